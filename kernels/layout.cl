@@ -1,0 +1,43 @@
+/* layout.cl: reports sizeof and offsetof of the shared structs (psf_shared.h)
+ * as the device compiler lays them out; tests/test_layout.cpp compares them with
+ * the host's. Writes pairs (name id order fixed by the host test). */
+
+#define PSF_OFFSET(type, field) ((uint)(size_t)&(((type*)0)->field))
+
+__kernel void layout_report(__global uint* out) {
+  if (get_global_id(0) != 0) return;
+  uint i = 0;
+  out[i++] = sizeof(Ray);
+  out[i++] = PSF_OFFSET(Ray, dir);
+  out[i++] = sizeof(Hit);
+  out[i++] = PSF_OFFSET(Hit, prim);
+  out[i++] = PSF_OFFSET(Hit, v);
+  out[i++] = sizeof(BvhTriangle);
+  out[i++] = PSF_OFFSET(BvhTriangle, e2);
+  out[i++] = sizeof(BvhNode);
+  out[i++] = PSF_OFFSET(BvhNode, max_x);
+  out[i++] = PSF_OFFSET(BvhNode, min_z);
+  out[i++] = PSF_OFFSET(BvhNode, child);
+  out[i++] = sizeof(Camera);
+  out[i++] = PSF_OFFSET(Camera, down);
+  out[i++] = PSF_OFFSET(Camera, width);
+  out[i++] = PSF_OFFSET(Camera, pad1);
+  out[i++] = sizeof(Material);
+  out[i++] = PSF_OFFSET(Material, emission);
+  out[i++] = PSF_OFFSET(Material, type);
+  out[i++] = PSF_OFFSET(Material, two_sided);
+  out[i++] = sizeof(Emitter);
+  out[i++] = PSF_OFFSET(Emitter, radiance);
+  out[i++] = PSF_OFFSET(Emitter, prim);
+  out[i++] = PSF_OFFSET(Emitter, two_sided);
+  out[i++] = sizeof(PathState);
+  out[i++] = PSF_OFFSET(PathState, radiance);
+  out[i++] = PSF_OFFSET(PathState, prev_pos);
+  out[i++] = PSF_OFFSET(PathState, pixel);
+  out[i++] = PSF_OFFSET(PathState, flags);
+  out[i++] = sizeof(FrameParams);
+  out[i++] = PSF_OFFSET(FrameParams, max_depth);
+  out[i++] = PSF_OFFSET(FrameParams, batch_size);
+  out[i++] = PSF_OFFSET(FrameParams, rr_depth);
+  out[i++] = PSF_OFFSET(FrameParams, pad2);
+}

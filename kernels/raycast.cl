@@ -1,0 +1,1 @@
+/* raycast.cl: placeholder */

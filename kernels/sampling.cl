@@ -1,0 +1,89 @@
+/* sampling.cl: the Sobol sequence with Joe-Kuo direction numbers and hash-based
+ * Owen scrambling, addressed by (pixel, sample index, dimension).
+ *
+ * Reads: the generator matrices `sobol` (PSF_SOBOL_DIMS x 32 columns, host/sampling.cpp).
+ * Point n of dimension d is x_d(n) = XOR over the set bits b of n of sobol[d*32 + b]
+ * (Bratley & Fox 1988; Joe & Kuo 2008), i.e. the natural, not Gray-code, order.
+ * Scrambling: Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4) 2020:
+ * reverse the bits, apply a hash in which every bit depends only on lower bits
+ * (a nested uniform scramble), reverse back. Each (pixel, dimension) gets its own
+ * seed, so any path index maps to the same sample on every device and batch size.
+ * Dimensions >= PSF_SOBOL_DIMS use hashed random numbers instead. */
+
+inline uint psf_hash(uint x) {
+  /* lowbias32 (Wellons): a well-mixing 32-bit integer hash. */
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
+inline uint psf_hash_combine(uint seed, uint v) {
+  return psf_hash(seed ^ (v + 0x9e3779b9u + (seed << 6) + (seed >> 2)));
+}
+
+inline uint reverse_bits32(uint x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+inline uint sobol_unscrambled(__global const uint* sobol, uint index, uint dim) {
+  uint x = 0u;
+  __global const uint* m = sobol + dim * PSF_SOBOL_BITS;
+  for (uint b = 0u; index != 0u; index >>= 1, ++b)
+    if (index & 1u) x ^= m[b];
+  return x;
+}
+
+/* Burley's improved Laine-Karras permutation (on bit-reversed values). */
+inline uint laine_karras_permutation(uint x, uint seed) {
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return x;
+}
+
+inline uint nested_uniform_scramble(uint x, uint seed) {
+  x = reverse_bits32(x);
+  x = laine_karras_permutation(x, seed);
+  return reverse_bits32(x);
+}
+
+/* Scrambling seed of one dimension of one pixel's sequence. */
+inline uint sobol_seed(uint seed, uint pixel, uint dim) {
+  return psf_hash_combine(psf_hash_combine(psf_hash(seed), pixel), dim);
+}
+
+/* 32-bit value of dimension `dim` of sample `index` of `pixel`, scrambled. */
+inline uint sample_bits(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
+  if (dim < PSF_SOBOL_DIMS)
+    return nested_uniform_scramble(sobol_unscrambled(sobol, index, dim), sobol_seed(seed, pixel, dim));
+  return psf_hash_combine(psf_hash_combine(sobol_seed(seed, pixel, dim), index), 0x51ed270bu);
+}
+
+/* Uniform float in [0, 1): the top 24 bits. */
+inline float bits_to_float(uint x) { return (float)(x >> 8) * (1.0f / 16777216.0f); }
+
+inline float sample_1d(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
+  return bits_to_float(sample_bits(sobol, seed, pixel, index, dim));
+}
+
+/* Writes `dims` dimensions of the points first..first+count-1 (row per point):
+ * unscrambled when scramble == 0, else scrambled with (seed, pixel). */
+__kernel void sobol_points(__global const uint* sobol, uint first, uint count, uint dims,
+                           uint scramble, uint seed, uint pixel, __global uint* out) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  for (uint d = 0u; d < dims; ++d) {
+    uint x = scramble ? sample_bits(sobol, seed, pixel, first + i, d)
+                      : sobol_unscrambled(sobol, first + i, d);
+    out[i * dims + d] = x;
+  }
+}

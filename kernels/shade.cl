@@ -1,0 +1,1 @@
+/* shade.cl: placeholder */

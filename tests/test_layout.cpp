@@ -1,0 +1,57 @@
+// The shared structs (kernels/psf_shared.h) have the same layout on the device as on the host.
+#include <catch2/catch.hpp>
+#include <cstddef>
+
+#include "psf_shared.h"
+#include "support.h"
+
+TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
+  // Same order as kernels/layout.cl.
+  const std::vector<std::pair<const char*, size_t>> host = {
+      {"sizeof(Ray)", sizeof(Ray)},
+      {"offsetof(Ray, dir)", offsetof(Ray, dir)},
+      {"sizeof(Hit)", sizeof(Hit)},
+      {"offsetof(Hit, prim)", offsetof(Hit, prim)},
+      {"offsetof(Hit, v)", offsetof(Hit, v)},
+      {"sizeof(BvhTriangle)", sizeof(BvhTriangle)},
+      {"offsetof(BvhTriangle, e2)", offsetof(BvhTriangle, e2)},
+      {"sizeof(BvhNode)", sizeof(BvhNode)},
+      {"offsetof(BvhNode, max_x)", offsetof(BvhNode, max_x)},
+      {"offsetof(BvhNode, min_z)", offsetof(BvhNode, min_z)},
+      {"offsetof(BvhNode, child)", offsetof(BvhNode, child)},
+      {"sizeof(Camera)", sizeof(Camera)},
+      {"offsetof(Camera, down)", offsetof(Camera, down)},
+      {"offsetof(Camera, width)", offsetof(Camera, width)},
+      {"offsetof(Camera, pad1)", offsetof(Camera, pad1)},
+      {"sizeof(Material)", sizeof(Material)},
+      {"offsetof(Material, emission)", offsetof(Material, emission)},
+      {"offsetof(Material, type)", offsetof(Material, type)},
+      {"offsetof(Material, two_sided)", offsetof(Material, two_sided)},
+      {"sizeof(Emitter)", sizeof(Emitter)},
+      {"offsetof(Emitter, radiance)", offsetof(Emitter, radiance)},
+      {"offsetof(Emitter, prim)", offsetof(Emitter, prim)},
+      {"offsetof(Emitter, two_sided)", offsetof(Emitter, two_sided)},
+      {"sizeof(PathState)", sizeof(PathState)},
+      {"offsetof(PathState, radiance)", offsetof(PathState, radiance)},
+      {"offsetof(PathState, prev_pos)", offsetof(PathState, prev_pos)},
+      {"offsetof(PathState, pixel)", offsetof(PathState, pixel)},
+      {"offsetof(PathState, flags)", offsetof(PathState, flags)},
+      {"sizeof(FrameParams)", sizeof(FrameParams)},
+      {"offsetof(FrameParams, max_depth)", offsetof(FrameParams, max_depth)},
+      {"offsetof(FrameParams, batch_size)", offsetof(FrameParams, batch_size)},
+      {"offsetof(FrameParams, rr_depth)", offsetof(FrameParams, rr_depth)},
+      {"offsetof(FrameParams, pad2)", offsetof(FrameParams, pad2)},
+  };
+  auto& rt = psf::test::runtime();
+  cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 64 * sizeof(cl_uint));
+  rt.launch("layout_report", 1, 1, out);
+  auto device = rt.download<cl_uint>(out, host.size());
+  for (size_t i = 0; i < host.size(); ++i) {
+    INFO(host[i].first);
+    CHECK(device[i] == host[i].second);
+  }
+  // Every buffer struct is a multiple of 16 bytes so arrays of it stay float4-aligned.
+  for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriangle), sizeof(BvhNode), sizeof(Camera),
+                   sizeof(Material), sizeof(Emitter), sizeof(PathState), sizeof(FrameParams)})
+    CHECK(s % 16 == 0);
+}
