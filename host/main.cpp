@@ -1,1 +1,176 @@
-int main() { return 0; }
+// psf: the command line. `psf devices` lists OpenCL devices; `psf render SCENE`
+// renders a scene to OpenEXR (and a PNG preview).
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+
+#include "cl/runtime.h"
+#include "image.h"
+#include "render.h"
+#include "scene/scene.h"
+
+namespace {
+
+constexpr int kExitBadInput = 2;
+constexpr int kExitFailure = 1;
+
+std::string bytes_text(uint64_t b) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.2f GiB", double(b) / (1024.0 * 1024.0 * 1024.0));
+  return buf;
+}
+
+int run_devices() {
+  auto devices = psf::list_devices();
+  int platform = -1;
+  for (const auto& d : devices) {
+    if (d.platform_index != platform) {
+      platform = d.platform_index;
+      std::cout << "Platform " << platform << ": " << d.platform << "\n";
+    }
+    std::cout << "  [" << d.index << "] " << d.name << " (" << d.type << ", " << d.version << ", driver "
+              << d.driver << ")\n"
+              << "      global memory " << bytes_text(d.global_mem) << ", max allocation "
+              << bytes_text(d.max_alloc) << ", local memory " << d.local_mem / 1024 << " KiB, "
+              << d.compute_units << " compute units\n";
+  }
+  return 0;
+}
+
+struct RenderArgs {
+  std::string scene;                   // scene file
+  std::string output;                  // EXR path; PNG beside it
+  std::string device;                  // --device SPEC
+  std::string filter = "off";          // --filter
+  std::vector<std::string> defines;    // -D name=value
+  int spp = 0;                         // 0: the scene's sample count, else 16
+  int width = 0, height = 0;           // 0: the scene's film
+  int max_depth = -2;                  // -2: the scene's integrator
+  uint32_t seed = 0;
+  bool stats = false, quiet = false, no_png = false;
+};
+
+int run_render(const RenderArgs& a) {
+  namespace fs = std::filesystem;
+  if (!fs::exists(a.scene)) {
+    std::cerr << "psf: " << a.scene << ": no such file\n";
+    return kExitBadInput;
+  }
+  std::vector<std::pair<std::string, std::string>> params;
+  for (const auto& d : a.defines) {
+    auto eq = d.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      std::cerr << "psf: -D " << d << ": expected name=value\n";
+      return kExitBadInput;
+    }
+    params.emplace_back(d.substr(0, eq), d.substr(eq + 1));
+  }
+  std::string out = a.output.empty() ? "out/" + fs::path(a.scene).stem().string() + ".exr" : a.output;
+  std::string png = fs::path(out).replace_extension(".png").string();
+  if (a.output.empty()) fs::create_directories("out");
+  try {
+    psf::check_writable(out);
+    if (!a.no_png) psf::check_writable(png);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "psf: " << e.what() << "\n";
+    return kExitBadInput;
+  }
+
+  psf::Scene scene;
+  try {
+    scene = psf::load_scene(a.scene, params);
+  } catch (const psf::SceneError& e) {
+    std::cerr << "psf: " << e.what() << "\n";
+    return kExitBadInput;
+  }
+  if (!a.quiet)
+    for (const auto& w : scene.warnings) std::cerr << "psf: warning: " << w << "\n";
+  if (a.width > 0) scene.width = a.width;
+  if (a.height > 0) scene.height = a.height;
+
+  psf::RenderOptions opt;
+  opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
+  opt.seed = a.seed;
+  opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
+
+  psf::DeviceInfo device = psf::choose_device(a.device);
+  psf::Runtime rt(device);
+  if (!a.quiet)
+    std::cerr << "psf: " << device.name << " (" << device.platform << "), program built in "
+              << rt.build_seconds() << " s; " << scene.triangles.size() << " triangles, " << scene.width << "x"
+              << scene.height << ", " << opt.spp << " spp\n";
+  psf::Renderer renderer(rt, scene);
+  psf::RenderResult r = renderer.render(opt);
+
+  psf::write_exr(out, r.image,
+                 {{"psf:scene", a.scene}, {"psf:spp", std::to_string(opt.spp)}, {"psf:seed", std::to_string(opt.seed)}});
+  if (!a.no_png) psf::write_png(png, r.image);
+  if (!a.quiet) {
+    std::cerr << "psf: " << r.paths << " paths in " << r.seconds << " s (" << r.paths / r.seconds / 1e6
+              << " M paths/s), batch " << r.batch_size << "; wrote " << out << (a.no_png ? "" : " and " + png)
+              << "\n";
+    if (r.nonfinite) std::cerr << "psf: warning: " << r.nonfinite << " paths had NaN/Inf radiance and were left out\n";
+  }
+  if (a.stats) {
+    std::printf("%-24s %10s %12s %12s\n", "kernel", "launches", "total ms", "ms/launch");
+    for (const auto& [name, t] : rt.stats())
+      std::printf("%-24s %10llu %12.3f %12.4f\n", name.c_str(), (unsigned long long)t.launches, t.ms,
+                  t.ms / double(t.launches));
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"psf: consistent path space filtering on OpenCL"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("psf ") + PSF_VERSION);
+
+  CLI::App* devices = app.add_subcommand("devices", "List OpenCL platforms and devices");
+
+  RenderArgs ra;
+  CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML or OBJ) to OpenEXR and PNG");
+  render->add_option("scene", ra.scene, "Scene file (.xml, .obj)")->required();
+  render->add_option("-o,--output", ra.output, "Output OpenEXR file (default out/<scene>.exr); a PNG is written beside it");
+  render->add_option("--spp", ra.spp, "Samples per pixel (default: the scene's, else 16)")->check(CLI::PositiveNumber);
+  render->add_option("--width", ra.width, "Image width (default: the scene's film)")->check(CLI::Range(1, 65536));
+  render->add_option("--height", ra.height, "Image height (default: the scene's film)")->check(CLI::Range(1, 65536));
+  render->add_option("--max-depth", ra.max_depth, "Longest path in segments, -1 unbounded (default: the scene's)")
+      ->check(CLI::Range(-1, 1 << 16));
+  render->add_option("--seed", ra.seed, "Sampling seed: the image is a deterministic function of it");
+  render->add_option("--device", ra.device, "Device index or name substring (default: first GPU, else CPU)");
+  render->add_option("--filter", ra.filter, "Filtering: off (plain path tracing)")->check(CLI::IsMember({"off"}));
+  render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");
+  render->add_flag("--stats", ra.stats, "Print device time per kernel");
+  render->add_flag("-q,--quiet", ra.quiet, "Print nothing but errors");
+  render->add_flag("--no-png", ra.no_png, "Do not write the PNG preview");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "psf: " << e.what() << "\nRun `psf --help` or `psf render --help` for usage.\n";
+    return kExitBadInput;
+  }
+  try {
+    if (devices->parsed()) return run_devices();
+    return run_render(ra);
+  } catch (const psf::NoDeviceError& e) {
+    std::cerr << "psf: " << e.what() << "\n";
+    return kExitFailure;
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "psf: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "psf: " << e.what() << "\n";
+    return kExitFailure;
+  }
+}

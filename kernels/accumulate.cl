@@ -1,1 +1,24 @@
-/* accumulate.cl: placeholder */
+/* accumulate.cl: adds each path's radiance to its pixel.
+ *
+ * One work-item per pixel sums the batch's paths of that pixel in increasing
+ * path index, so the image never depends on thread timing (no float atomics).
+ * Path j of the batch belongs to pixel (first_path + j) mod (width * height).
+ * Non-finite radiance never reaches the image: it is counted per pixel instead. */
+
+__kernel void accumulate(FrameParams params, __global const PathState* states,
+                         __global float4* image, __global uint* nonfinite) {
+  uint p = get_global_id(0);
+  uint pixels = params.width * params.height;
+  if (p >= pixels) return;
+  ulong first = ((ulong)params.first_path_hi << 32) | (ulong)params.first_path_lo;
+  uint j = (uint)(((ulong)p + (ulong)pixels - first % (ulong)pixels) % (ulong)pixels);
+  float4 sum = image[p];
+  uint bad = 0u;
+  for (; j < params.batch_size; j += pixels) {
+    float3 c = states[j].radiance.xyz;
+    if (isfinite(c.x) && isfinite(c.y) && isfinite(c.z)) sum.xyz += c;
+    else bad += 1u;
+  }
+  image[p] = sum;
+  if (bad) nonfinite[p] += bad;
+}

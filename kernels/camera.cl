@@ -1,1 +1,38 @@
-/* camera.cl: placeholder */
+/* camera.cl: camera ray generation, the first stage of every batch.
+ *
+ * Path j of a batch has the global index g = first_path + j; it belongs to pixel
+ * g mod (width * height) and is that pixel's sample number g div (width * height),
+ * so a path gets the same samples whatever batch, device or work-group size
+ * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
+ * Writes: the path's state and its camera ray (pinhole, psf_shared.h Camera). */
+
+inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
+
+__kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
+                          __global PathState* states, __global Ray* rays) {
+  uint j = get_global_id(0);
+  if (j >= params.batch_size) return;
+  ulong pixels = (ulong)params.width * (ulong)params.height;
+  ulong g = frame_first_path(params) + (ulong)j;
+  uint pixel = (uint)(g % pixels);
+  uint sample = (uint)(g / pixels);
+  float u = sample_1d(sobol, params.seed, pixel, sample, PSF_DIM_PIXEL);
+  float v = sample_1d(sobol, params.seed, pixel, sample, PSF_DIM_PIXEL + 1);
+  float s = ((float)(pixel % params.width) + u) / (float)params.width;
+  float t = ((float)(pixel / params.width) + v) / (float)params.height;
+  float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
+  Ray r;
+  r.org = (float4)(camera.origin.xyz, 0.0f);
+  r.dir = (float4)(normalize(dir), INFINITY);
+  rays[j] = r;
+  PathState st;
+  st.throughput = (float4)(1.0f, 1.0f, 1.0f, 0.0f);
+  st.radiance = (float4)(0.0f);
+  st.pending = (float4)(0.0f);
+  st.prev_pos = (float4)(camera.origin.xyz, 0.0f);
+  st.pixel = pixel;
+  st.sample = sample;
+  st.depth = 0u;
+  st.flags = PSF_PATH_ALIVE;
+  states[j] = st;
+}

@@ -12,8 +12,9 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = sizeof(Hit);
   out[i++] = PSF_OFFSET(Hit, prim);
   out[i++] = PSF_OFFSET(Hit, v);
-  out[i++] = sizeof(BvhTriangle);
-  out[i++] = PSF_OFFSET(BvhTriangle, e2);
+  out[i++] = sizeof(BvhTriPack);
+  out[i++] = PSF_OFFSET(BvhTriPack, e2_x);
+  out[i++] = PSF_OFFSET(BvhTriPack, prim);
   out[i++] = sizeof(BvhNode);
   out[i++] = PSF_OFFSET(BvhNode, max_x);
   out[i++] = PSF_OFFSET(BvhNode, min_z);

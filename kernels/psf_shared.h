@@ -38,12 +38,15 @@ typedef cl_uint psf_uint;
 
 #define PSF_NO_HIT 0xFFFFFFFFu
 #define PSF_EMPTY_CHILD 0xFFFFFFFFu
-/* A BVH child reference with this bit set is a leaf: bits 0..26 first triangle,
- * bits 27..30 triangle count minus one. */
+/* A BVH child reference with this bit set is a leaf: bits 0..26 its first
+ * triangle pack (BvhTriPack), bits 27..30 the number of packs minus one. */
 #define PSF_LEAF_BIT 0x80000000u
-#define PSF_LEAF_MAX_TRIS 16u
+#define PSF_LEAF_MAX_TRIS 16u /* triangles in a leaf at most */
 #define PSF_LEAF_COUNT_SHIFT 27u
 #define PSF_LEAF_FIRST_MASK 0x07FFFFFFu
+/* Deepest BVH (levels of wide nodes, root included) that host/bvh.cpp builds;
+ * sizes the traversal stack of kernels/raycast.cl. */
+#define PSF_BVH_MAX_DEPTH 48
 
 /* A ray. Directions need not be normalised; t is measured in units of |dir|. */
 typedef struct {
@@ -59,12 +62,22 @@ typedef struct {
   float v;       /* barycentric coordinate of vertex 2 */
 } Hit;
 
-/* A triangle ready for Moller-Trumbore intersection, stored in BVH leaf order. */
+/* PSF_BVH_WIDTH triangles as structure of arrays, so that Moller-Trumbore tests
+ * them all at once with PSF_BVH_WIDTH-wide vector arithmetic; a BVH leaf is a run
+ * of packs. An unused lane has zero edges (never hit) and prim PSF_NO_HIT. */
 typedef struct {
-  psf_float4 v0; /* xyz first vertex, w: triangle index in scene order (as_float of a uint) */
-  psf_float4 e1; /* xyz v1 - v0 */
-  psf_float4 e2; /* xyz v2 - v0 */
-} BvhTriangle;
+  float v0_x[PSF_BVH_WIDTH];     /* first vertex */
+  float v0_y[PSF_BVH_WIDTH];
+  float v0_z[PSF_BVH_WIDTH];
+  float e1_x[PSF_BVH_WIDTH];     /* second vertex minus first */
+  float e1_y[PSF_BVH_WIDTH];
+  float e1_z[PSF_BVH_WIDTH];
+  float e2_x[PSF_BVH_WIDTH];     /* third vertex minus first */
+  float e2_y[PSF_BVH_WIDTH];
+  float e2_z[PSF_BVH_WIDTH];
+  float inv_size[PSF_BVH_WIDTH]; /* 1 / sqrt(|e1 x e2|): scales the intersection tolerance */
+  psf_uint prim[PSF_BVH_WIDTH];  /* triangle index in scene order, PSF_NO_HIT if unused */
+} BvhTriPack;
 
 /* A node of a PSF_BVH_WIDTH-wide BVH: the children's boxes as structure of arrays
  * so that one node is tested with PSF_BVH_WIDTH-wide vector arithmetic. */

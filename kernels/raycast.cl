@@ -1,1 +1,352 @@
-/* raycast.cl: placeholder */
+/* raycast.cl: closest-hit and any-hit ray casting through a PSF_BVH_WIDTH-wide BVH.
+ *
+ * Reads: the BVH built by host/bvh.cpp (BvhNode array, node 0 the root; BvhTriPack
+ * array, PSF_BVH_WIDTH triangles per pack, leaves as runs of packs) and Rays
+ * (org.w = tmin, dir.w = tmax; a ray with tmax < 0 is dead).
+ * Writes: one Hit per ray. Closest: the smallest t in (tmin, tmax), prim the scene
+ * triangle index, u, v the barycentrics of vertices 1 and 2; a miss (or a dead
+ * ray) has t = tmax, prim = PSF_NO_HIT. Any: prim = PSF_NO_HIT when nothing lies
+ * within (tmin, tmax), otherwise some hit triangle with its t, u, v.
+ *
+ * Algorithms:
+ * - Ray/box: the slab test (Kay & Kajiya 1986) of all PSF_BVH_WIDTH children of a
+ *   node at once, in float4/float8 arithmetic on the node's structure-of-arrays
+ *   boxes: t = (plane - org) * (1 / dir) with the inverse direction precomputed,
+ *   near and far planes chosen by the sign of the direction (so empty slots,
+ *   min > max, never hit). Direction components of magnitude below 1e-12 are
+ *   replaced by +-1e-12 so no 0 * inf = NaN arises. The far distance is enlarged
+ *   by a few ulps (Ize, "Robust BVH ray traversal", JCGT 2013) so boxes touched at
+ *   an edge or of zero thickness are not missed.
+ * - Traversal: depth first with a private stack of child references and their
+ *   entry distances. For the closest hit: one child hit, descend into it; two,
+ *   push the farther; more, push all sorted far to near (insertion sort) and
+ *   descend into the nearest. Popped entries farther than the closest hit so far
+ *   are dropped. The any-hit traversal stops at the first hit.
+ * - Ray/triangle: Moller & Trumbore, "Fast, minimum storage ray/triangle
+ *   intersection", JGT 1997, without back-face culling, on the PSF_BVH_WIDTH
+ *   triangles of a pack at once. Its barycentrics carry an error of a few ulps
+ *   times |org - v0| / size of the triangle, so they are accepted up to
+ *   eps = PSF_BARY_EPS + PSF_BARY_EPS_DIST * distance / size outside [0,1]
+ *   (size = sqrt(|e1 x e2|), stored inverted in the pack): a ray through an edge
+ *   shared by two triangles hits at least one of them. The tests are written so
+ *   that NaN (det = 0: unused lanes, degenerate triangles) rejects.
+ * No barriers; kernels guard the rounded-up tail of the global range. */
+
+#if PSF_BVH_WIDTH == 8
+typedef float8 bvh_floatw;
+typedef int8 bvh_intw;
+#define BVH_VLOAD vload8
+#define BVH_VSTORE vstore8
+#define BVH_HMIN(x) bvh_hmin4(BVH_MIN((x).lo, (x).hi))
+#elif PSF_BVH_WIDTH == 4
+typedef float4 bvh_floatw;
+typedef int4 bvh_intw;
+#define BVH_VLOAD vload4
+#define BVH_VSTORE vstore4
+#define BVH_HMIN(x) bvh_hmin4(x)
+#else
+#error "PSF_BVH_WIDTH must be 4 or 8"
+#endif
+
+/* Entries of the traversal stack: at most PSF_BVH_WIDTH - 1 per level below the root. */
+#define PSF_BVH_STACK ((PSF_BVH_WIDTH - 1) * PSF_BVH_MAX_DEPTH + 1)
+/* Barycentric tolerance eps = PSF_BARY_EPS + PSF_BARY_EPS_DIST * distance / size: the
+ * triangle grows by 1e-6 of its size plus 5e-7 of its distance (about 4x the float
+ * rounding of Moller-Trumbore measured at shared edges), so rays not nearly
+ * parallel to a triangle cannot slip between two that share an edge. */
+#define PSF_BARY_EPS 1e-6f
+#define PSF_BARY_EPS_DIST 5e-7f
+/* 1 + 2 gamma(3) (Ize 2013), rounded up: the conservative far distance of the slab test. */
+#define PSF_SLAB_FAR_SCALE 1.0000004f
+
+/* Float offsets of the arrays of a BvhNode seen as a float array. */
+#define BVH_MIN_X 0
+#define BVH_MIN_Y (2 * PSF_BVH_WIDTH)
+#define BVH_MIN_Z (4 * PSF_BVH_WIDTH)
+#define BVH_CHILD (6 * PSF_BVH_WIDTH)
+
+/* Float offsets of the arrays of a BvhTriPack seen as a float array. */
+#define PACK_V0 0
+#define PACK_E1 (3 * PSF_BVH_WIDTH)
+#define PACK_E2 (6 * PSF_BVH_WIDTH)
+#define PACK_INV_SIZE (9 * PSF_BVH_WIDTH)
+#define PACK_PRIM (10 * PSF_BVH_WIDTH)
+
+/* Forced inlining of the traversal's helpers: a call would keep the hit record
+ * in memory instead of registers. */
+#define BVH_INLINE inline __attribute__((always_inline))
+
+/* Per-component max / min as compare and select (maps to maxps / minps; no NaN
+ * can reach them, see slab_ray). */
+#define BVH_MAX(a, b) select((b), (a), (a) > (b))
+#define BVH_MIN(a, b) select((b), (a), (a) < (b))
+
+inline float bvh_hmin4(float4 x) {
+  float2 m = BVH_MIN(x.lo, x.hi);
+  return m.x < m.y ? m.x : m.y;
+}
+/* Bit k set where lane k of a comparison result is true. */
+inline uint bvh_lane_mask(bvh_intw c) {
+  /* One byte per lane (0 or 1), gathered into the top byte by a multiplication. */
+#if PSF_BVH_WIDTH == 8
+  ulong bytes = as_ulong(convert_uchar8(c) & (uchar8)(1));
+  return (uint)((bytes * 0x0102040810204080ul) >> 56);
+#else
+  uint bytes = as_uint(convert_uchar4(c) & (uchar4)(1));
+  return (bytes * 0x01020408u) >> 24;
+#endif
+}
+/* Index of the lowest set bit of a nonzero mask. */
+inline uint bvh_first_lane(uint mask) { return 31u - clz(mask & (0u - mask)); }
+
+/* The per-ray constants of the slab test. */
+typedef struct {
+  float3 inv;     /* 1 / direction, components below 1e-12 in magnitude clamped to +-1e-12 */
+  float3 org;     /* origin */
+  uint near_x;    /* float offset in a node of the near-plane array of each axis */
+  uint near_y;
+  uint near_z;
+  uint far_x;     /* and of the far-plane array */
+  uint far_y;
+  uint far_z;
+} SlabRay;
+
+inline SlabRay slab_ray(float3 org, float3 dir) {
+  SlabRay s;
+  float3 d = select(dir, copysign((float3)(1e-12f), dir), isless(fabs(dir), (float3)(1e-12f)));
+  s.inv = 1.0f / d;
+  s.org = org;
+  uint fx = s.inv.x >= 0.0f ? 0u : PSF_BVH_WIDTH;
+  uint fy = s.inv.y >= 0.0f ? 0u : PSF_BVH_WIDTH;
+  uint fz = s.inv.z >= 0.0f ? 0u : PSF_BVH_WIDTH;
+  s.near_x = BVH_MIN_X + fx;
+  s.near_y = BVH_MIN_Y + fy;
+  s.near_z = BVH_MIN_Z + fz;
+  s.far_x = BVH_MIN_X + (PSF_BVH_WIDTH - fx);
+  s.far_y = BVH_MIN_Y + (PSF_BVH_WIDTH - fy);
+  s.far_z = BVH_MIN_Z + (PSF_BVH_WIDTH - fz);
+  return s;
+}
+
+/* Slab test of all children of node `f` (a BvhNode as floats): returns a mask with
+ * bit k set when child k's box overlaps [tmin, tmax]; *tnear gets the entry distances. */
+BVH_INLINE uint slab_test(__global const float* f, const SlabRay* s, float tmin, float tmax, bvh_floatw* tnear) {
+  bvh_floatw ix = (bvh_floatw)(s->inv.x), iy = (bvh_floatw)(s->inv.y), iz = (bvh_floatw)(s->inv.z);
+  bvh_floatw ox = (bvh_floatw)(s->org.x), oy = (bvh_floatw)(s->org.y), oz = (bvh_floatw)(s->org.z);
+  bvh_floatw nx = (BVH_VLOAD(0, f + s->near_x) - ox) * ix;
+  bvh_floatw ny = (BVH_VLOAD(0, f + s->near_y) - oy) * iy;
+  bvh_floatw nz = (BVH_VLOAD(0, f + s->near_z) - oz) * iz;
+  bvh_floatw fx = (BVH_VLOAD(0, f + s->far_x) - ox) * ix;
+  bvh_floatw fy = (BVH_VLOAD(0, f + s->far_y) - oy) * iy;
+  bvh_floatw fz = (BVH_VLOAD(0, f + s->far_z) - oz) * iz;
+  bvh_floatw tn = BVH_MAX(BVH_MAX(nx, ny), BVH_MAX(nz, (bvh_floatw)(tmin)));
+  bvh_floatw tf = BVH_MIN(BVH_MIN(fx, fy), BVH_MIN(fz, (bvh_floatw)(tmax))) * PSF_SLAB_FAR_SCALE;
+  *tnear = tn;
+  return bvh_lane_mask(tn <= tf);
+}
+
+/* Moller-Trumbore test of the PSF_BVH_WIDTH triangles of pack `p` (a BvhTriPack as
+ * floats) at once. Returns the mask of lanes hit within (tmin, tmax); *t_out gets
+ * their distances (infinity in the other lanes), *u_out and *v_out the barycentrics. */
+BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float dir_len, float tmin, float tmax,
+                          bvh_floatw* t_out, bvh_floatw* u_out, bvh_floatw* v_out) {
+  bvh_floatw dx = (bvh_floatw)(dir.x), dy = (bvh_floatw)(dir.y), dz = (bvh_floatw)(dir.z);
+  bvh_floatw e1x = BVH_VLOAD(0, p + PACK_E1), e1y = BVH_VLOAD(0, p + PACK_E1 + PSF_BVH_WIDTH),
+             e1z = BVH_VLOAD(0, p + PACK_E1 + 2 * PSF_BVH_WIDTH);
+  bvh_floatw e2x = BVH_VLOAD(0, p + PACK_E2), e2y = BVH_VLOAD(0, p + PACK_E2 + PSF_BVH_WIDTH),
+             e2z = BVH_VLOAD(0, p + PACK_E2 + 2 * PSF_BVH_WIDTH);
+  /* pv = dir x e2, det = e1 . pv */
+  bvh_floatw pvx = dy * e2z - dz * e2y, pvy = dz * e2x - dx * e2z, pvz = dx * e2y - dy * e2x;
+  bvh_floatw inv_det = 1.0f / (e1x * pvx + e1y * pvy + e1z * pvz);
+  /* s = org - v0, u = s . pv / det */
+  bvh_floatw sx = (bvh_floatw)(org.x) - BVH_VLOAD(0, p + PACK_V0);
+  bvh_floatw sy = (bvh_floatw)(org.y) - BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH);
+  bvh_floatw sz = (bvh_floatw)(org.z) - BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH);
+  bvh_floatw u = (sx * pvx + sy * pvy + sz * pvz) * inv_det;
+  /* q = s x e1, v = dir . q / det, t = e2 . q / det */
+  bvh_floatw qx = sy * e1z - sz * e1y, qy = sz * e1x - sx * e1z, qz = sx * e1y - sy * e1x;
+  bvh_floatw v = (dx * qx + dy * qy + dz * qz) * inv_det;
+  bvh_floatw t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+  bvh_floatw eps = (PSF_BARY_EPS_DIST * dir_len) * fabs(t) * BVH_VLOAD(0, p + PACK_INV_SIZE) + PSF_BARY_EPS;
+  /* Conjunctions of true comparisons: a NaN lane (det = 0, unused lanes) fails. */
+  bvh_intw ok = (u >= -eps) & (v >= -eps) & (u + v <= 1.0f + eps) & (t > tmin) & (t < tmax);
+  *t_out = select((bvh_floatw)(INFINITY), t, ok);
+  *u_out = u;
+  *v_out = v;
+  return bvh_lane_mask(ok);
+}
+
+/* Records lane k of a pack test in *hit. */
+BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_floatw u, bvh_floatw v, Hit* hit) {
+  float tl[PSF_BVH_WIDTH], ul[PSF_BVH_WIDTH], vl[PSF_BVH_WIDTH];
+  BVH_VSTORE(t, 0, tl);
+  BVH_VSTORE(u, 0, ul);
+  BVH_VSTORE(v, 0, vl);
+  hit->t = tl[k];
+  hit->u = ul[k];
+  hit->v = vl[k];
+  hit->prim = ((__global const uint*)(p + PACK_PRIM))[k];
+}
+
+/* The closest hit among a leaf's packs [first, end), updating *hit. */
+BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, float3 org, float3 dir,
+                             float dir_len, float tmin, Hit* hit) {
+  for (uint k = first; k < end; ++k) {
+    __global const float* p = (__global const float*)(packs + k);
+    bvh_floatw t, u, v;
+    uint mask = pack_test(p, org, dir, dir_len, tmin, hit->t, &t, &u, &v);
+    if (mask == 0u) continue;
+    /* Several lanes hit: the nearest (the other lanes hold infinity). */
+    if (mask & (mask - 1u)) mask = bvh_lane_mask(t == (bvh_floatw)(BVH_HMIN(t)));
+    uint lane = bvh_first_lane(mask);
+    pack_take(p, lane, t, u, v, hit);
+  }
+}
+
+/* A miss of `ray`: t at its tmax. */
+inline Hit hit_none(Ray ray) {
+  Hit hit;
+  hit.t = ray.dir.w;
+  hit.prim = PSF_NO_HIT;
+  hit.u = 0.0f;
+  hit.v = 0.0f;
+  return hit;
+}
+
+/* The closest hit of `ray` (see the file comment). */
+inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+  Hit hit = hit_none(ray);
+  float tmin = ray.org.w;
+  if (!(ray.dir.w >= 0.0f)) return hit;
+  float3 org = ray.org.xyz, dir = ray.dir.xyz;
+  float dir_len = length(dir);
+  SlabRay s = slab_ray(org, dir);
+
+  uint stack_ref[PSF_BVH_STACK];   /* child references: node index or leaf */
+  float stack_t[PSF_BVH_STACK];    /* their entry distances */
+  int sp = 0;
+  uint ref = 0u;                   /* the root */
+  for (;;) {
+    if (ref & PSF_LEAF_BIT) {
+      uint first = ref & PSF_LEAF_FIRST_MASK;
+      uint end = first + ((ref & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
+      leaf_closest(packs, first, end, org, dir, dir_len, tmin, &hit);
+    } else {
+      __global const float* f = (__global const float*)(nodes + ref);
+      bvh_floatw tn;
+      uint mask = slab_test(f, &s, tmin, hit.t, &tn);
+      if (mask != 0u) {
+        float tnear[PSF_BVH_WIDTH];
+        BVH_VSTORE(tn, 0, tnear);
+        __global const uint* child = (__global const uint*)(f + BVH_CHILD);
+        uint k0 = bvh_first_lane(mask);
+        mask &= mask - 1u;
+        if (mask == 0u) {  /* one child hit: descend without the stack */
+          ref = child[k0];
+          continue;
+        }
+        uint k1 = bvh_first_lane(mask);
+        mask &= mask - 1u;
+        float d0 = tnear[k0], d1 = tnear[k1];
+        uint c0 = child[k0], c1 = child[k1];
+        if (mask == 0u) {  /* two: push the farther, descend into the nearer */
+          bool swap = d1 < d0;
+          stack_ref[sp] = swap ? c0 : c1;
+          stack_t[sp] = swap ? d0 : d1;
+          ++sp;
+          ref = swap ? c1 : c0;
+          continue;
+        }
+        /* More: push all so that the stack stays sorted far to near (insertion
+         * sort of the few entries), then continue with the nearest. */
+        int base = sp;
+        stack_ref[sp] = c0;
+        stack_t[sp] = d0;
+        ++sp;
+        mask |= 1u << k1;
+        while (mask != 0u) {
+          uint k = bvh_first_lane(mask);
+          mask &= mask - 1u;
+          float d = tnear[k];
+          uint c = child[k];
+          int j = sp++;
+          while (j > base && stack_t[j - 1] < d) {
+            stack_t[j] = stack_t[j - 1];
+            stack_ref[j] = stack_ref[j - 1];
+            --j;
+          }
+          stack_t[j] = d;
+          stack_ref[j] = c;
+        }
+        ref = stack_ref[--sp];
+        continue;
+      }
+    }
+    /* Pop the nearest entry not beyond the closest hit found so far. */
+    do {
+      if (sp == 0) return hit;
+      --sp;
+    } while (stack_t[sp] > hit.t);
+    ref = stack_ref[sp];
+  }
+}
+
+/* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none. */
+inline Hit intersect_any_hit(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+  Hit hit = hit_none(ray);
+  float tmin = ray.org.w;
+  if (!(ray.dir.w >= 0.0f)) return hit;
+  float3 org = ray.org.xyz, dir = ray.dir.xyz;
+  float dir_len = length(dir);
+  SlabRay s = slab_ray(org, dir);
+
+  uint stack_ref[PSF_BVH_STACK];
+  int sp = 1;
+  stack_ref[0] = 0u;
+  while (sp > 0) {
+    uint ref = stack_ref[--sp];
+    if (ref & PSF_LEAF_BIT) {
+      uint first = ref & PSF_LEAF_FIRST_MASK;
+      uint end = first + ((ref & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
+      for (uint k = first; k < end; ++k) {
+        __global const float* p = (__global const float*)(packs + k);
+        bvh_floatw t, u, v;
+        uint mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);
+        if (mask != 0u) {
+          pack_take(p, bvh_first_lane(mask), t, u, v, &hit);
+          return hit;
+        }
+      }
+      continue;
+    }
+    __global const float* f = (__global const float*)(nodes + ref);
+    bvh_floatw tn;
+    uint mask = slab_test(f, &s, tmin, hit.t, &tn);
+    __global const uint* child = (__global const uint*)(f + BVH_CHILD);
+    while (mask != 0u) {
+      uint k = bvh_first_lane(mask);
+      mask &= mask - 1u;
+      stack_ref[sp++] = child[k];
+    }
+  }
+  return hit;
+}
+
+/* Whether anything blocks `ray` within (tmin, tmax). */
+inline bool intersect_any(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+  return intersect_any_hit(nodes, packs, ray).prim != PSF_NO_HIT;
+}
+
+__kernel void raycast_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                              __global const Ray* rays, __global Hit* hits, uint count) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  hits[i] = intersect_closest(nodes, packs, rays[i]);
+}
+
+__kernel void raycast_any(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                          __global const Ray* rays, __global Hit* hits, uint count) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  hits[i] = intersect_any_hit(nodes, packs, rays[i]);
+}

@@ -13,8 +13,9 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"sizeof(Hit)", sizeof(Hit)},
       {"offsetof(Hit, prim)", offsetof(Hit, prim)},
       {"offsetof(Hit, v)", offsetof(Hit, v)},
-      {"sizeof(BvhTriangle)", sizeof(BvhTriangle)},
-      {"offsetof(BvhTriangle, e2)", offsetof(BvhTriangle, e2)},
+      {"sizeof(BvhTriPack)", sizeof(BvhTriPack)},
+      {"offsetof(BvhTriPack, e2_x)", offsetof(BvhTriPack, e2_x)},
+      {"offsetof(BvhTriPack, prim)", offsetof(BvhTriPack, prim)},
       {"sizeof(BvhNode)", sizeof(BvhNode)},
       {"offsetof(BvhNode, max_x)", offsetof(BvhNode, max_x)},
       {"offsetof(BvhNode, min_z)", offsetof(BvhNode, min_z)},
@@ -51,7 +52,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
     CHECK(device[i] == host[i].second);
   }
   // Every buffer struct is a multiple of 16 bytes so arrays of it stay float4-aligned.
-  for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriangle), sizeof(BvhNode), sizeof(Camera),
+  for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriPack), sizeof(BvhNode), sizeof(Camera),
                    sizeof(Material), sizeof(Emitter), sizeof(PathState), sizeof(FrameParams)})
     CHECK(s % 16 == 0);
 }

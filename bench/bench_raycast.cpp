@@ -1,0 +1,380 @@
+// bench_raycast: closest-hit ray casting throughput of kernels/raycast.cl on
+// incoherent diffuse rays, against Embree 3 (rtcIntersect1) on the same rays with
+// as many threads as the OpenCL device has compute units.
+//
+// Rays: 2^21 (--rays_log2) area-uniform points on the scene's triangles, offset
+// along the geometric normal by 1e-5 of the scene's bounding-box diagonal, with
+// cosine-distributed directions about that normal; tmin 0, tmax infinity; fixed seed.
+// Timing: one warm-up launch, then --trials launches; the device time of each
+// comes from its OpenCL profiling event (Runtime::stats), the wall time from a
+// steady clock around enqueue + finish. Reported: min and median of both, Mrays/s
+// of the median device time, and after timing the agreement of the hit triangles
+// with Embree's.
+//
+// Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
+//                      [--trials=N]
+// Without --scene: scenes/cornell-box.xml of the source tree and Dabrovic Sponza
+// from $PSF_SHARED (else ../shared beside the source tree); absent ones are skipped.
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cstdarg>
+#include <cstring>
+#include <memory>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <limits>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#ifdef PSF_HAVE_EMBREE
+#include <embree3/rtcore.h>
+#endif
+
+#include "bvh.h"
+#include "cl/runtime.h"
+#include "scene/scene.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Options {
+  std::vector<std::string> scenes;  // scene files; empty: the defaults
+  size_t local = 64;                // work-group size of the launches
+  int rays_log2 = 21;               // 2^rays_log2 rays per scene
+  int trials = 7;                   // timed launches per scene
+};
+
+struct Timing {
+  double min_s = 0, median_s = 0;  // over the trials
+};
+
+Timing summarize(std::vector<double> s) {
+  std::sort(s.begin(), s.end());
+  Timing t;
+  if (s.empty()) return t;
+  t.min_s = s.front();
+  t.median_s = s.size() % 2 ? s[s.size() / 2] : 0.5 * (s[s.size() / 2 - 1] + s[s.size() / 2]);
+  return t;
+}
+
+// A scene prepared for the benchmark: geometry, BVH and rays, and the results.
+struct Bench {
+  std::string name;                  // short name for the benchmark
+  std::string path;                  // scene file
+  std::vector<glm::vec3> positions;  // geometry
+  std::vector<glm::uvec3> triangles;
+  psf::Bvh bvh;                      // the wide BVH
+  std::vector<Ray> rays;             // the incoherent rays
+  std::vector<Hit> psf_hits;         // after timing, for the comparison
+  std::vector<uint32_t> embree_prims;
+  double embree_build_ms = 0;
+  Timing embree;                     // wall time of one pass over all rays
+};
+
+// Area-uniform surface points with cosine-distributed directions about the
+// geometric normal (Pharr et al., PBR 4th ed., 13.6.3 cosine-weighted hemisphere).
+std::vector<Ray> diffuse_rays(const std::vector<glm::vec3>& p, const std::vector<glm::uvec3>& tris, size_t count,
+                              uint32_t seed) {
+  std::vector<double> cdf;
+  cdf.reserve(tris.size());
+  double total = 0;
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (const auto& t : tris) {
+    glm::vec3 a = p[t.x], b = p[t.y], c = p[t.z];
+    double area = 0.5 * glm::length(glm::cross(glm::dvec3(b - a), glm::dvec3(c - a)));
+    total += std::isfinite(area) ? area : 0.0;
+    cdf.push_back(total);
+    lo = glm::min(lo, glm::min(a, glm::min(b, c)));
+    hi = glm::max(hi, glm::max(a, glm::max(b, c)));
+  }
+  std::vector<Ray> rays;
+  if (total <= 0) return rays;
+  const float offset = 1e-5f * glm::length(hi - lo);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  rays.reserve(count);
+  while (rays.size() < count) {
+    size_t t = std::upper_bound(cdf.begin(), cdf.end(), u01(rng) * total) - cdf.begin();
+    if (t >= tris.size()) continue;
+    glm::vec3 a = p[tris[t].x], b = p[tris[t].y], c = p[tris[t].z];
+    glm::vec3 n = glm::cross(b - a, c - a);
+    if (!(glm::length(n) > 0)) continue;
+    n = glm::normalize(n);
+    double su = std::sqrt(u01(rng)), v = u01(rng);
+    glm::vec3 x = a + float(su * (1 - v)) * (b - a) + float(su * v) * (c - a);
+    // An orthonormal basis about n (Duff et al., JCGT 2017).
+    float sign = std::copysign(1.0f, n.z);
+    float q = -1.0f / (sign + n.z);
+    float w = n.x * n.y * q;
+    glm::vec3 tx(1.0f + sign * n.x * n.x * q, sign * w, -sign * n.x);
+    glm::vec3 ty(w, sign + n.y * n.y * q, -n.y);
+    double r2 = u01(rng), phi = 2 * M_PI * u01(rng);
+    double r = std::sqrt(r2);
+    glm::vec3 d = float(r * std::cos(phi)) * tx + float(r * std::sin(phi)) * ty + float(std::sqrt(1 - r2)) * n;
+    glm::vec3 o = x + offset * n;
+    Ray ray;
+    ray.org = {{o.x, o.y, o.z, 0.0f}};
+    ray.dir = {{d.x, d.y, d.z, std::numeric_limits<float>::infinity()}};
+    rays.push_back(ray);
+  }
+  return rays;
+}
+
+#ifdef PSF_HAVE_EMBREE
+struct Embree {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+
+  Embree(const Bench& b) {
+    device = rtcNewDevice(nullptr);
+    auto t0 = std::chrono::steady_clock::now();
+    scene = rtcNewScene(device);
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                          3 * sizeof(float), b.positions.size()));
+    for (size_t i = 0; i < b.positions.size(); ++i)
+      for (int k = 0; k < 3; ++k) v[3 * i + k] = b.positions[i][k];
+    auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                               3 * sizeof(uint32_t), b.triangles.size()));
+    for (size_t i = 0; i < b.triangles.size(); ++i)
+      for (int k = 0; k < 3; ++k) idx[3 * i + k] = b.triangles[i][k];
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene);
+    build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+  ~Embree() {
+    rtcReleaseScene(scene);
+    rtcReleaseDevice(device);
+  }
+
+  // Closest hits of rays [begin, end): the hit triangle or PSF_NO_HIT.
+  void trace(const std::vector<Ray>& rays, size_t begin, size_t end, uint32_t* prims) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (size_t i = begin; i < end; ++i) {
+      RTCRayHit rh;
+      const Ray& r = rays[i];
+      rh.ray.org_x = r.org.s[0];
+      rh.ray.org_y = r.org.s[1];
+      rh.ray.org_z = r.org.s[2];
+      rh.ray.tnear = r.org.s[3];
+      rh.ray.dir_x = r.dir.s[0];
+      rh.ray.dir_y = r.dir.s[1];
+      rh.ray.dir_z = r.dir.s[2];
+      rh.ray.tfar = r.dir.s[3];
+      rh.ray.time = 0.0f;
+      rh.ray.mask = 0xFFFFFFFFu;
+      rh.ray.id = 0;
+      rh.ray.flags = 0;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+      rtcIntersect1(scene, &ctx, &rh);
+      prims[i] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? PSF_NO_HIT : rh.hit.primID;
+    }
+  }
+
+  // All rays on `threads` threads, each a contiguous chunk.
+  void trace_all(const std::vector<Ray>& rays, unsigned threads, std::vector<uint32_t>& prims) const {
+    prims.resize(rays.size());
+    std::vector<std::thread> pool;
+    size_t chunk = (rays.size() + threads - 1) / threads;
+    for (unsigned t = 0; t < threads; ++t) {
+      size_t begin = std::min(rays.size(), t * chunk), end = std::min(rays.size(), begin + chunk);
+      pool.emplace_back([&, begin, end] { trace(rays, begin, end, prims.data()); });
+    }
+    for (auto& th : pool) th.join();
+  }
+
+  double build_ms = 0;
+};
+#endif
+
+std::string sponza_path() {
+  if (const char* env = std::getenv("PSF_SHARED"); env && *env)
+    return (fs::path(env) / "scenes/sponza-dabrovic/sponza.obj").string();
+  return (fs::path(PSF_SOURCE_DIR) / "../shared/scenes/sponza-dabrovic/sponza.obj").string();
+}
+
+std::string scene_name(const std::string& path) {
+  fs::path p(path);
+  std::string stem = p.stem().string();
+  if (stem == "scene" || stem == "sponza") stem = p.parent_path().filename().string();
+  return stem;
+}
+
+void report(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+void report(const char* fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  std::vfprintf(stderr, fmt, ap);
+  va_end(ap);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  Options opt;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto value = [&](const char* key) -> const char* {
+      size_t n = std::strlen(key);
+      return a.compare(0, n, key) == 0 ? a.c_str() + n : nullptr;
+    };
+    if (const char* v = value("--scene=")) {
+      opt.scenes.push_back(v);
+    } else if (const char* v = value("--local=")) {
+      opt.local = std::stoul(v);
+    } else if (const char* v = value("--rays_log2=")) {
+      opt.rays_log2 = std::stoi(v);
+    } else if (const char* v = value("--trials=")) {
+      opt.trials = std::max(1, std::stoi(v));
+    } else {
+      std::fprintf(stderr, "bench_raycast: unknown argument '%s'\n", a.c_str());
+      return 2;
+    }
+  }
+  if (opt.scenes.empty()) {
+    opt.scenes.push_back((fs::path(PSF_SOURCE_DIR) / "scenes/cornell-box.xml").string());
+    opt.scenes.push_back(sponza_path());
+  }
+
+  psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
+  psf::Runtime rt(dev);
+  const std::string build_options = "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH);
+  const unsigned threads = std::max(1u, dev.compute_units);
+  const size_t num_rays = size_t(1) << opt.rays_log2;
+  benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
+  benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
+  benchmark::AddCustomContext("psf_build_options", build_options);
+  benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
+  benchmark::AddCustomContext("psf_rays", std::to_string(num_rays));
+  benchmark::AddCustomContext("psf_local_size", std::to_string(opt.local));
+  report("device: %s / %s, driver %s, %s, %u compute units\n", dev.platform.c_str(), dev.name.c_str(),
+         dev.driver.c_str(), dev.version.c_str(), dev.compute_units);
+  report("build options: %s; rays: %zu; local size: %zu; trials: %d\n", build_options.c_str(), num_rays, opt.local,
+         opt.trials);
+
+  std::vector<std::unique_ptr<Bench>> benches;
+  for (const std::string& path : opt.scenes) {
+    if (!fs::exists(path)) {
+      report("skipped %s: not found\n", path.c_str());
+      continue;
+    }
+    auto b = std::make_unique<Bench>();
+    b->path = path;
+    b->name = scene_name(path);
+    try {
+      psf::Scene scene = psf::load_scene(path);
+      b->positions = std::move(scene.positions);
+      b->triangles = std::move(scene.triangles);
+    } catch (const std::exception& e) {
+      report("skipped %s: %s\n", path.c_str(), e.what());
+      continue;
+    }
+    b->bvh = psf::build_bvh(b->positions, b->triangles);
+    b->rays = diffuse_rays(b->positions, b->triangles, num_rays, 1234567u);
+    report("%s: %zu triangles, BVH build %.1f ms, %zu nodes, depth %d, %u triangles left out\n", b->name.c_str(),
+           b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.depth, b->bvh.skipped);
+    if (b->rays.empty()) {
+      report("skipped %s: no surface to start rays from\n", path.c_str());
+      continue;
+    }
+    benches.push_back(std::move(b));
+  }
+
+  for (auto& bp : benches) {
+    Bench* b = bp.get();
+#ifdef PSF_HAVE_EMBREE
+    // Embree first, so the psf benchmark can report the ratio and the agreement.
+    benchmark::RegisterBenchmark(("embree_raycast/" + b->name).c_str(), [b, threads, &opt](benchmark::State& state) {
+      Embree e(*b);
+      b->embree_build_ms = e.build_ms;
+      std::vector<double> wall;
+      e.trace_all(b->rays, threads, b->embree_prims);  // warm-up
+      for (auto _ : state) {
+        auto t0 = std::chrono::steady_clock::now();
+        e.trace_all(b->rays, threads, b->embree_prims);
+        double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        state.SetIterationTime(s);
+        wall.push_back(s);
+      }
+      b->embree = summarize(wall);
+      state.counters["Mrays_per_s"] = b->rays.size() / b->embree.median_s * 1e-6;
+      state.counters["Mrays_per_s_best"] = b->rays.size() / b->embree.min_s * 1e-6;
+      state.counters["build_ms"] = b->embree_build_ms;
+      state.counters["threads"] = threads;
+      report("%s: embree %u threads: build %.1f ms, %.2f Mrays/s (median %.1f ms, min %.1f ms)\n", b->name.c_str(),
+             threads, b->embree_build_ms, b->rays.size() / b->embree.median_s * 1e-6, b->embree.median_s * 1e3,
+             b->embree.min_s * 1e3);
+    })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
+#endif
+    benchmark::RegisterBenchmark(("psf_raycast/" + b->name).c_str(), [b, &rt, &opt](benchmark::State& state) {
+      psf::RayCaster caster(rt, b->bvh);
+      caster.local_size = opt.local;
+      const uint32_t n = static_cast<uint32_t>(b->rays.size());
+      cl::Buffer rays = rt.upload(b->rays);
+      cl::Buffer hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
+      caster.closest(rays, hits, n);  // warm-up: first launch with this local size
+      rt.finish();
+      std::vector<double> device, wall;
+      for (auto _ : state) {
+        rt.reset_stats();
+        auto t0 = std::chrono::steady_clock::now();
+        caster.closest(rays, hits, n);
+        rt.finish();
+        double w = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        double d = rt.stats().at("raycast_closest").ms * 1e-3;
+        state.SetIterationTime(d);
+        device.push_back(d);
+        wall.push_back(w);
+      }
+      Timing dt = summarize(device), wt = summarize(wall);
+      // Check the output after timing: NaN-free, and against Embree where present.
+      b->psf_hits = rt.download<Hit>(hits, n);
+      size_t nan = 0, hit = 0;
+      for (const Hit& h : b->psf_hits) {
+        nan += std::isnan(h.t) || std::isnan(h.u) || std::isnan(h.v);
+        hit += h.prim != PSF_NO_HIT;
+      }
+      double mrays = n / dt.median_s * 1e-6;
+      state.counters["Mrays_per_s"] = mrays;
+      state.counters["Mrays_per_s_best"] = n / dt.min_s * 1e-6;
+      state.counters["wall_ms_median"] = wt.median_s * 1e3;
+      state.counters["wall_ms_min"] = wt.min_s * 1e3;
+      state.counters["build_ms"] = b->bvh.build_ms;
+      state.counters["hit_fraction"] = double(hit) / n;
+      state.counters["local_size"] = double(opt.local);
+      report("%s: psf W=%d local %zu: build %.1f ms, %.2f Mrays/s (device median %.1f ms, min %.1f ms; wall median "
+             "%.1f ms, min %.1f ms), %.1f%% hit\n",
+             b->name.c_str(), PSF_BVH_WIDTH, opt.local, b->bvh.build_ms, mrays, dt.median_s * 1e3, dt.min_s * 1e3,
+             wt.median_s * 1e3, wt.min_s * 1e3, 100.0 * hit / n);
+      if (nan) state.SkipWithError("NaN in the hits");
+#ifdef PSF_HAVE_EMBREE
+      if (b->embree_prims.size() == n) {
+        size_t agree = 0;
+        for (uint32_t i = 0; i < n; ++i) agree += b->psf_hits[i].prim == b->embree_prims[i];
+        double agreement = double(agree) / n;
+        double ratio = mrays / (n / b->embree.median_s * 1e-6);
+        state.counters["agreement"] = agreement;
+        state.counters["ratio_psf_embree"] = ratio;
+        report("%s: psf/embree = %.2f; hit triangles agree for %.4f%% of rays%s\n", b->name.c_str(), ratio,
+               100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
+        if (agreement <= 0.999) state.SkipWithError("hit triangles agree with Embree for <= 99.9% of rays");
+      }
+#endif
+    })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

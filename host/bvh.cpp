@@ -1,0 +1,366 @@
+// Binned SAH BVH build (Wald, "On fast construction of SAH-based bounding volume
+// hierarchies", RT 2007) of a binary BVH, collapsed into a PSF_BVH_WIDTH-wide BVH
+// by repeatedly opening the child of largest surface area (Wald et al., "Getting
+// rid of packets", RT 2008), and the RayCaster that uploads it.
+#include "bvh.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace psf {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+struct Box {
+  glm::vec3 lo{kInf};   // minimum corner; lo > hi on an empty box
+  glm::vec3 hi{-kInf};  // maximum corner
+
+  void grow(const glm::vec3& p) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  void grow(const Box& b) {
+    lo = glm::min(lo, b.lo);
+    hi = glm::max(hi, b.hi);
+  }
+  bool empty() const { return lo.x > hi.x || lo.y > hi.y || lo.z > hi.z; }
+  // Half the surface area (the SAH only needs ratios); 0 for an empty box.
+  float half_area() const {
+    if (empty()) return 0.0f;
+    glm::vec3 d = hi - lo;
+    return d.x * d.y + d.y * d.z + d.z * d.x;
+  }
+};
+
+// A node of the binary BVH: an inner node (left, right) or a leaf (first, count)
+// over a range of the builder's triangle index array.
+struct BinaryNode {
+  Box box;             // bounds of the node's triangles
+  uint32_t left = 0;   // inner node: children (binary node indices)
+  uint32_t right = 0;
+  uint32_t first = 0;  // leaf: first position in the index array
+  uint32_t count = 0;  // leaf: number of triangles; 0 for an inner node
+};
+
+class BinaryBuilder {
+ public:
+  BinaryBuilder(const std::vector<Box>& boxes, const BvhParams& params)
+      : boxes_(boxes), params_(params) {
+    centroids_.reserve(boxes.size());
+    for (const Box& b : boxes) centroids_.push_back(0.5f * (b.lo + b.hi));
+  }
+
+  // Builds over the given triangle ids; returns the root (binary node 0).
+  void build(std::vector<uint32_t> ids) {
+    index_ = std::move(ids);
+    nodes_.reserve(2 * index_.size());
+    nodes_.emplace_back();
+    build_node(0, 0, static_cast<uint32_t>(index_.size()), 1);
+  }
+
+  const std::vector<BinaryNode>& nodes() const { return nodes_; }
+  const std::vector<uint32_t>& index() const { return index_; }
+
+ private:
+  struct Split {
+    int axis = -1;                                  // -1: none found
+    int bin = 0;                                    // left side is bins [0, bin]
+    float cost = std::numeric_limits<float>::max();  // sum of area * count of both sides
+  };
+
+  // Triangle tests come in packs of PSF_BVH_WIDTH: the SAH counts packs.
+  static float packs(uint32_t n) { return float((n + PSF_BVH_WIDTH - 1) / PSF_BVH_WIDTH); }
+
+  // The bin of centroid coordinate c; clamped before the conversion to int so that
+  // an overflowing scale (a tiny extent) cannot produce an out-of-range value.
+  static int bin_of(float c, float lo, float scale, int bins) {
+    float f = (c - lo) * scale;
+    if (!(f > 0.0f)) return 0;
+    if (f >= float(bins - 1)) return bins - 1;
+    return static_cast<int>(f);
+  }
+
+  Split find_split(uint32_t first, uint32_t count, const Box& cbox) const {
+    const int bins = std::max(2, params_.bins);
+    Split best;
+    std::vector<Box> bin_box(bins);
+    std::vector<uint32_t> bin_count(bins);
+    std::vector<float> right_area(bins);
+    std::vector<uint32_t> right_count(bins);
+    for (int axis = 0; axis < 3; ++axis) {
+      float lo = cbox.lo[axis], extent = cbox.hi[axis] - cbox.lo[axis];
+      if (!(extent > 0.0f)) continue;
+      float scale = bins / extent;
+      std::fill(bin_box.begin(), bin_box.end(), Box{});
+      std::fill(bin_count.begin(), bin_count.end(), 0u);
+      for (uint32_t i = first; i < first + count; ++i) {
+        uint32_t t = index_[i];
+        int b = bin_of(centroids_[t][axis], lo, scale, bins);
+        bin_box[b].grow(boxes_[t]);
+        bin_count[b] += 1;
+      }
+      Box acc;
+      uint32_t n = 0;
+      for (int b = bins - 1; b > 0; --b) {
+        acc.grow(bin_box[b]);
+        n += bin_count[b];
+        right_area[b] = acc.half_area();
+        right_count[b] = n;
+      }
+      acc = Box{};
+      n = 0;
+      for (int b = 0; b < bins - 1; ++b) {
+        acc.grow(bin_box[b]);
+        n += bin_count[b];
+        if (n == 0 || right_count[b + 1] == 0) continue;
+        float cost = acc.half_area() * packs(n) + right_area[b + 1] * packs(right_count[b + 1]);
+        if (cost < best.cost) best = {axis, b, cost};
+      }
+    }
+    return best;
+  }
+
+  void make_leaf(uint32_t node, uint32_t first, uint32_t count) {
+    nodes_[node].first = first;
+    nodes_[node].count = count;
+  }
+
+  void build_node(uint32_t node, uint32_t first, uint32_t count, int depth) {
+    Box box, cbox;
+    for (uint32_t i = first; i < first + count; ++i) {
+      box.grow(boxes_[index_[i]]);
+      cbox.grow(centroids_[index_[i]]);
+    }
+    nodes_[node].box = box;
+    if (count <= 1) return make_leaf(node, first, count);
+
+    // Balanced splits from here on must still end within PSF_BVH_MAX_DEPTH levels.
+    int levels_needed = static_cast<int>(std::ceil(std::log2(double(count)))) + 1;
+    bool force_median = depth + levels_needed >= PSF_BVH_MAX_DEPTH;
+
+    uint32_t mid = first;
+    if (force_median && count <= params_.max_leaf) return make_leaf(node, first, count);
+    if (!force_median) {
+      Split s = find_split(first, count, cbox);
+      float area = box.half_area();
+      float leaf_cost = params_.intersection_cost * packs(count);
+      float split_cost = params_.traversal_cost +
+                         (area > 0.0f ? params_.intersection_cost * s.cost / area : 0.0f);
+      if (count <= params_.max_leaf && (s.axis < 0 || leaf_cost <= split_cost))
+        return make_leaf(node, first, count);
+      if (s.axis >= 0) {
+        const int bins = std::max(2, params_.bins);
+        float lo = cbox.lo[s.axis], scale = bins / (cbox.hi[s.axis] - cbox.lo[s.axis]);
+        auto it = std::partition(index_.begin() + first, index_.begin() + first + count, [&](uint32_t t) {
+          return bin_of(centroids_[t][s.axis], lo, scale, bins) <= s.bin;
+        });
+        mid = static_cast<uint32_t>(it - index_.begin());
+      }
+    }
+    if (mid == first || mid == first + count) {
+      // No usable SAH split (all centroids equal) or the depth budget is short:
+      // median split along the widest centroid axis.
+      glm::vec3 ext = cbox.hi - cbox.lo;
+      int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
+      mid = first + count / 2;
+      std::nth_element(index_.begin() + first, index_.begin() + mid, index_.begin() + first + count,
+                       [&](uint32_t a, uint32_t b) { return centroids_[a][axis] < centroids_[b][axis]; });
+    }
+    uint32_t left = static_cast<uint32_t>(nodes_.size());
+    nodes_.emplace_back();
+    nodes_.emplace_back();
+    nodes_[node].left = left;
+    nodes_[node].right = left + 1;
+    build_node(left, first, mid - first, depth + 1);
+    build_node(left + 1, mid, first + count - mid, depth + 1);
+  }
+
+  const std::vector<Box>& boxes_;
+  const BvhParams& params_;
+  std::vector<glm::vec3> centroids_;
+  std::vector<uint32_t> index_;
+  std::vector<BinaryNode> nodes_;
+};
+
+BvhNode empty_node() {
+  BvhNode n;
+  for (int s = 0; s < PSF_BVH_WIDTH; ++s) {
+    n.min_x[s] = n.min_y[s] = n.min_z[s] = kInf;
+    n.max_x[s] = n.max_y[s] = n.max_z[s] = -kInf;
+    n.child[s] = PSF_EMPTY_CHILD;
+  }
+  return n;
+}
+
+// A pack whose lanes are all unused: zero edges are never hit.
+BvhTriPack empty_pack() {
+  BvhTriPack p;
+  std::memset(&p, 0, sizeof p);
+  for (int k = 0; k < PSF_BVH_WIDTH; ++k) p.prim[k] = PSF_NO_HIT;
+  return p;
+}
+
+// Collapses the binary BVH into wide nodes, depth first (a node before its children).
+class Collapser {
+ public:
+  using LeafFn = std::function<uint32_t(const BinaryNode&)>;  // writes a leaf's packs, returns the first
+  Collapser(const std::vector<BinaryNode>& bin, std::vector<BvhNode>& out, LeafFn leaf)
+      : bin_(bin), out_(out), leaf_(std::move(leaf)) {}
+
+  // Emits the wide node whose slots are the (grand)children of binary node `b`;
+  // a binary leaf as root becomes a wide root with one leaf slot.
+  uint32_t emit(uint32_t b, int depth) {
+    depth_ = std::max(depth_, depth);
+    uint32_t id = static_cast<uint32_t>(out_.size());
+    out_.push_back(empty_node());
+    std::vector<uint32_t> kids;
+    if (bin_[b].count > 0) {
+      kids.push_back(b);
+    } else {
+      kids.push_back(bin_[b].left);
+      kids.push_back(bin_[b].right);
+    }
+    while (kids.size() < PSF_BVH_WIDTH) {
+      int open = -1;
+      float best = -1.0f;
+      for (size_t k = 0; k < kids.size(); ++k) {
+        const BinaryNode& n = bin_[kids[k]];
+        if (n.count == 0 && n.box.half_area() > best) {
+          best = n.box.half_area();
+          open = static_cast<int>(k);
+        }
+      }
+      if (open < 0) break;
+      uint32_t opened = kids[open];
+      kids[open] = bin_[opened].left;
+      kids.push_back(bin_[opened].right);
+    }
+    for (size_t s = 0; s < kids.size(); ++s) {
+      const BinaryNode& n = bin_[kids[s]];
+      uint32_t child;
+      if (n.count > 0) {
+        uint32_t packs = (n.count + PSF_BVH_WIDTH - 1) / PSF_BVH_WIDTH;
+        child = PSF_LEAF_BIT | ((packs - 1u) << PSF_LEAF_COUNT_SHIFT) | leaf_(n);
+      } else {
+        child = emit(kids[s], depth + 1);
+      }
+      BvhNode& w = out_[id];  // after the recursion: out_ may have grown
+      w.min_x[s] = n.box.lo.x;
+      w.min_y[s] = n.box.lo.y;
+      w.min_z[s] = n.box.lo.z;
+      w.max_x[s] = n.box.hi.x;
+      w.max_y[s] = n.box.hi.y;
+      w.max_z[s] = n.box.hi.z;
+      w.child[s] = child;
+    }
+    return id;
+  }
+  int depth() const { return depth_; }
+
+ private:
+  const std::vector<BinaryNode>& bin_;
+  std::vector<BvhNode>& out_;
+  LeafFn leaf_;
+  int depth_ = 1;
+};
+
+bool finite(const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+}  // namespace
+
+Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
+              const BvhParams& params) {
+  static_assert(PSF_BVH_WIDTH == 4 || PSF_BVH_WIDTH == 8, "PSF_BVH_WIDTH must be 4 or 8");
+  auto t0 = std::chrono::steady_clock::now();
+  if (triangles.size() > PSF_LEAF_FIRST_MASK)
+    throw std::invalid_argument("build_bvh: " + std::to_string(triangles.size()) +
+                                " triangles exceed the leaf encoding (2^27)");
+  Bvh bvh;
+  std::vector<Box> boxes(triangles.size());
+  std::vector<uint32_t> ids;
+  ids.reserve(triangles.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const glm::uvec3& tri = triangles[t];
+    for (int k = 0; k < 3; ++k)
+      if (tri[k] >= positions.size())
+        throw std::invalid_argument("build_bvh: triangle " + std::to_string(t) + " refers to vertex " +
+                                    std::to_string(tri[k]) + " of " + std::to_string(positions.size()));
+    const glm::vec3 &a = positions[tri.x], &b = positions[tri.y], &c = positions[tri.z];
+    // Zero area (repeated vertices, collinear) to a relative tolerance of 1e-12 in
+    // sin(angle), computed in double: such a triangle can never be hit.
+    glm::dvec3 e1 = glm::dvec3(b) - glm::dvec3(a), e2 = glm::dvec3(c) - glm::dvec3(a);
+    double cross2 = glm::dot(glm::cross(e1, e2), glm::cross(e1, e2));
+    double scale2 = glm::dot(e1, e1) * glm::dot(e2, e2);
+    if (!finite(a) || !finite(b) || !finite(c) || !(cross2 > 1e-24 * scale2)) {
+      bvh.skipped += 1;
+      continue;
+    }
+    boxes[t].grow(a);
+    boxes[t].grow(b);
+    boxes[t].grow(c);
+    ids.push_back(static_cast<uint32_t>(t));
+  }
+
+  if (ids.empty()) {
+    bvh.nodes.push_back(empty_node());
+    bvh.depth = 1;
+  } else {
+    bvh.triangle_count = static_cast<uint32_t>(ids.size());
+    BinaryBuilder builder(boxes, params);
+    builder.build(std::move(ids));
+    const std::vector<uint32_t>& order = builder.index();
+    // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, appended in leaf order.
+    auto write_leaf = [&](const BinaryNode& leaf) {
+      uint32_t first = static_cast<uint32_t>(bvh.packs.size());
+      for (uint32_t k = 0; k < leaf.count; ++k) {
+        if (k % PSF_BVH_WIDTH == 0) bvh.packs.push_back(empty_pack());
+        BvhTriPack& p = bvh.packs.back();
+        int lane = k % PSF_BVH_WIDTH;
+        uint32_t t = order[leaf.first + k];
+        const glm::uvec3& tri = triangles[t];
+        const glm::vec3 &a = positions[tri.x], &b = positions[tri.y], &c = positions[tri.z];
+        glm::vec3 e1 = b - a, e2 = c - a;
+        glm::dvec3 n = glm::cross(glm::dvec3(b) - glm::dvec3(a), glm::dvec3(c) - glm::dvec3(a));
+        p.v0_x[lane] = a.x;
+        p.v0_y[lane] = a.y;
+        p.v0_z[lane] = a.z;
+        p.e1_x[lane] = e1.x;
+        p.e1_y[lane] = e1.y;
+        p.e1_z[lane] = e1.z;
+        p.e2_x[lane] = e2.x;
+        p.e2_y[lane] = e2.y;
+        p.e2_z[lane] = e2.z;
+        p.inv_size[lane] = static_cast<float>(1.0 / std::sqrt(glm::length(n)));
+        p.prim[lane] = t;
+      }
+      return first;
+    };
+    Collapser collapser(builder.nodes(), bvh.nodes, write_leaf);
+    collapser.emit(0, 1);
+    bvh.depth = collapser.depth();
+  }
+  if (bvh.depth > PSF_BVH_MAX_DEPTH)
+    throw std::logic_error("build_bvh: depth " + std::to_string(bvh.depth) + " exceeds PSF_BVH_MAX_DEPTH");
+  bvh.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return bvh;
+}
+
+RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
+    : rt_(rt), nodes_(rt.upload(bvh.nodes)), packs_(rt.upload(bvh.packs)), depth_(bvh.depth) {}
+
+void RayCaster::closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
+  rt_.launch("raycast_closest", count, local_size, nodes_, packs_, rays, hits, count);
+}
+
+void RayCaster::any(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
+  rt_.launch("raycast_any", count, local_size, nodes_, packs_, rays, hits, count);
+}
+
+}  // namespace psf

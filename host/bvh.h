@@ -1,0 +1,72 @@
+// BVH and ray casting stage, host side: a binned SAH build of a binary BVH,
+// collapsed into a PSF_BVH_WIDTH-wide BVH (kernels/psf_shared.h: BvhNode,
+// BvhTriangle), and RayCaster, which uploads it and launches kernels/raycast.cl.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "cl/runtime.h"
+#include "psf_shared.h"
+
+namespace psf {
+
+// Build settings; the defaults are what the renderer and the benchmark use.
+struct BvhParams {
+  int bins = 16;                          // SAH bins per axis over the centroid bounds
+  float traversal_cost = 1.0f;            // SAH cost of a binary split, in pack tests
+  float intersection_cost = 1.0f;         // SAH cost of testing one BvhTriPack
+  unsigned max_leaf = PSF_LEAF_MAX_TRIS;  // a node with more triangles is always split
+};
+
+struct Bvh {
+  std::vector<BvhNode> nodes;      // node 0 is the root
+  std::vector<BvhTriPack> packs;   // leaf triangles, PSF_BVH_WIDTH per pack, in leaf order
+  uint32_t triangle_count = 0;     // triangles in the packs (scene triangles less `skipped`)
+  double build_ms = 0.0;           // wall time of build_bvh
+  int depth = 0;                   // levels of wide nodes (1: the root only)
+  uint32_t skipped = 0;            // degenerate or non-finite triangles left out
+};
+
+// Builds the wide BVH over `triangles` (indices into `positions`). Triangles of
+// zero area (below a relative tolerance: they can never be hit) or with
+// non-finite vertices are left out; an empty scene gives a root whose slots are
+// all empty. Throws std::invalid_argument on an out-of-range vertex index.
+Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
+              const BvhParams& params = {});
+
+// Decodes a leaf child reference (PSF_LEAF_BIT set): first pack and number of packs.
+inline uint32_t leaf_first(uint32_t child) { return child & PSF_LEAF_FIRST_MASK; }
+inline uint32_t leaf_count(uint32_t child) {
+  return ((child & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
+}
+inline bool is_leaf(uint32_t child) { return child != PSF_EMPTY_CHILD && (child & PSF_LEAF_BIT); }
+
+// The BVH on a device and the ray casting kernels over it.
+class RayCaster {
+ public:
+  RayCaster(Runtime& rt, const Bvh& bvh);
+
+  // Closest hit of each of `count` rays (Ray) into `hits` (Hit): raycast_closest.
+  void closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count);
+  // Occlusion of each ray within [tmin, tmax] (shadow rays): raycast_any.
+  void any(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count);
+
+  // The BVH buffers (BvhNode, BvhTriPack), for kernels that call intersect_closest
+  // or intersect_any themselves.
+  const cl::Buffer& nodes() const { return nodes_; }
+  const cl::Buffer& packs() const { return packs_; }
+  int depth() const { return depth_; }
+
+  // Work-group size of the launches.
+  size_t local_size = 64;
+
+ private:
+  Runtime& rt_;
+  cl::Buffer nodes_;
+  cl::Buffer packs_;
+  int depth_ = 0;
+};
+
+}  // namespace psf

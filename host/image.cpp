@@ -1,0 +1,115 @@
+#include "image.h"
+
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfOutputFile.h>
+#include <ImfStringAttribute.h>
+#include <stb_image_write.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <random>
+#include <stdexcept>
+
+namespace psf {
+namespace fs = std::filesystem;
+
+namespace {
+
+// A temporary name in the target's folder, so the final rename is atomic.
+std::string temp_name(const std::string& path) {
+  std::random_device rd;
+  fs::path p(path);
+  return (p.parent_path() / ("." + p.filename().string() + ".tmp" + std::to_string(rd() % 1000000))).string();
+}
+
+void commit(const std::string& tmp, const std::string& path) {
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw std::runtime_error(path + ": cannot replace the file: " + ec.message());
+  }
+}
+
+float srgb_encode(float x) {
+  x = std::clamp(std::isfinite(x) ? x : 0.0f, 0.0f, 1.0f);
+  return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
+}
+
+}  // namespace
+
+void check_writable(const std::string& path) {
+  fs::path p(path);
+  if (p.filename().empty()) throw std::invalid_argument(path + ": output path names a folder, not a file");
+  if (fs::is_directory(p)) throw std::invalid_argument(path + ": output path is a folder");
+  fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+  if (!fs::is_directory(dir)) throw std::invalid_argument(path + ": folder " + dir.string() + " does not exist");
+  if (access(dir.c_str(), W_OK) != 0) throw std::invalid_argument(path + ": folder " + dir.string() + " is not writable");
+}
+
+void write_exr(const std::string& path, const Image& image, const std::map<std::string, std::string>& attributes) {
+  std::string tmp = temp_name(path);
+  try {
+    Imf::Header header(image.width, image.height);
+    for (const char* c : {"R", "G", "B"}) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+    for (const auto& [k, v] : attributes) header.insert(k, Imf::StringAttribute(v));
+    Imf::OutputFile file(tmp.c_str(), header);
+    Imf::FrameBuffer fb;
+    char* base = reinterpret_cast<char*>(const_cast<float*>(image.rgb.data()));
+    size_t xs = 3 * sizeof(float), ys = xs * image.width;
+    fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
+    fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
+    fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
+    file.setFrameBuffer(fb);
+    file.writePixels(image.height);
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw std::runtime_error(path + ": cannot write OpenEXR file: " + e.what());
+  }
+  commit(tmp, path);
+}
+
+Image read_exr(const std::string& path) {
+  try {
+    Imf::InputFile file(path.c_str());
+    Imath::Box2i dw = file.header().dataWindow();
+    Image img;
+    img.width = dw.max.x - dw.min.x + 1;
+    img.height = dw.max.y - dw.min.y + 1;
+    img.rgb.assign(size_t(img.width) * img.height * 3, 0.0f);
+    char* base = reinterpret_cast<char*>(img.rgb.data()) -
+                 (size_t(dw.min.x) + size_t(dw.min.y) * img.width) * 3 * sizeof(float);
+    size_t xs = 3 * sizeof(float), ys = xs * img.width;
+    Imf::FrameBuffer fb;
+    fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
+    fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
+    fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return img;
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot read OpenEXR file: " + e.what());
+  }
+}
+
+void write_png(const std::string& path, const Image& image, float exposure) {
+  std::vector<uint8_t> px(size_t(image.width) * image.height * 3);
+  for (size_t i = 0; i < px.size(); ++i)
+    px[i] = uint8_t(std::lround(255.0f * srgb_encode(image.rgb[i] * exposure)));
+  std::string tmp = temp_name(path);
+  if (!stbi_write_png(tmp.c_str(), image.width, image.height, 3, px.data(), image.width * 3)) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw std::runtime_error(path + ": cannot write PNG file");
+  }
+  commit(tmp, path);
+}
+
+}  // namespace psf

@@ -1,0 +1,79 @@
+// Private interface between the scene loaders: scene.cpp dispatches by file
+// extension to mitsuba.cpp and obj.cpp; shapes.cpp tessellates Mitsuba's
+// analytic shapes and appends meshes to the scene.
+#pragma once
+#include <glm/glm.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "scene/scene.h"
+
+namespace psf::detail {
+
+// A triangle mesh in object space.
+struct TriMesh {
+  std::vector<glm::vec3> positions;   // vertex positions
+  std::vector<glm::uvec3> triangles;  // vertex indices, counter-clockwise seen from the front
+};
+
+// Mitsuba's rectangle: [-1,1]^2 in the plane z = 0, facing +z (2 triangles).
+TriMesh make_rectangle();
+// Mitsuba's cube: [-1,1]^3 with outward faces, 4 vertices per face (12 triangles).
+TriMesh make_cube();
+// Mitsuba's disk: the unit disk in the plane z = 0, facing +z, as a fan of `segments` triangles.
+TriMesh make_disk(int segments = 64);
+// Mitsuba's sphere: a latitude-longitude tessellation with outward faces whose
+// vertices lie on the sphere; `rings` >= 2 bands from pole to pole, `segments` >= 3 around.
+TriMesh make_sphere(const glm::vec3& center, float radius, int rings = 32, int segments = 64);
+
+// Appends `mesh` transformed by `to_world` with material `material` to the scene,
+// reversing the winding when `flip` is set. Throws SceneError(file, line) if a
+// transformed position is not finite.
+void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, uint32_t material, bool flip,
+                 const std::string& file, int line);
+
+// A material of an OBJ file's MTL library.
+struct ObjMaterial {
+  std::string name;       // newmtl name
+  glm::vec3 kd{0.5f};     // Kd, diffuse reflectance
+  glm::vec3 ke{0.0f};     // Ke, emitted radiance
+  bool textured = false;  // has a texture map (ignored for now)
+};
+
+// The contents of an OBJ file, triangulated as fans (as Mitsuba does).
+struct ObjData {
+  TriMesh mesh;                        // referenced vertices only, in file coordinates
+  std::vector<int> tri_material;       // index into `materials` per triangle, -1 without usemtl
+  std::vector<ObjMaterial> materials;  // from the MTL library (empty unless requested)
+  std::vector<std::string> warnings;   // tinyobjloader's warnings, each "file: message"
+};
+
+// Reads an OBJ file; with `with_materials` also its MTL library. Throws
+// SceneError(path, line) for a missing file, a parse error reported by
+// tinyobjloader, an out-of-range index or a non-finite vertex position.
+ObjData read_obj(const std::string& path, bool with_materials);
+
+// A camera looking along -z at the bounding box of `positions`, with a 45 degree
+// field of view along the larger film axis that fits the box.
+CameraDesc camera_framing(const std::vector<glm::vec3>& positions);
+
+// Loads a Wavefront OBJ file: MTL Kd and Ke as materials, camera_framing, 512x512 film.
+Scene load_obj_scene(const std::string& path);
+
+// Loads a Mitsuba 0.5 / 2 / 3 XML scene; `params` override the file's <default> values.
+Scene load_mitsuba(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params);
+
+// A reflectance (`emitter` false) or emitted radiance (`emitter` true) spectrum
+// given as wavelength (nm) and value samples, converted to linear sRGB the way
+// Mitsuba 3's RGB variants do: linear interpolation between samples, zero outside
+// them, integrated against the CIE 1931 colour-matching functions (under the D65
+// illuminant for reflectances), normalised so that a constant reflectance 1 gives
+// (1,1,1) and a constant radiance 1 has luminance 1. Reflectances are clamped to
+// [0,1], radiances to >= 0.
+glm::vec3 spectrum_to_rgb(const std::vector<double>& wavelengths, const std::vector<double>& values, bool emitter);
+
+// The sRGB transfer function inverted: an 8-bit style sRGB-encoded value in [0,1] to linear.
+float srgb_to_linear(float encoded);
+
+}  // namespace psf::detail

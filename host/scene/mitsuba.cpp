@@ -1,0 +1,1105 @@
+// Mitsuba XML scenes (versions 0.5, 2 and 3) loaded into psf::Scene.
+//
+// Two passes over the top-level elements of <scene>, with <include>d files
+// spliced in place:
+//   1. <default> values fill in the `$name` parameters not given by the caller,
+//      and every element with an id is indexed (a <ref> may point forward, as in
+//      Mitsuba 3's own cbox scene);
+//   2. integrator, sensor, shapes and top-level BSDFs are instantiated in
+//      document order; BSDFs and emitters are built on first use and memoised.
+// Plugins are looked up by type name in small tables (shape_plugins(),
+// bsdf_plugins(), emitter_plugins()); a BSDF or emitter type without an exact
+// counterpart is approximated (a diffuse reflectance, or ignored) and reported
+// once per element in Scene::warnings as "file:line: ...".
+//
+// Property names are compared in snake_case, so Mitsuba 0.5's camelCase names
+// (toWorld, fovAxis, maxDepth, sampleCount, ...) are the same properties as
+// Mitsuba 3's (to_world, fov_axis, max_depth, sample_count, ...).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <glm/gtc/matrix_transform.hpp>
+#include <map>
+#include <memory>
+#include <optional>
+#include <pugixml.hpp>
+#include <set>
+#include <sstream>
+#include <string_view>
+#include <unordered_map>
+
+#include "scene/loaders.h"
+
+namespace fs = std::filesystem;
+
+namespace psf::detail {
+
+// ---------------------------------------------------------------------------
+// Colour: spectra to linear sRGB
+// ---------------------------------------------------------------------------
+namespace {
+
+// One lobe of the piecewise Gaussian fit: exp(-((x - mu) / sigma)^2 / 2) with
+// sigma = s1 left of mu and s2 right of it.
+double lobe(double x, double mu, double s1, double s2) {
+  double t = (x - mu) / (x < mu ? s1 : s2);
+  return std::exp(-0.5 * t * t);
+}
+
+// CIE 1931 2-degree colour-matching functions, the multi-lobe fit of Wyman,
+// Sloan and Shirley, "Simple Analytic Approximations to the CIE XYZ Color
+// Matching Functions", JCGT 2(2), 2013, equations 2-4.
+glm::dvec3 cie_xyz(double nm) {
+  return {
+      1.056 * lobe(nm, 599.8, 37.9, 31.0) + 0.362 * lobe(nm, 442.0, 16.0, 26.7) - 0.065 * lobe(nm, 501.1, 20.4, 26.2),
+      0.821 * lobe(nm, 568.8, 46.9, 40.5) + 0.286 * lobe(nm, 530.9, 16.3, 31.1),
+      1.217 * lobe(nm, 437.0, 11.8, 36.0) + 0.681 * lobe(nm, 459.0, 26.0, 13.8)};
+}
+
+constexpr double kCieMin = 360.0;  // integration range in nm, as Mitsuba's MI_CIE_MIN ...
+constexpr double kCieMax = 830.0;  // ... and MI_CIE_MAX
+constexpr int kCieSteps = 471;     // 1 nm steps from kCieMin to kCieMax inclusive
+
+// CIE standard illuminant D65, relative spectral power at 5 nm steps from 360 to
+// 830 nm (CIE 15:2004, table T.1).
+constexpr std::array<double, 95> kD65 = {
+    46.6383, 49.3637, 52.0891, 51.0323, 49.9755, 52.3118, 54.6482, 68.7015, 82.7549, 87.1204, 91.486,  92.4589,
+    93.4318, 90.057,  86.6823, 95.7736, 104.865, 110.936, 117.008, 117.41,  117.812, 116.336, 114.861, 115.392,
+    115.923, 112.367, 108.811, 109.082, 109.354, 108.578, 107.802, 106.296, 104.79,  106.239, 107.689, 106.047,
+    104.405, 104.225, 104.046, 102.023, 100.0,   98.1671, 96.3342, 96.0611, 95.788,  92.2368, 88.6856, 89.3459,
+    90.0062, 89.8026, 89.5991, 88.6489, 87.6987, 85.4936, 83.2886, 83.4939, 83.6992, 81.863,  80.0268, 80.1207,
+    80.2146, 81.2462, 82.2778, 80.281,  78.2842, 74.0027, 69.7213, 70.6652, 71.6091, 72.979,  74.349,  67.9765,
+    61.604,  65.7448, 69.8856, 72.4863, 75.087,  69.3398, 63.5927, 55.0054, 46.4182, 56.6118, 66.8054, 65.0941,
+    63.3828, 63.8434, 64.304,  61.8779, 59.4519, 55.7054, 51.959,  54.6998, 57.4406, 58.8765, 60.3125};
+
+double d65(double nm) {
+  double t = std::clamp((nm - kCieMin) / 5.0, 0.0, double(kD65.size() - 1));
+  size_t i = std::min(size_t(t), kD65.size() - 2);
+  double f = t - double(i);
+  return (1 - f) * kD65[i] + f * kD65[i + 1];
+}
+
+// XYZ to linear sRGB (ITU-R BT.709 primaries, D65 white), the matrix Mitsuba uses.
+glm::dvec3 xyz_to_srgb(const glm::dvec3& c) {
+  return {3.240479 * c.x - 1.537150 * c.y - 0.498535 * c.z, -0.969256 * c.x + 1.875991 * c.y + 0.041556 * c.z,
+          0.055648 * c.x - 0.204043 * c.y + 1.057311 * c.z};
+}
+
+// Integration constants of the fitted curves over the 1 nm grid.
+struct CieIntegrals {
+  glm::dvec3 flat;       // sum of xyz(l): the equal-energy white, unnormalised
+  glm::dvec3 d65_white;  // linear sRGB of sum(xyz(l) d65(l)) / sum(y(l) d65(l)), ideally (1,1,1)
+  double d65_y = 0;      // sum of y(l) d65(l)
+};
+
+const CieIntegrals& cie_integrals() {
+  static const CieIntegrals integrals = [] {
+    CieIntegrals c;
+    glm::dvec3 d65_xyz(0.0);
+    c.flat = glm::dvec3(0.0);
+    for (int i = 0; i < kCieSteps; ++i) {
+      double nm = kCieMin + i;
+      c.flat += cie_xyz(nm);
+      d65_xyz += cie_xyz(nm) * d65(nm);
+    }
+    c.d65_y = d65_xyz.y;
+    c.d65_white = xyz_to_srgb(d65_xyz / d65_xyz.y);
+    return c;
+  }();
+  return integrals;
+}
+
+}  // namespace
+
+glm::vec3 spectrum_to_rgb(const std::vector<double>& wavelengths, const std::vector<double>& values, bool emitter) {
+  const CieIntegrals& cie = cie_integrals();
+  glm::dvec3 xyz(0.0);
+  size_t k = 0;
+  for (int i = 0; i < kCieSteps; ++i) {
+    double nm = kCieMin + i;
+    if (wavelengths.empty() || nm < wavelengths.front() || nm > wavelengths.back()) continue;
+    while (k + 2 < wavelengths.size() && wavelengths[k + 1] < nm) ++k;
+    double w0 = wavelengths[k], w1 = wavelengths[std::min(k + 1, wavelengths.size() - 1)];
+    double f = w1 > w0 ? (nm - w0) / (w1 - w0) : 0.0;
+    double v = (1 - f) * values[k] + f * values[std::min(k + 1, values.size() - 1)];
+    xyz += cie_xyz(nm) * v * (emitter ? 1.0 : d65(nm));
+  }
+  glm::dvec3 rgb;
+  if (emitter) {
+    // Luminance 1 for a unit spectrum; each fitted curve rescaled to the same
+    // integral, as the tabulated CIE curves have (equal-energy white x = y = 1/3).
+    xyz *= glm::dvec3(1.0) / cie.flat;
+    rgb = xyz_to_srgb(xyz);
+  } else {
+    // Under D65 with luminance 1 for the perfect reflector; dividing by its sRGB
+    // removes the residual white-point error of the fitted curves.
+    rgb = xyz_to_srgb(xyz / cie.d65_y) / cie.d65_white;
+  }
+  return glm::vec3(glm::max(rgb, glm::dvec3(0.0)));
+}
+
+float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
+
+// ---------------------------------------------------------------------------
+// The loader
+// ---------------------------------------------------------------------------
+namespace {
+
+std::string_view trim(std::string_view s) {
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
+  return s;
+}
+
+// A finite decimal number spanning all of `s` (blanks around it allowed).
+std::optional<double> parse_number(std::string_view s) {
+  std::string t(trim(s));
+  if (t.empty()) return std::nullopt;
+  char* end = nullptr;
+  double v = std::strtod(t.c_str(), &end);
+  if (end != t.c_str() + t.size() || !std::isfinite(v)) return std::nullopt;
+  return v;
+}
+
+// Splits at blanks and commas: "1 2 3", "1, 2, 3" and "1,2,3" give three tokens.
+std::vector<std::string> split_list(std::string_view s) {
+  std::vector<std::string> out;
+  std::string cur;
+  for (char c : s) {
+    if (c == ',' || std::isspace(static_cast<unsigned char>(c))) {
+      if (!cur.empty()) out.push_back(std::move(cur));
+      cur.clear();
+    } else {
+      cur += c;
+    }
+  }
+  if (!cur.empty()) out.push_back(std::move(cur));
+  return out;
+}
+
+// camelCase to snake_case: toWorld -> to_world, intIOR -> int_ior; snake_case is unchanged.
+std::string to_snake(std::string_view name) {
+  std::string out;
+  for (size_t i = 0; i < name.size(); ++i) {
+    char c = name[i];
+    bool upper = std::isupper(static_cast<unsigned char>(c));
+    if (upper && i > 0 &&
+        (std::islower(static_cast<unsigned char>(name[i - 1])) ||
+         std::isdigit(static_cast<unsigned char>(name[i - 1]))))
+      out += '_';
+    out += char(std::tolower(static_cast<unsigned char>(c)));
+  }
+  return out;
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string fmt(const glm::vec3& v) {
+  std::ostringstream s;
+  s.precision(3);
+  s << "(" << v.x << ", " << v.y << ", " << v.z << ")";
+  return s.str();
+}
+
+// One XML file of the scene (the main file or an <include>d one).
+struct XmlFile {
+  std::string path;                 // path as opened
+  std::vector<size_t> line_starts;  // byte offset of the first character of each line
+  pugi::xml_document doc;           // the parsed document
+
+  // 1-based line of a byte offset (pugixml's offset_debug), 0 if unknown.
+  int line_of(ptrdiff_t offset) const {
+    if (offset < 0) return 0;
+    return int(std::upper_bound(line_starts.begin(), line_starts.end(), size_t(offset)) - line_starts.begin());
+  }
+};
+
+// A property element (<float>, <rgb>, <spectrum>, <transform>, <ref name=...>, ...), parsed.
+struct Property {
+  enum class Kind { Number, Integer, Boolean, String, Color, Spectrum, Vector, Transform, Object };
+  Kind kind = Kind::Number;         // which field below holds the value
+  pugi::xml_node node;              // the element, for error locations
+  double number = 0;                // Number and Integer
+  bool boolean = false;             // Boolean
+  std::string text;                 // String
+  glm::vec3 vec{0.0f};              // Color (linear RGB) and Vector (<point>, <vector>)
+  std::vector<double> wavelengths;  // Spectrum: sample wavelengths in nm, empty if uniform
+  std::vector<double> values;       // Spectrum: sample values, one if uniform
+  glm::mat4 matrix{1.0f};           // Transform
+  pugi::xml_node object;            // Object: the nested or referenced plugin element
+};
+
+// A plugin element (<shape>, <bsdf>, <sensor>, ...) with its properties parsed.
+struct Element {
+  pugi::xml_node node;                    // the element
+  std::string type;                       // its type attribute
+  std::map<std::string, Property> props;  // properties by snake_case name
+  std::vector<pugi::xml_node> objects;    // nested and referenced plugin elements, in document order
+};
+
+// How a colour-valued property is converted (Mitsuba's texture intents).
+enum class ColorUse {
+  Reflectance,  // spectra under D65, clamped to [0, 1]
+  Radiance,     // emitted spectra, >= 0, a uniform spectrum is equal-energy white
+  Unbounded     // spectra under D65, >= 0 (indices of refraction)
+};
+
+// A BSDF reduced to what the renderer supports.
+struct Bsdf {
+  glm::vec3 albedo{0.5f};  // diffuse reflectance
+  bool two_sided = false;  // scatters on both sides (Mitsuba's twosided)
+  std::string name;        // the element's id, else its type
+};
+
+// Element tags that hold a plugin (a nested object) rather than a property value.
+const std::set<std::string>& plugin_tags() {
+  static const std::set<std::string> tags = {"bsdf",  "emitter", "shape",      "texture", "sensor",
+                                             "film",  "sampler", "integrator", "rfilter", "medium",
+                                             "phase", "volume",  "subsurface"};
+  return tags;
+}
+
+// Element tags that hold a property value.
+const std::set<std::string>& property_tags() {
+  static const std::set<std::string> tags = {"float",    "integer",   "boolean", "string", "rgb",      "srgb",
+                                             "spectrum", "blackbody", "point",   "vector", "transform"};
+  return tags;
+}
+
+// Approximate normal-incidence reflectance (F0) of a few metals in linear sRGB,
+// the values commonly tabulated for real-time rendering, for conductors given by
+// a material name instead of eta and k.
+const std::map<std::string, glm::vec3>& metal_reflectance() {
+  static const std::map<std::string, glm::vec3> metals = {{"ag", {0.95f, 0.93f, 0.88f}}, {"al", {0.91f, 0.92f, 0.92f}},
+                                                          {"au", {1.00f, 0.71f, 0.29f}}, {"cr", {0.55f, 0.56f, 0.55f}},
+                                                          {"cu", {0.95f, 0.64f, 0.54f}}, {"fe", {0.56f, 0.57f, 0.58f}}};
+  return metals;
+}
+
+class MitsubaLoader {
+ public:
+  explicit MitsubaLoader(const std::vector<std::pair<std::string, std::string>>& params) {
+    for (const auto& [name, value] : params) params_[name] = value;
+  }
+
+  Scene load(const std::string& path) {
+    XmlFile& main = open(path, pugi::xml_node());
+    pugi::xml_node root = main.doc.document_element();
+    std::string version = attr(root, "version").value_or("3.0.0");
+    version_major_ = std::atoi(version.c_str());
+
+    std::vector<pugi::xml_node> top;
+    std::vector<std::string> include_stack = {fs::weakly_canonical(path).string()};
+    collect(root, top, include_stack);
+    for (pugi::xml_node node : top) index_ids(node);
+
+    using Handler = void (MitsubaLoader::*)(pugi::xml_node);
+    static const std::map<std::string, Handler> handlers = {
+        {"integrator", &MitsubaLoader::load_integrator}, {"sensor", &MitsubaLoader::load_sensor},
+        {"shape", &MitsubaLoader::load_shape},           {"bsdf", &MitsubaLoader::load_top_bsdf},
+        {"emitter", &MitsubaLoader::load_top_emitter},   {"texture", &MitsubaLoader::skip},
+    };
+    for (pugi::xml_node node : top) {
+      auto it = handlers.find(node.name());
+      if (it != handlers.end()) {
+        (this->*it->second)(node);
+      } else if (plugin_tags().count(node.name())) {
+        warn(node, node.name(), std::string("<") + node.name() + "> is not supported yet; ignored");
+      } else {
+        fail(node, std::string("unexpected element <") + node.name() + "> in <scene>");
+      }
+    }
+
+    if (!has_sensor_) {
+      scene_.camera = camera_framing(scene_.positions);
+      scene_.warnings.push_back(main.path + ": no <sensor>; using a camera framing the scene");
+    }
+    return std::move(scene_);
+  }
+
+ private:
+  // --- files, locations, messages -----------------------------------------
+
+  XmlFile& open(const std::string& path, pugi::xml_node from) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+      if (from) fail(from, "cannot open included file '" + path + "'");
+      throw SceneError(path, 0, "cannot open file");
+    }
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    auto file = std::make_unique<XmlFile>();
+    file->path = path;
+    file->line_starts.push_back(0);
+    for (size_t i = 0; i < text.size(); ++i)
+      if (text[i] == '\n') file->line_starts.push_back(i + 1);
+    pugi::xml_parse_result result =
+        file->doc.load_buffer(text.data(), text.size(), pugi::parse_default, pugi::encoding_utf8);
+    if (!result)
+      throw SceneError(path, file->line_of(result.offset), std::string("malformed XML: ") + result.description());
+    pugi::xml_node root = file->doc.document_element();
+    if (std::string(root.name()) != "scene")
+      throw SceneError(path, file->line_of(root.offset_debug()),
+                       std::string("the root element is <") + root.name() + ">, expected <scene>");
+    roots_[file->doc.internal_object()] = file.get();
+    files_.push_back(std::move(file));
+    return *files_.back();
+  }
+
+  const XmlFile& file_of(pugi::xml_node node) const { return *roots_.at(node.root().internal_object()); }
+
+  int line_of(pugi::xml_node node) const { return file_of(node).line_of(node.offset_debug()); }
+
+  std::string where(pugi::xml_node node) const { return file_of(node).path + ":" + std::to_string(line_of(node)); }
+
+  [[noreturn]] void fail(pugi::xml_node node, const std::string& message) const {
+    throw SceneError(file_of(node).path, line_of(node), message);
+  }
+
+  // Records "file:line: message" once per element and plugin type.
+  void warn(pugi::xml_node node, const std::string& plugin, const std::string& message) {
+    std::string at = where(node);
+    if (warned_.insert(at + " " + plugin).second) scene_.warnings.push_back(at + ": " + message);
+  }
+
+  // The directory of the file holding `node`, for relative paths.
+  fs::path directory_of(pugi::xml_node node) const { return fs::path(file_of(node).path).parent_path(); }
+
+  // A path named in the file holding `node`: relative to that file, else to the main file.
+  std::string resolve(pugi::xml_node node, const std::string& name) const {
+    fs::path p(name);
+    if (p.is_absolute()) return p.string();
+    fs::path local = directory_of(node) / p;
+    if (fs::exists(local)) return local.string();
+    fs::path main = fs::path(files_.front()->path).parent_path() / p;
+    return fs::exists(main) ? main.string() : local.string();
+  }
+
+  // --- attributes and $parameters -----------------------------------------
+
+  // The attribute's value with `$name` parameters substituted, if present.
+  std::optional<std::string> attr(pugi::xml_node node, const char* name) const {
+    pugi::xml_attribute a = node.attribute(name);
+    if (!a) return std::nullopt;
+    return substitute(node, a.value());
+  }
+
+  std::string required_attr(pugi::xml_node node, const char* name) const {
+    std::optional<std::string> v = attr(node, name);
+    if (!v) fail(node, std::string("<") + node.name() + "> needs the attribute '" + name + "'");
+    return *v;
+  }
+
+  std::string substitute(pugi::xml_node node, std::string_view raw) const {
+    std::string out;
+    for (size_t i = 0; i < raw.size(); ++i) {
+      size_t j = i + 1;
+      while (j < raw.size() && (std::isalnum(static_cast<unsigned char>(raw[j])) || raw[j] == '_')) ++j;
+      if (raw[i] != '$' || j == i + 1) {
+        out += raw[i];
+        continue;
+      }
+      std::string name(raw.substr(i + 1, j - i - 1));
+      auto it = params_.find(name);
+      if (it == params_.end())
+        fail(node, "undefined parameter '$" + name + "' (pass " + name + "=value or add a <default>)");
+      out += it->second;
+      i = j - 1;
+    }
+    return out;
+  }
+
+  double number_attr(pugi::xml_node node, const char* name, double fallback) const {
+    std::optional<std::string> v = attr(node, name);
+    if (!v) return fallback;
+    std::optional<double> x = parse_number(*v);
+    if (!x) fail(node, std::string("attribute '") + name + "': '" + *v + "' is not a number");
+    return *x;
+  }
+
+  double required_number(pugi::xml_node node, const char* name) const {
+    required_attr(node, name);
+    return number_attr(node, name, 0.0);
+  }
+
+  // Exactly `counts` numbers (any of them) in the attribute, separated by blanks or commas.
+  std::vector<double> number_list(pugi::xml_node node, const char* name, std::initializer_list<size_t> counts) const {
+    std::string v = required_attr(node, name);
+    std::vector<double> out;
+    for (const std::string& token : split_list(v)) {
+      std::optional<double> x = parse_number(token);
+      if (!x) fail(node, std::string("attribute '") + name + "': '" + token + "' is not a number");
+      out.push_back(*x);
+    }
+    if (std::find(counts.begin(), counts.end(), out.size()) == counts.end()) {
+      std::string expected;
+      for (size_t c : counts) expected += (expected.empty() ? "" : " or ") + std::to_string(c);
+      fail(node, std::string("attribute '") + name + "' has " + std::to_string(out.size()) + " numbers, expected " +
+                     expected);
+    }
+    return out;
+  }
+
+  // <point>/<vector>/<translate>-style xyz: a `value` list or x, y, z attributes.
+  glm::vec3 xyz_attrs(pugi::xml_node node, float fallback) const {
+    if (node.attribute("value")) {
+      std::vector<double> v = number_list(node, "value", {1, 3});
+      return v.size() == 1 ? glm::vec3(float(v[0])) : glm::vec3(float(v[0]), float(v[1]), float(v[2]));
+    }
+    return {float(number_attr(node, "x", fallback)), float(number_attr(node, "y", fallback)),
+            float(number_attr(node, "z", fallback))};
+  }
+
+  glm::vec3 vec_attr(pugi::xml_node node, const char* name) const {
+    std::vector<double> v = number_list(node, name, {3});
+    return {float(v[0]), float(v[1]), float(v[2])};
+  }
+
+  // --- pass 1: defaults, includes, ids ------------------------------------
+
+  void collect(pugi::xml_node scene, std::vector<pugi::xml_node>& top, std::vector<std::string>& include_stack) {
+    for (pugi::xml_node child : scene.children()) {
+      if (child.type() != pugi::node_element) continue;
+      std::string tag = child.name();
+      if (tag == "default") {
+        std::string name = required_attr(child, "name");
+        params_.emplace(name, required_attr(child, "value"));
+      } else if (tag == "include") {
+        std::string path = resolve(child, required_attr(child, "filename"));
+        std::string canonical = fs::weakly_canonical(path).string();
+        if (std::find(include_stack.begin(), include_stack.end(), canonical) != include_stack.end())
+          fail(child, "'" + path + "' includes itself");
+        XmlFile& file = open(path, child);
+        include_stack.push_back(canonical);
+        collect(file.doc.document_element(), top, include_stack);
+        include_stack.pop_back();
+      } else {
+        top.push_back(child);
+      }
+    }
+  }
+
+  void index_ids(pugi::xml_node node) {
+    if (node.attribute("id") && std::string(node.name()) != "ref") {
+      std::string id = required_attr(node, "id");
+      auto [it, inserted] = ids_.emplace(id, node);
+      if (!inserted) fail(node, "duplicate id '" + id + "' (first defined at " + where(it->second) + ")");
+    }
+    for (pugi::xml_node child : node.children())
+      if (child.type() == pugi::node_element) index_ids(child);
+  }
+
+  pugi::xml_node resolve_ref(pugi::xml_node ref) const {
+    std::string id = required_attr(ref, "id");
+    auto it = ids_.find(id);
+    if (it == ids_.end()) fail(ref, "reference to unknown id '" + id + "'");
+    return it->second;
+  }
+
+  // --- elements and properties --------------------------------------------
+
+  Element parse_element(pugi::xml_node node) const {
+    Element e;
+    e.node = node;
+    e.type = attr(node, "type").value_or("");
+    for (pugi::xml_node child : node.children()) {
+      if (child.type() != pugi::node_element) continue;
+      std::string tag = child.name();
+      std::optional<std::string> name = attr(child, "name");
+      Property p;
+      p.node = child;
+      if (tag == "ref" || plugin_tags().count(tag) || (tag == "spectrum" && child.attribute("type"))) {
+        p.kind = Property::Kind::Object;
+        p.object = tag == "ref" ? resolve_ref(child) : child;
+        e.objects.push_back(p.object);
+        if (!name) continue;
+      } else if (property_tags().count(tag)) {
+        if (!name) fail(child, "<" + tag + "> needs the attribute 'name'");
+        p = parse_property(child);
+      } else {
+        fail(child, "unexpected element <" + tag + "> in <" + node.name() + ">");
+      }
+      auto [it, inserted] = e.props.emplace(to_snake(*name), p);
+      if (!inserted) fail(child, "property '" + *name + "' is given twice (also at " + where(it->second.node) + ")");
+    }
+    return e;
+  }
+
+  Property parse_property(pugi::xml_node node) const {
+    Property p;
+    p.node = node;
+    std::string tag = node.name();
+    if (tag == "float") {
+      p.kind = Property::Kind::Number;
+      p.number = required_number(node, "value");
+    } else if (tag == "integer") {
+      p.kind = Property::Kind::Integer;
+      std::string v(trim(required_attr(node, "value")));
+      char* end = nullptr;
+      long long x = std::strtoll(v.c_str(), &end, 10);
+      if (v.empty() || end != v.c_str() + v.size()) fail(node, "'" + v + "' is not an integer");
+      p.number = double(x);
+    } else if (tag == "boolean") {
+      p.kind = Property::Kind::Boolean;
+      std::string v = lower(std::string(trim(required_attr(node, "value"))));
+      if (v != "true" && v != "false") fail(node, "'" + v + "' is not a boolean (true or false)");
+      p.boolean = v == "true";
+    } else if (tag == "string") {
+      p.kind = Property::Kind::String;
+      p.text = required_attr(node, "value");
+    } else if (tag == "rgb") {
+      p.kind = Property::Kind::Color;
+      std::vector<double> v = number_list(node, "value", {1, 3});
+      p.vec = v.size() == 1 ? glm::vec3(float(v[0])) : glm::vec3(float(v[0]), float(v[1]), float(v[2]));
+    } else if (tag == "srgb") {
+      p.kind = Property::Kind::Color;
+      p.vec = parse_srgb(node);
+    } else if (tag == "spectrum") {
+      p.kind = Property::Kind::Spectrum;
+      parse_spectrum(node, p);
+    } else if (tag == "blackbody") {
+      p.kind = Property::Kind::Spectrum;
+      parse_blackbody(node, p);
+    } else if (tag == "point" || tag == "vector") {
+      p.kind = Property::Kind::Vector;
+      p.vec = xyz_attrs(node, 0.0f);
+    } else if (tag == "transform") {
+      p.kind = Property::Kind::Transform;
+      p.matrix = parse_transform(node);
+    }
+    return p;
+  }
+
+  glm::vec3 parse_srgb(pugi::xml_node node) const {
+    std::string v(trim(required_attr(node, "value")));
+    glm::vec3 encoded;
+    if (!v.empty() && v[0] == '#') {
+      bool hex = v.size() == 7 && std::all_of(v.begin() + 1, v.end(), [](char c) { return std::isxdigit(c); });
+      if (!hex) fail(node, "'" + v + "' is not an sRGB colour (#rrggbb)");
+      for (int i = 0; i < 3; ++i) encoded[i] = float(std::stoi(v.substr(1 + 2 * i, 2), nullptr, 16)) / 255.0f;
+    } else {
+      std::vector<double> x = number_list(node, "value", {1, 3});
+      encoded = x.size() == 1 ? glm::vec3(float(x[0])) : glm::vec3(float(x[0]), float(x[1]), float(x[2]));
+    }
+    return {srgb_to_linear(encoded.r), srgb_to_linear(encoded.g), srgb_to_linear(encoded.b)};
+  }
+
+  // <spectrum value="0.5"/>, <spectrum value="400:0.1, 500:0.2"/> or <spectrum filename="x.spd"/>
+  // (lines of "wavelength value", '#' comments).
+  void parse_spectrum(pugi::xml_node node, Property& p) const {
+    std::vector<std::string> tokens;
+    if (std::optional<std::string> file = attr(node, "filename")) {
+      std::string path = resolve(node, *file);
+      std::ifstream in(path);
+      if (!in) fail(node, "cannot open spectrum file '" + path + "'");
+      for (std::string line; std::getline(in, line);) {
+        line = line.substr(0, line.find('#'));
+        std::vector<std::string> pair = split_list(line);
+        if (pair.empty()) continue;
+        if (pair.size() != 2) fail(node, "spectrum file '" + path + "': expected 'wavelength value' in: " + line);
+        tokens.push_back(pair[0] + ":" + pair[1]);
+      }
+    } else {
+      tokens = split_list(required_attr(node, "value"));
+    }
+    if (tokens.size() == 1 && tokens[0].find(':') == std::string::npos) {
+      std::optional<double> x = parse_number(tokens[0]);
+      if (!x) fail(node, "'" + tokens[0] + "' is not a number");
+      p.values = {*x};
+      return;
+    }
+    for (const std::string& token : tokens) {
+      size_t colon = token.find(':');
+      std::optional<double> w, v;
+      if (colon != std::string::npos) {
+        w = parse_number(std::string_view(token).substr(0, colon));
+        v = parse_number(std::string_view(token).substr(colon + 1));
+      }
+      if (!w || !v) fail(node, "'" + token + "' is not a wavelength:value pair");
+      if (!p.wavelengths.empty() && *w <= p.wavelengths.back())
+        fail(node, "spectrum wavelengths must increase ('" + token + "')");
+      p.wavelengths.push_back(*w);
+      p.values.push_back(*v);
+    }
+    if (p.wavelengths.size() < 2) fail(node, "a sampled spectrum needs at least two wavelength:value pairs");
+  }
+
+  // Mitsuba 0.5's <blackbody temperature="5000K" scale="1"/>: Planck's law in W/(m^2 sr nm).
+  void parse_blackbody(pugi::xml_node node, Property& p) const {
+    std::string t(trim(required_attr(node, "temperature")));
+    if (!t.empty() && (t.back() == 'k' || t.back() == 'K')) t.pop_back();
+    std::optional<double> kelvin = parse_number(t);
+    if (!kelvin || *kelvin <= 0) fail(node, "'" + t + "' is not a temperature in kelvin");
+    double scale = number_attr(node, "scale", 1.0);
+    const double h = 6.62607015e-34, c = 2.99792458e8, kb = 1.380649e-23;
+    for (double nm = kCieMin; nm <= kCieMax; nm += 5.0) {
+      double l = nm * 1e-9;
+      double radiance = 2 * h * c * c / std::pow(l, 5) / (std::exp(h * c / (l * kb * *kelvin)) - 1);
+      p.wavelengths.push_back(nm);
+      p.values.push_back(radiance * 1e-9 * scale);
+    }
+  }
+
+  // <transform>: each child left-multiplies the matrix so far, as in Mitsuba.
+  glm::mat4 parse_transform(pugi::xml_node node) const {
+    glm::mat4 m(1.0f);
+    for (pugi::xml_node c : node.children()) {
+      if (c.type() != pugi::node_element) continue;
+      std::string tag = lower(c.name());
+      glm::mat4 step(1.0f);
+      if (tag == "translate") {
+        step = glm::translate(glm::mat4(1.0f), xyz_attrs(c, 0.0f));
+      } else if (tag == "scale") {
+        step = glm::scale(glm::mat4(1.0f), xyz_attrs(c, 1.0f));
+      } else if (tag == "rotate") {
+        glm::vec3 axis = xyz_attrs(c, 0.0f);
+        if (glm::length(axis) == 0.0f) fail(c, "<rotate> needs a non-zero axis (x, y, z or value)");
+        float angle = float(required_number(c, "angle"));
+        step = glm::rotate(glm::mat4(1.0f), glm::radians(angle), glm::normalize(axis));
+      } else if (tag == "matrix") {
+        std::vector<double> v = number_list(c, "value", {9, 16});
+        size_t n = v.size() == 9 ? 3 : 4;
+        for (size_t row = 0; row < n; ++row)
+          for (size_t col = 0; col < n; ++col) step[int(col)][int(row)] = float(v[row * n + col]);
+      } else if (tag == "lookat") {
+        step = look_at(c);
+      } else {
+        fail(c, "unexpected element <" + std::string(c.name()) + "> in <transform>");
+      }
+      m = step * m;
+    }
+    return m;
+  }
+
+  // Mitsuba's look_at: columns left = up x dir, up' = dir x left, dir, origin.
+  glm::mat4 look_at(pugi::xml_node c) const {
+    glm::vec3 origin = vec_attr(c, "origin"), target = vec_attr(c, "target");
+    glm::vec3 dir = target - origin;
+    if (glm::length(dir) == 0.0f) fail(c, "<lookat> origin and target coincide");
+    dir = glm::normalize(dir);
+    glm::vec3 up;
+    if (c.attribute("up")) {
+      up = vec_attr(c, "up");
+    } else {
+      up = std::abs(dir.y) < 0.9f ? glm::vec3(0, 1, 0) : glm::vec3(0, 0, 1);
+    }
+    glm::vec3 left = glm::cross(up, dir);
+    if (glm::length(left) < 1e-6f * std::max(glm::length(up), 1e-30f))
+      fail(c, "<lookat> up is parallel to the view direction");
+    left = glm::normalize(left);
+    glm::vec3 new_up = glm::cross(dir, left);
+    glm::mat4 m(1.0f);
+    m[0] = glm::vec4(left, 0);
+    m[1] = glm::vec4(new_up, 0);
+    m[2] = glm::vec4(dir, 0);
+    m[3] = glm::vec4(origin, 1);
+    return m;
+  }
+
+  // --- typed property access ----------------------------------------------
+
+  static const Property* find(const Element& e, const std::string& name) {
+    auto it = e.props.find(name);
+    return it == e.props.end() ? nullptr : &it->second;
+  }
+
+  [[noreturn]] void wrong_type(const Property& p, const std::string& name, const char* expected) const {
+    fail(p.node, "property '" + name + "' has the wrong type <" + p.node.name() + ">, expected " + expected);
+  }
+
+  double get_float(const Element& e, const std::string& name, double fallback) const {
+    const Property* p = find(e, name);
+    if (!p) return fallback;
+    if (p->kind != Property::Kind::Number && p->kind != Property::Kind::Integer) wrong_type(*p, name, "<float>");
+    return p->number;
+  }
+
+  int get_int(const Element& e, const std::string& name, int fallback) const {
+    const Property* p = find(e, name);
+    if (!p) return fallback;
+    if (p->kind != Property::Kind::Integer) wrong_type(*p, name, "<integer>");
+    return int(p->number);
+  }
+
+  bool get_bool(const Element& e, const std::string& name, bool fallback) const {
+    const Property* p = find(e, name);
+    if (!p) return fallback;
+    if (p->kind != Property::Kind::Boolean) wrong_type(*p, name, "<boolean>");
+    return p->boolean;
+  }
+
+  std::optional<std::string> get_string(const Element& e, const std::string& name) const {
+    const Property* p = find(e, name);
+    if (!p) return std::nullopt;
+    if (p->kind != Property::Kind::String) wrong_type(*p, name, "<string>");
+    return p->text;
+  }
+
+  glm::vec3 get_point(const Element& e, const std::string& name, const glm::vec3& fallback) const {
+    const Property* p = find(e, name);
+    if (!p) return fallback;
+    if (p->kind != Property::Kind::Vector) wrong_type(*p, name, "<point>");
+    return p->vec;
+  }
+
+  glm::mat4 get_transform(const Element& e, const std::string& name) const {
+    const Property* p = find(e, name);
+    if (!p) return glm::mat4(1.0f);
+    if (p->kind != Property::Kind::Transform) wrong_type(*p, name, "<transform>");
+    return p->matrix;
+  }
+
+  std::optional<glm::vec3> get_color(const Element& e, const std::string& name, ColorUse use) {
+    const Property* p = find(e, name);
+    if (!p) return std::nullopt;
+    switch (p->kind) {
+      case Property::Kind::Number:
+      case Property::Kind::Integer:
+        return glm::vec3(float(p->number));
+      case Property::Kind::Color:
+        return use == ColorUse::Reflectance ? glm::clamp(p->vec, 0.0f, 1.0f) : p->vec;
+      case Property::Kind::Spectrum:
+        if (p->wavelengths.empty()) {
+          // Mitsuba 3 in RGB mode: a uniform emitted spectrum is equal-energy white, xyz_to_srgb(1, 1, 1).
+          bool equal_energy = use == ColorUse::Radiance && version_major_ >= 3;
+          return float(p->values[0]) * (equal_energy ? glm::vec3(xyz_to_srgb(glm::dvec3(1.0))) : glm::vec3(1.0f));
+        } else {
+          glm::vec3 rgb = spectrum_to_rgb(p->wavelengths, p->values, use == ColorUse::Radiance);
+          return use == ColorUse::Reflectance ? glm::min(rgb, glm::vec3(1.0f)) : rgb;
+        }
+      case Property::Kind::Object: {
+        std::string type = attr(p->object, "type").value_or("?");
+        warn(p->object, std::string(p->object.name()) + ":" + type,
+             std::string(p->object.name()) + " '" + type + "' for '" + name +
+                 "' is not supported yet; using the default value");
+        return std::nullopt;
+      }
+      default:
+        break;
+    }
+    wrong_type(*p, name, "<rgb>, <srgb>, <spectrum> or <float>");
+  }
+
+  // The nested and referenced plugin elements of `e` with the tag `tag`.
+  static std::vector<pugi::xml_node> objects(const Element& e, const char* tag) {
+    std::vector<pugi::xml_node> out;
+    for (pugi::xml_node o : e.objects)
+      if (std::string(o.name()) == tag) out.push_back(o);
+    return out;
+  }
+
+  // --- top-level plugins --------------------------------------------------
+
+  void skip(pugi::xml_node) {}
+
+  void load_integrator(pugi::xml_node node) {
+    Element e = parse_element(node);
+    if (e.type == "direct") {
+      scene_.max_depth = 2;  // emitters seen directly plus one bounce of direct light
+      return;
+    }
+    if (e.type != "path")
+      warn(node, "integrator:" + e.type, "integrator '" + e.type + "' is not supported yet; using path tracing");
+    scene_.max_depth = get_int(e, "max_depth", -1);
+  }
+
+  void load_sensor(pugi::xml_node node) {
+    if (has_sensor_) {
+      warn(node, "sensor", "only the first <sensor> is used");
+      return;
+    }
+    has_sensor_ = true;
+    Element e = parse_element(node);
+    if (e.type != "perspective")
+      warn(node, "sensor:" + e.type, "sensor '" + e.type + "' is not supported yet; using a perspective camera");
+
+    CameraDesc& cam = scene_.camera;
+    const Property* fov = find(e, "fov");
+    const Property* focal = find(e, "focal_length");
+    if (fov && focal) fail(focal->node, "give either 'fov' or 'focal_length', not both");
+    if (fov) {
+      cam.fov_degrees = float(get_float(e, "fov", 0.0));
+      cam.fov_axis = lower(get_string(e, "fov_axis").value_or("x"));
+      static const std::set<std::string> axes = {"x", "y", "diagonal", "smaller", "larger"};
+      if (!axes.count(cam.fov_axis))
+        fail(find(e, "fov_axis")->node, "fov_axis '" + cam.fov_axis + "' is not x, y, diagonal, smaller or larger");
+    } else {
+      // A 35 mm film equivalent focal length (default 50mm) fixes the diagonal field of view.
+      std::string f = lower(get_string(e, "focal_length").value_or("50mm"));
+      if (f.size() > 2 && f.compare(f.size() - 2, 2, "mm") == 0) f.resize(f.size() - 2);
+      std::optional<double> mm = parse_number(f);
+      if (!mm || *mm <= 0) fail(focal ? focal->node : node, "focal_length '" + f + "' is not of the form <x>mm");
+      cam.fov_degrees = float(glm::degrees(2.0 * std::atan(std::sqrt(36.0 * 36.0 + 24.0 * 24.0) / (2.0 * *mm))));
+      cam.fov_axis = "diagonal";
+    }
+    if (!(cam.fov_degrees > 0.0f && cam.fov_degrees < 180.0f))
+      fail(fov ? fov->node : node, "the field of view must be between 0 and 180 degrees");
+
+    // Mitsuba's camera frame: +z forward, +y up (and +x towards the image's left).
+    glm::mat4 m = get_transform(e, "to_world");
+    cam.origin = glm::vec3(m * glm::vec4(0, 0, 0, 1));
+    cam.target = glm::vec3(m * glm::vec4(0, 0, 1, 1));
+    glm::vec3 up = glm::mat3(m) * glm::vec3(0, 1, 0);
+    glm::vec3 forward = cam.target - cam.origin;
+    if (glm::length(glm::cross(forward, up)) <= 1e-12f * glm::length(forward) * glm::length(up))
+      fail(find(e, "to_world") ? find(e, "to_world")->node : node, "the sensor's to_world is degenerate");
+    cam.up = glm::normalize(up);
+    // A reflection (negative determinant) turns the image's left into its right,
+    // which origin, target and up cannot express.
+    cam.mirrored = glm::determinant(glm::mat3(m)) < 0.0f;
+
+    scene_.width = 768;
+    scene_.height = 576;
+    for (pugi::xml_node film : objects(e, "film")) load_film(film);
+    for (pugi::xml_node sampler : objects(e, "sampler")) load_sampler(sampler);
+  }
+
+  void load_film(pugi::xml_node node) {
+    Element e = parse_element(node);
+    if (e.type != "hdrfilm" && e.type != "ldrfilm")
+      warn(node, "film:" + e.type, "film '" + e.type + "' is not supported yet; reading width and height");
+    scene_.width = get_int(e, "width", 768);
+    scene_.height = get_int(e, "height", 576);
+    if (scene_.width <= 0 || scene_.height <= 0) fail(node, "the film's width and height must be positive");
+  }
+
+  void load_sampler(pugi::xml_node node) {
+    Element e = parse_element(node);
+    scene_.default_spp = get_int(e, "sample_count", 4);
+    if (scene_.default_spp <= 0) fail(find(e, "sample_count")->node, "sample_count must be positive");
+  }
+
+  void load_top_bsdf(pugi::xml_node node) { bsdf(node); }
+
+  void load_top_emitter(pugi::xml_node node) {
+    std::string type = attr(node, "type").value_or("");
+    if (type != "area") {
+      emitter(node);
+    } else if (!node.attribute("id")) {
+      warn(node, "emitter:area", "an area emitter outside a <shape> has no surface; ignored");
+    }
+  }
+
+  // --- shapes -------------------------------------------------------------
+
+  using ShapeBuilder = TriMesh (MitsubaLoader::*)(const Element&);
+
+  static const std::map<std::string, ShapeBuilder>& shape_plugins() {
+    static const std::map<std::string, ShapeBuilder> plugins = {{"obj", &MitsubaLoader::shape_obj},
+                                                                {"rectangle", &MitsubaLoader::shape_rectangle},
+                                                                {"cube", &MitsubaLoader::shape_cube},
+                                                                {"disk", &MitsubaLoader::shape_disk},
+                                                                {"sphere", &MitsubaLoader::shape_sphere}};
+    return plugins;
+  }
+
+  void load_shape(pugi::xml_node node) {
+    Element e = parse_element(node);
+    auto plugin = shape_plugins().find(e.type);
+    if (plugin == shape_plugins().end()) {
+      std::string known;
+      for (const auto& entry : shape_plugins()) known += (known.empty() ? "" : ", ") + entry.first;
+      fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ")");
+    }
+    TriMesh mesh = (this->*plugin->second)(e);
+
+    std::vector<pugi::xml_node> bsdfs = objects(e, "bsdf"), emitters = objects(e, "emitter");
+    if (bsdfs.size() > 1) fail(bsdfs[1], "a shape can have only one BSDF");
+    if (emitters.size() > 1) fail(emitters[1], "a shape can have only one emitter");
+    for (pugi::xml_node o : e.objects) {
+      std::string tag = o.name();
+      if (tag != "bsdf" && tag != "emitter") warn(o, tag, "<" + tag + "> in a <shape> is not supported yet; ignored");
+    }
+    uint32_t mat =
+        material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0], emitters.empty() ? pugi::xml_node() : emitters[0]);
+    append_mesh(scene_, mesh, get_transform(e, "to_world"), mat, get_bool(e, "flip_normals", false), file_of(node).path,
+                line_of(node));
+  }
+
+  TriMesh shape_obj(const Element& e) {
+    std::optional<std::string> name = get_string(e, "filename");
+    if (!name) fail(e.node, "<shape type=\"obj\"> needs a 'filename'");
+    std::string path = resolve(e.node, *name);
+    if (!fs::is_regular_file(path)) fail(e.node, "cannot open OBJ file '" + path + "'");
+    ObjData obj = read_obj(path, false);
+    for (const std::string& w : obj.warnings) scene_.warnings.push_back(where(e.node) + ": " + w);
+    return std::move(obj.mesh);
+  }
+
+  TriMesh shape_rectangle(const Element&) { return make_rectangle(); }
+  TriMesh shape_cube(const Element&) { return make_cube(); }
+  TriMesh shape_disk(const Element&) { return make_disk(); }
+
+  TriMesh shape_sphere(const Element& e) {
+    float radius = float(get_float(e, "radius", 1.0));
+    if (!(radius > 0.0f)) fail(find(e, "radius")->node, "the sphere radius must be positive");
+    return make_sphere(get_point(e, "center", glm::vec3(0.0f)), radius);
+  }
+
+  // --- materials, BSDFs, emitters -----------------------------------------
+
+  // The material of a shape with this BSDF and emitter (either may be null), shared between shapes.
+  uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node) {
+    auto key = std::make_pair(bsdf_node.internal_object(), emitter_node.internal_object());
+    auto it = materials_.find(key);
+    if (it != materials_.end()) return it->second;
+
+    Bsdf b;
+    b.name = "default";
+    if (bsdf_node) b = bsdf(bsdf_node);
+    glm::vec3 radiance = emitter_node ? emitter(emitter_node) : glm::vec3(0.0f);
+    bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
+
+    Material m{};
+    m.albedo = {{b.albedo.x, b.albedo.y, b.albedo.z, 0}};
+    m.emission = {{radiance.x, radiance.y, radiance.z, 0}};
+    m.type = PSF_MATERIAL_DIFFUSE;
+    // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
+    m.two_sided = b.two_sided && !emits ? 1u : 0u;
+    uint32_t index = uint32_t(scene_.materials.size());
+    scene_.materials.push_back(m);
+    std::string name = b.name;
+    if (emitter_node) name += "+" + attr(emitter_node, "id").value_or("emitter");
+    scene_.material_names.push_back(name);
+    materials_.emplace(key, index);
+    return index;
+  }
+
+  using BsdfBuilder = Bsdf (MitsubaLoader::*)(const Element&);
+
+  // BSDFs the renderer reproduces exactly; every other type goes to approximate_bsdf.
+  static const std::map<std::string, BsdfBuilder>& bsdf_plugins() {
+    static const std::map<std::string, BsdfBuilder> plugins = {{"diffuse", &MitsubaLoader::bsdf_diffuse},
+                                                               {"twosided", &MitsubaLoader::bsdf_twosided}};
+    return plugins;
+  }
+
+  const Bsdf& bsdf(pugi::xml_node node) {
+    auto cached = bsdfs_.find(node.internal_object());
+    if (cached != bsdfs_.end()) return cached->second;
+    if (!in_progress_.insert(node.internal_object()).second) fail(node, "BSDF refers to itself");
+    Element e = parse_element(node);
+    auto plugin = bsdf_plugins().find(e.type);
+    Bsdf b = plugin != bsdf_plugins().end() ? (this->*plugin->second)(e) : approximate_bsdf(e);
+    b.name = attr(node, "id").value_or(b.name.empty() ? e.type : b.name);
+    in_progress_.erase(node.internal_object());
+    return bsdfs_.emplace(node.internal_object(), b).first->second;
+  }
+
+  Bsdf bsdf_diffuse(const Element& e) {
+    Bsdf b;
+    b.albedo = get_color(e, "reflectance", ColorUse::Reflectance).value_or(glm::vec3(0.5f));
+    return b;
+  }
+
+  Bsdf bsdf_twosided(const Element& e) {
+    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
+    if (nested.empty()) fail(e.node, "<bsdf type=\"twosided\"> needs a nested BSDF");
+    Bsdf b = bsdf(nested[0]);
+    if (nested.size() > 1) {
+      // Mitsuba 3: different front and back BSDFs; the renderer has one albedo for both sides.
+      b.albedo = 0.5f * (b.albedo + bsdf(nested[1]).albedo);
+      warn(e.node, "bsdf:twosided2", "twosided with separate front and back BSDFs; using their average albedo");
+    }
+    b.two_sided = true;
+    b.name.clear();
+    return b;
+  }
+
+  // A diffuse stand-in for a BSDF type the renderer does not support yet:
+  // wrappers (mask, bumpmap, coating, blendbsdf, ...) average their nested BSDFs;
+  // conductors reflect their normal-incidence Fresnel reflectance; otherwise the
+  // first of reflectance, diffuse_reflectance, specular_reflectance, else 0.5 grey.
+  Bsdf approximate_bsdf(const Element& e) {
+    Bsdf b;
+    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
+    if (!nested.empty()) {
+      b.albedo = glm::vec3(0.0f);
+      for (pugi::xml_node n : nested) {
+        const Bsdf& inner = bsdf(n);
+        b.albedo += inner.albedo / float(nested.size());
+        b.two_sided = b.two_sided || inner.two_sided;
+      }
+    } else if (e.type == "conductor" || e.type == "roughconductor") {
+      b.albedo = conductor_albedo(e);
+    } else {
+      std::optional<glm::vec3> c;
+      for (const char* name : {"reflectance", "diffuse_reflectance", "specular_reflectance"})
+        if (!c) c = get_color(e, name, ColorUse::Reflectance);
+      b.albedo = c.value_or(glm::vec3(0.5f));
+    }
+    warn(e.node, "bsdf:" + e.type,
+         "bsdf '" + e.type + "' is not supported yet; approximated by diffuse reflectance " + fmt(b.albedo));
+    return b;
+  }
+
+  // R0 = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2) per channel, times specular_reflectance.
+  glm::vec3 conductor_albedo(const Element& e) {
+    glm::vec3 specular = get_color(e, "specular_reflectance", ColorUse::Reflectance).value_or(glm::vec3(1.0f));
+    std::optional<glm::vec3> eta = get_color(e, "eta", ColorUse::Unbounded);
+    std::optional<glm::vec3> k = get_color(e, "k", ColorUse::Unbounded);
+    if (eta && k) {
+      glm::vec3 r0 = ((*eta - 1.0f) * (*eta - 1.0f) + *k * *k) / ((*eta + 1.0f) * (*eta + 1.0f) + *k * *k);
+      return glm::clamp(r0 * specular, 0.0f, 1.0f);
+    }
+    std::string metal = lower(get_string(e, "material").value_or(version_major_ >= 2 ? "none" : "cu"));
+    if (metal == "none") return specular;
+    auto it = metal_reflectance().find(metal);
+    return specular * (it != metal_reflectance().end() ? it->second : glm::vec3(0.9f));
+  }
+
+  using EmitterBuilder = glm::vec3 (MitsubaLoader::*)(const Element&);
+
+  static const std::map<std::string, EmitterBuilder>& emitter_plugins() {
+    static const std::map<std::string, EmitterBuilder> plugins = {{"area", &MitsubaLoader::emitter_area}};
+    return plugins;
+  }
+
+  // The radiance of an emitter on a surface; zero (with a warning) for unsupported types.
+  glm::vec3 emitter(pugi::xml_node node) {
+    auto cached = emitters_.find(node.internal_object());
+    if (cached != emitters_.end()) return cached->second;
+    Element e = parse_element(node);
+    auto plugin = emitter_plugins().find(e.type);
+    glm::vec3 radiance(0.0f);
+    if (plugin != emitter_plugins().end()) {
+      radiance = (this->*plugin->second)(e);
+    } else {
+      warn(node, "emitter:" + e.type, "emitter '" + e.type + "' is not supported yet; ignored");
+    }
+    emitters_.emplace(node.internal_object(), radiance);
+    return radiance;
+  }
+
+  glm::vec3 emitter_area(const Element& e) {
+    return get_color(e, "radiance", ColorUse::Radiance).value_or(glm::vec3(1.0f));
+  }
+
+  // --- state ----------------------------------------------------------------
+
+  Scene scene_;                                                        // the result
+  std::map<std::string, std::string> params_;                          // $name values: caller's, then <default>s
+  std::vector<std::unique_ptr<XmlFile>> files_;                        // main file first, then includes
+  std::unordered_map<const void*, const XmlFile*> roots_;              // document node -> its file
+  std::map<std::string, pugi::xml_node> ids_;                          // id -> element
+  std::set<std::string> warned_;                                       // "file:line plugin" already warned about
+  std::map<const void*, Bsdf> bsdfs_;                                  // BSDF element -> built BSDF
+  std::set<const void*> in_progress_;                                  // BSDFs being built (cycle check)
+  std::map<const void*, glm::vec3> emitters_;                          // emitter element -> radiance
+  std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
+  int version_major_ = 3;                                              // the scene's version="major.minor.patch"
+  bool has_sensor_ = false;                                            // a <sensor> was loaded
+};
+
+}  // namespace
+
+Scene load_mitsuba(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params) {
+  return MitsubaLoader(params).load(path);
+}
+
+}  // namespace psf::detail

@@ -1,0 +1,60 @@
+#include "scene/scene.h"
+
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+
+#include "scene/loaders.h"
+
+namespace psf {
+
+SceneError::SceneError(const std::string& file, int line, const std::string& message)
+    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + message),
+      file_(file),
+      line_(line) {}
+
+Camera make_camera(const CameraDesc& desc, int width, int height) {
+  glm::vec3 forward = glm::normalize(desc.target - desc.origin);
+  glm::vec3 right = glm::normalize(glm::cross(forward, desc.up));
+  if (desc.mirrored) right = -right;  // a reflecting to_world flips the image left-right
+  glm::vec3 down = glm::cross(forward, right);
+  float aspect = float(width) / float(height);
+  float tan_half = std::tan(glm::radians(desc.fov_degrees) * 0.5f);
+  float half_w, half_h;
+  const std::string& axis = desc.fov_axis;
+  bool along_x = axis == "x" || (axis == "smaller" && width <= height) || (axis == "larger" && width >= height);
+  if (axis == "diagonal") {
+    float diag = tan_half;
+    half_w = diag * aspect / std::sqrt(1 + aspect * aspect);
+    half_h = half_w / aspect;
+  } else if (along_x) {
+    half_w = tan_half;
+    half_h = half_w / aspect;
+  } else {
+    half_h = tan_half;
+    half_w = half_h * aspect;
+  }
+  Camera c{};
+  c.origin = {{desc.origin.x, desc.origin.y, desc.origin.z, 0}};
+  c.forward = {{forward.x, forward.y, forward.z, 0}};
+  c.right = {{right.x * half_w, right.y * half_w, right.z * half_w, 0}};
+  c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, 0}};
+  c.width = uint32_t(width);
+  c.height = uint32_t(height);
+  return c;
+}
+
+Scene load_scene(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
+  if (ext == ".xml") return detail::load_mitsuba(path, params);
+  if (ext == ".obj") {
+    Scene scene = detail::load_obj_scene(path);
+    if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for OBJ files");
+    return scene;
+  }
+  throw SceneError(path, 0, "unknown scene format '" + ext + "' (expected .xml or .obj)");
+}
+
+}  // namespace psf

@@ -1,0 +1,97 @@
+// Tessellation of Mitsuba's analytic shapes (rectangle, cube, disk, sphere) in
+// their object-space conventions, and the transform-and-append step shared by
+// every shape loader.
+#include <cmath>
+#include <glm/gtc/constants.hpp>
+
+#include "scene/loaders.h"
+
+namespace psf::detail {
+
+TriMesh make_rectangle() {
+  TriMesh m;
+  m.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+TriMesh make_cube() {
+  TriMesh m;
+  // Each face: outward normal n and two tangents u, v with cross(u, v) = n, so
+  // that the corners c + (+-u) + (+-v) in this order wind counter-clockwise.
+  const glm::vec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (const glm::vec3& n : normals) {
+    glm::vec3 u = std::abs(n.x) > 0 ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0);
+    glm::vec3 v = glm::cross(n, u);
+    uint32_t base = uint32_t(m.positions.size());
+    m.positions.push_back(n - u - v);
+    m.positions.push_back(n + u - v);
+    m.positions.push_back(n + u + v);
+    m.positions.push_back(n - u + v);
+    m.triangles.push_back({base, base + 1, base + 2});
+    m.triangles.push_back({base, base + 2, base + 3});
+  }
+  return m;
+}
+
+TriMesh make_disk(int segments) {
+  TriMesh m;
+  m.positions.push_back({0, 0, 0});
+  for (int i = 0; i < segments; ++i) {
+    float phi = 2 * glm::pi<float>() * float(i) / float(segments);
+    m.positions.push_back({std::cos(phi), std::sin(phi), 0});
+  }
+  for (int i = 0; i < segments; ++i) {
+    uint32_t a = 1 + uint32_t(i), b = 1 + uint32_t((i + 1) % segments);
+    m.triangles.push_back({0, a, b});
+  }
+  return m;
+}
+
+TriMesh make_sphere(const glm::vec3& center, float radius, int rings, int segments) {
+  TriMesh m;
+  // Vertex (ring r, segment s) for 0 < r < rings; the poles are separate vertices.
+  m.positions.push_back(center + glm::vec3(0, 0, radius));
+  for (int r = 1; r < rings; ++r) {
+    float theta = glm::pi<float>() * float(r) / float(rings);
+    for (int s = 0; s < segments; ++s) {
+      float phi = 2 * glm::pi<float>() * float(s) / float(segments);
+      glm::vec3 d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+      m.positions.push_back(center + radius * d);
+    }
+  }
+  uint32_t south = uint32_t(m.positions.size());
+  m.positions.push_back(center - glm::vec3(0, 0, radius));
+  auto at = [&](int r, int s) { return uint32_t(1 + (r - 1) * segments + (s % segments)); };
+  for (int s = 0; s < segments; ++s) {
+    // theta grows towards -z and phi counter-clockwise around +z: (r, s), (r+1, s), (r+1, s+1) faces outwards.
+    m.triangles.push_back({0, at(1, s), at(1, s + 1)});
+    for (int r = 1; r + 1 < rings; ++r) {
+      m.triangles.push_back({at(r, s), at(r + 1, s), at(r + 1, s + 1)});
+      m.triangles.push_back({at(r, s), at(r + 1, s + 1), at(r, s + 1)});
+    }
+    m.triangles.push_back({at(rings - 1, s), south, at(rings - 1, s + 1)});
+  }
+  return m;
+}
+
+void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, uint32_t material, bool flip,
+                 const std::string& file, int line) {
+  uint32_t base = uint32_t(scene.positions.size());
+  scene.positions.reserve(scene.positions.size() + mesh.positions.size());
+  for (const glm::vec3& p : mesh.positions) {
+    glm::vec4 w = to_world * glm::vec4(p, 1.0f);
+    glm::vec3 q = glm::vec3(w) / w.w;
+    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
+      throw SceneError(file, line, "transformed vertex position is not finite (check to_world)");
+    scene.positions.push_back(q);
+  }
+  scene.triangles.reserve(scene.triangles.size() + mesh.triangles.size());
+  for (const glm::uvec3& t : mesh.triangles) {
+    glm::uvec3 tri = t + glm::uvec3(base);
+    scene.triangles.push_back(flip ? glm::uvec3(tri.x, tri.z, tri.y) : tri);
+  }
+  scene.tri_material.insert(scene.tri_material.end(), mesh.triangles.size(), material);
+}
+
+}  // namespace psf::detail

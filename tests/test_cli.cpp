@@ -1,0 +1,158 @@
+// The command line: usage, bad input (clear message, exit 2, nothing damaged),
+// devices, and a render to OpenEXR and PNG.
+#include <catch2/catch.hpp>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "image.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+  int status = -1;     // exit status
+  std::string output;  // stdout and stderr together
+};
+
+std::string binary() {
+  const char* b = std::getenv("PSF_BINARY");
+  return b ? b : PSF_BINARY_DEFAULT;
+}
+
+Run run(const std::string& args, const std::string& env = "") {
+  std::string cmd = env + (env.empty() ? "" : " ") + binary() + " " + args + " 2>&1";
+  Run r;
+  FILE* p = popen(cmd.c_str(), "r");
+  REQUIRE(p);
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+fs::path temp_dir() {
+  fs::path d = fs::temp_directory_path() / ("psf-cli-" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d;
+}
+
+void write_file(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
+
+std::string read_file(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+const char* kTinyScene = R"(<scene version="3.0.0">
+  <sensor type="perspective">
+    <float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="16"/></film>
+  </sensor>
+  <shape type="rectangle"><bsdf type="diffuse"/></shape>
+  <shape type="rectangle">
+    <transform name="to_world"><translate z="2.5"/></transform>
+    <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+  </shape>
+</scene>
+)";
+
+}  // namespace
+
+TEST_CASE("CLI: help describes the commands and options", "[cli]") {
+  Run h = run("--help");
+  CHECK(h.status == 0);
+  CHECK(h.output.find("render") != std::string::npos);
+  CHECK(h.output.find("devices") != std::string::npos);
+  Run rh = run("render --help");
+  CHECK(rh.status == 0);
+  for (const char* opt : {"--spp", "--width", "--height", "--seed", "--device", "--stats", "--quiet", "-o"})
+    CHECK(rh.output.find(opt) != std::string::npos);
+}
+
+TEST_CASE("CLI: devices lists the OpenCL devices with their memory", "[cli]") {
+  Run d = run("devices");
+  CHECK(d.status == 0);
+  CHECK(d.output.find("global memory") != std::string::npos);
+  CHECK(d.output.find("compute units") != std::string::npos);
+}
+
+TEST_CASE("CLI: no OpenCL platform gives one clear message and exit 1", "[cli]") {
+  fs::path empty = temp_dir() / "no-icd";
+  fs::create_directories(empty);
+  Run d = run("devices", "OCL_ICD_VENDORS=" + empty.string() + " OCL_ICD_FILENAMES=");
+  CHECK(d.status == 1);
+  CHECK(d.output.find("pocl-opencl-icd") != std::string::npos);
+}
+
+TEST_CASE("CLI: bad input gives a clear error, exit 2, and leaves outputs alone", "[cli]") {
+  fs::path dir = temp_dir();
+  fs::path good = dir / "keep.exr";
+  write_file(good, "precious");
+  write_file(dir / "broken.xml", "<scene version=\"3.0.0\">\n  <shape type=\"rectangle\">\n</scene>\n");
+
+  Run unknown = run("render --no-such-option x.xml");
+  CHECK(unknown.status == 2);
+  CHECK(unknown.output.find("--no-such-option") != std::string::npos);
+
+  Run missing = run("render " + (dir / "missing.xml").string() + " -o " + good.string());
+  CHECK(missing.status == 2);
+  CHECK(missing.output.find("missing.xml") != std::string::npos);
+
+  Run broken = run("render " + (dir / "broken.xml").string() + " -o " + good.string());
+  CHECK(broken.status == 2);
+  CHECK(broken.output.find("broken.xml:") != std::string::npos);  // file:line
+  CHECK(read_file(good) == "precious");
+
+  Run bad_spp = run("render " + (dir / "broken.xml").string() + " --spp 0");
+  CHECK(bad_spp.status == 2);
+
+  Run to_dir = run("render " + psf::test::source_path("scenes/cornell-box.xml") + " -o " + dir.string());
+  CHECK(to_dir.status == 2);
+  CHECK(to_dir.output.find("folder") != std::string::npos);
+
+  Run no_dir = run("render " + psf::test::source_path("scenes/cornell-box.xml") + " -o " +
+                   (dir / "nope" / "x.exr").string());
+  CHECK(no_dir.status == 2);
+}
+
+TEST_CASE("CLI: render writes an OpenEXR and a PNG, deterministically per seed", "[cli]") {
+  fs::path dir = temp_dir();
+  write_file(dir / "tiny.xml", kTinyScene);
+  fs::path a = dir / "a.exr", b = dir / "b.exr", c = dir / "c.exr";
+  Run ra = run("render " + (dir / "tiny.xml").string() + " --spp 4 --seed 1 --quiet -o " + a.string());
+  REQUIRE(ra.status == 0);
+  CHECK(ra.output.empty());
+  CHECK(fs::exists(dir / "a.png"));
+  Run rb = run("render " + (dir / "tiny.xml").string() + " --spp 4 --seed 1 --quiet --stats -o " + b.string());
+  REQUIRE(rb.status == 0);
+  for (const char* k : {"camera_rays", "raycast_closest", "raycast_any", "shade", "accumulate"})
+    CHECK(rb.output.find(k) != std::string::npos);
+  Run rc = run("render " + (dir / "tiny.xml").string() + " --spp 4 --seed 2 -q -o " + c.string() + " --width 12");
+  REQUIRE(rc.status == 0);
+
+  psf::Image ia = psf::read_exr(a.string()), ib = psf::read_exr(b.string()), ic = psf::read_exr(c.string());
+  CHECK(ia.width == 24);
+  CHECK(ia.height == 16);
+  CHECK(ic.width == 12);
+  CHECK(ia.rgb == ib.rgb);
+  double sum = 0;
+  for (float v : ia.rgb) {
+    REQUIRE(std::isfinite(v));
+    sum += v;
+  }
+  CHECK(sum > 0);
+}

@@ -1,0 +1,654 @@
+// Ray casting (kernels/raycast.cl, host/bvh.cpp) against an independent brute-force
+// reference: Moller-Trumbore in double precision over every triangle of the scene.
+//
+// Tolerance. The kernel works in float (about 6e-8 relative error per operation);
+// Moller-Trumbore amplifies rounding by cond = |d||e1||e2| / |det|
+// = 1 / (sin(angle of the triangle) * |cos(angle of incidence)|), and its
+// barycentrics further by 1 + distance / size (size = sqrt(|e1 x e2|)). We allow
+// kSlack = 1e-5 (about 170 ulps) times these: a hit is accepted when the reference
+// puts the reported triangle within kSlack * cond * (1 + distance / size) of its
+// barycentric bounds and at the same t within kSlack * cond * (|t| + |org| / |dir| + 1),
+// and when no triangle is hit clearly (by that margin) closer. A miss is accepted when no
+// triangle is hit clearly. So where two triangles are within tolerance of each
+// other (shared edges, coplanar overlaps) either is accepted. On top of that, the
+// exact triangle of the reference (or one at the very same t: coplanar overlaps)
+// must be reported for at least 99% of the rays, so a loose tolerance cannot hide
+// a systematic error.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <optional>
+#include <random>
+#include <vector>
+
+#include <tiny_obj_loader.h>
+
+#include "bvh.h"
+#include "support.h"
+
+namespace {
+
+using glm::dvec3;
+using glm::uvec3;
+using glm::vec3;
+
+constexpr double kSlack = 1e-5;
+
+struct Mesh {
+  std::vector<vec3> positions;
+  std::vector<uvec3> triangles;
+
+  void add_triangle(vec3 a, vec3 b, vec3 c) {
+    uint32_t i = static_cast<uint32_t>(positions.size());
+    positions.insert(positions.end(), {a, b, c});
+    triangles.push_back({i, i + 1, i + 2});
+  }
+  // Quad a b c d (in order around it) as the triangles (a b c) and (a c d).
+  void add_quad(vec3 a, vec3 b, vec3 c, vec3 d) {
+    uint32_t i = static_cast<uint32_t>(positions.size());
+    positions.insert(positions.end(), {a, b, c, d});
+    triangles.push_back({i, i + 1, i + 2});
+    triangles.push_back({i, i + 2, i + 3});
+  }
+};
+
+Ray make_ray(vec3 org, vec3 dir, float tmin, float tmax) {
+  Ray r;
+  r.org = {{org.x, org.y, org.z, tmin}};
+  r.dir = {{dir.x, dir.y, dir.z, tmax}};
+  return r;
+}
+
+// The reference: the line org + t dir against one triangle, in double.
+struct RefIsect {
+  bool valid = false;  // false when the ray is parallel to the (possibly degenerate) triangle
+  double t = 0, u = 0, v = 0;
+  double cond = 0;  // |d||e1||e2| / |det|
+  double bary_tol = 0;  // kSlack * cond * (1 + distance / size): the barycentric tolerance
+};
+
+RefIsect ref_isect(const Mesh& m, uint32_t tri, const Ray& ray) {
+  dvec3 a(m.positions[m.triangles[tri].x]), b(m.positions[m.triangles[tri].y]), c(m.positions[m.triangles[tri].z]);
+  dvec3 o(ray.org.s[0], ray.org.s[1], ray.org.s[2]), d(ray.dir.s[0], ray.dir.s[1], ray.dir.s[2]);
+  dvec3 e1 = b - a, e2 = c - a;
+  dvec3 p = glm::cross(d, e2);
+  double det = glm::dot(e1, p);
+  double scale = glm::length(d) * glm::length(e1) * glm::length(e2);
+  RefIsect r;
+  if (!(std::abs(det) > 1e-12 * scale)) return r;
+  dvec3 s = o - a;
+  dvec3 q = glm::cross(s, e1);
+  r.valid = true;
+  r.u = glm::dot(s, p) / det;
+  r.v = glm::dot(d, q) / det;
+  r.t = glm::dot(e2, q) / det;
+  r.cond = scale / std::abs(det);
+  double size = std::sqrt(glm::length(glm::cross(e1, e2)));
+  r.bary_tol = kSlack * r.cond * (1.0 + std::abs(r.t) * glm::length(d) / size);
+  return r;
+}
+
+// Whether the intersection lies inside the triangle widened (margin > 0) or shrunk
+// (margin < 0) by `margin` in barycentric terms, at a t inside (tmin, tmax) widened
+// or shrunk by `tmargin`.
+bool ref_inside(const RefIsect& r, double margin, double tmargin, const Ray& ray) {
+  return r.valid && r.u >= -margin && r.v >= -margin && r.u + r.v <= 1 + margin &&
+         r.t > ray.org.s[3] - tmargin && r.t < ray.dir.s[3] + tmargin;
+}
+
+double t_tolerance(const RefIsect& r, const Ray& ray) {
+  dvec3 o(ray.org.s[0], ray.org.s[1], ray.org.s[2]), d(ray.dir.s[0], ray.dir.s[1], ray.dir.s[2]);
+  return kSlack * r.cond * (std::abs(r.t) + glm::length(o) / glm::length(d) + 1.0);
+}
+
+struct Verdict {
+  bool ok = true;          // the device result is acceptable
+  bool exact = true;       // the device reports the reference's own closest triangle (or both miss)
+  std::string why;         // the reason when not ok
+};
+
+// Judges a device result for `ray` against the brute-force reference. `any`: the
+// device result came from the any-hit kernel (any triangle within range will do).
+Verdict judge(const Mesh& m, const Ray& ray, const Hit& hit, bool any) {
+  Verdict v;
+  uint32_t strict_prim = PSF_NO_HIT;
+  double strict_t = std::numeric_limits<double>::infinity();
+  double clear_t = std::numeric_limits<double>::infinity();  // closest hit beyond any doubt
+  for (uint32_t i = 0; i < m.triangles.size(); ++i) {
+    RefIsect r = ref_isect(m, i, ray);
+    if (ref_inside(r, 0.0, 0.0, ray) && r.t < strict_t) {
+      strict_t = r.t;
+      strict_prim = i;
+    }
+    if (r.valid) {
+      double tt = t_tolerance(r, ray);
+      if (ref_inside(r, -r.bary_tol, -tt, ray)) clear_t = std::min(clear_t, r.t + tt);
+    }
+  }
+  if (std::isnan(hit.t) || std::isnan(hit.u) || std::isnan(hit.v)) {
+    v.ok = false;
+    v.why = "NaN in the hit";
+    return v;
+  }
+  if (hit.prim == PSF_NO_HIT) {
+    v.exact = strict_prim == PSF_NO_HIT;
+    if (clear_t < std::numeric_limits<double>::infinity()) {
+      v.ok = false;
+      v.why = "device misses, reference hits triangle " + std::to_string(strict_prim) + " at t " +
+              std::to_string(strict_t);
+    } else if (!any && hit.t != ray.dir.s[3]) {
+      v.ok = false;
+      v.why = "a miss must report t = tmax";
+    }
+    return v;
+  }
+  if (hit.prim >= m.triangles.size()) {
+    v.ok = false;
+    v.why = "device reports triangle " + std::to_string(hit.prim) + " out of range";
+    return v;
+  }
+  RefIsect r = ref_isect(m, hit.prim, ray);
+  double tt = r.valid ? t_tolerance(r, ray) : 0.0;
+  // Exact: the reference's own closest triangle, or one it hits at the very same t (a tie).
+  bool tie = ref_inside(r, 0.0, 0.0, ray) && std::abs(r.t - strict_t) <= 1e-6 * std::max(1.0, std::abs(strict_t));
+  v.exact = any ? strict_prim != PSF_NO_HIT : hit.prim == strict_prim || tie;
+  if (!ref_inside(r, r.bary_tol, tt, ray)) {
+    v.ok = false;
+    v.why = "device reports triangle " + std::to_string(hit.prim) + " which the reference does not hit";
+  } else if (std::abs(hit.t - r.t) > tt) {
+    v.ok = false;
+    v.why = "t " + std::to_string(hit.t) + " differs from the reference's " + std::to_string(r.t);
+  } else if (std::abs(hit.u - r.u) > r.bary_tol || std::abs(hit.v - r.v) > r.bary_tol) {
+    v.ok = false;
+    v.why = "barycentrics differ from the reference";
+  } else if (!any && hit.t > clear_t) {
+    v.ok = false;
+    v.why = "triangle " + std::to_string(strict_prim) + " is clearly closer (t " + std::to_string(strict_t) + ")";
+  }
+  return v;
+}
+
+std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any) {
+  auto& rt = psf::test::runtime();
+  psf::RayCaster caster(rt, bvh);
+  cl::Buffer rb = rt.upload(rays);
+  cl::Buffer hb = rt.buffer(CL_MEM_WRITE_ONLY, rays.size() * sizeof(Hit));
+  if (any)
+    caster.any(rb, hb, static_cast<uint32_t>(rays.size()));
+  else
+    caster.closest(rb, hb, static_cast<uint32_t>(rays.size()));
+  rt.finish();
+  return rt.download<Hit>(hb, rays.size());
+}
+
+// Casts closest and any-hit rays and checks every result against the reference.
+// Returns the number of rays whose closest hit was a triangle.
+size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact = 0.99) {
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  std::vector<Hit> closest = cast(bvh, rays, false);
+  std::vector<Hit> any = cast(bvh, rays, true);
+  size_t exact = 0, hits = 0, failures = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    Verdict c = judge(m, rays[i], closest[i], false);
+    Verdict a = judge(m, rays[i], any[i], true);
+    exact += c.exact;
+    hits += closest[i].prim != PSF_NO_HIT;
+    if ((!c.ok || !a.ok) && ++failures <= 5) {
+      INFO("ray " << i << " org " << rays[i].org.s[0] << " " << rays[i].org.s[1] << " " << rays[i].org.s[2]
+                  << " dir " << rays[i].dir.s[0] << " " << rays[i].dir.s[1] << " " << rays[i].dir.s[2] << " t ["
+                  << rays[i].org.s[3] << ", " << rays[i].dir.s[3] << "]");
+      INFO("closest: prim " << closest[i].prim << " t " << closest[i].t << ": " << c.why);
+      INFO("any: prim " << any[i].prim << " t " << any[i].t << ": " << a.why);
+      CHECK((c.ok && a.ok));
+    }
+  }
+  INFO(failures << " of " << rays.size() << " rays fail");
+  CHECK(failures == 0);
+  INFO(exact << " of " << rays.size() << " rays report exactly the reference's triangle");
+  CHECK(double(exact) >= min_exact * double(rays.size()));
+  return hits;
+}
+
+vec3 uniform_sphere(std::mt19937& rng) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (;;) {
+    vec3 d(u(rng), u(rng), u(rng));
+    float l = glm::dot(d, d);
+    if (l > 1e-4f && l <= 1.0f) return d / std::sqrt(l);
+  }
+}
+
+Mesh random_soup(uint32_t seed, size_t count, float size) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  Mesh m;
+  for (size_t i = 0; i < count; ++i) {
+    vec3 c(u01(rng), u01(rng), u01(rng));
+    m.add_triangle(c + size * uniform_sphere(rng), c + size * uniform_sphere(rng), c + size * uniform_sphere(rng));
+  }
+  return m;
+}
+
+// The Cornell box from quads, in the coordinates of Mitsuba's cbox scene (y up).
+Mesh cornell_box_quads() {
+  Mesh m;
+  m.add_quad({552.8f, 0, 0}, {0, 0, 0}, {0, 0, 559.2f}, {549.6f, 0, 559.2f});                     // floor
+  m.add_quad({556, 548.8f, 0}, {556, 548.8f, 559.2f}, {0, 548.8f, 559.2f}, {0, 548.8f, 0});       // ceiling
+  m.add_quad({549.6f, 0, 559.2f}, {0, 0, 559.2f}, {0, 548.8f, 559.2f}, {556, 548.8f, 559.2f});    // back
+  m.add_quad({0, 0, 559.2f}, {0, 0, 0}, {0, 548.8f, 0}, {0, 548.8f, 559.2f});                     // green
+  m.add_quad({552.8f, 0, 0}, {549.6f, 0, 559.2f}, {556, 548.8f, 559.2f}, {556, 548.8f, 0});       // red
+  m.add_quad({343, 548.7f, 227}, {343, 548.7f, 332}, {213, 548.7f, 332}, {213, 548.7f, 227});     // light
+  auto block = [&](std::array<vec3, 4> base, float h) {
+    vec3 up(0, h, 0);
+    m.add_quad(base[0] + up, base[1] + up, base[2] + up, base[3] + up);
+    for (int k = 0; k < 4; ++k) {
+      vec3 a = base[k], b = base[(k + 1) % 4];
+      m.add_quad(a, b, b + up, a + up);
+    }
+  };
+  block({vec3(130, 0, 65), vec3(82, 0, 225), vec3(240, 0, 272), vec3(290, 0, 114)}, 165);
+  block({vec3(423, 0, 247), vec3(265, 0, 296), vec3(314, 0, 456), vec3(472, 0, 406)}, 330);
+  return m;
+}
+
+std::optional<Mesh> load_obj_dir(const std::string& dir) {
+  namespace fs = std::filesystem;
+  if (!fs::is_directory(dir)) return std::nullopt;
+  std::vector<fs::path> files;
+  for (auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".obj") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  Mesh m;
+  for (auto& f : files) {
+    tinyobj::ObjReader reader;
+    if (!reader.ParseFromFile(f.string())) return std::nullopt;
+    const auto& attrib = reader.GetAttrib();
+    uint32_t base = static_cast<uint32_t>(m.positions.size());
+    for (size_t i = 0; i + 2 < attrib.vertices.size(); i += 3)
+      m.positions.push_back({attrib.vertices[i], attrib.vertices[i + 1], attrib.vertices[i + 2]});
+    for (auto& shape : reader.GetShapes()) {
+      const auto& idx = shape.mesh.indices;
+      for (size_t i = 0; i + 2 < idx.size(); i += 3)
+        m.triangles.push_back(
+            {base + idx[i].vertex_index, base + idx[i + 1].vertex_index, base + idx[i + 2].vertex_index});
+    }
+  }
+  return m;
+}
+
+// Rays from random points inside the box [lo, hi] in uniform directions.
+std::vector<Ray> rays_in_box(uint32_t seed, size_t count, vec3 lo, vec3 hi, float tmax) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (size_t i = 0; i < count; ++i) {
+    vec3 o = lo + (hi - lo) * vec3(u01(rng), u01(rng), u01(rng));
+    rays.push_back(make_ray(o, uniform_sphere(rng), 0.0f, tmax));
+  }
+  return rays;
+}
+
+}  // namespace
+
+TEST_CASE("Raycast: random triangle soups match the brute-force reference", "[raycast]") {
+  struct Case {
+    uint32_t seed;
+    size_t triangles;
+    size_t rays;
+    float size;
+  };
+  for (Case c : {Case{1, 1000, 3001, 0.08f}, Case{2, 2500, 2047, 0.05f}, Case{3, 77, 1025, 0.3f},
+                 Case{4, 4000, 1999, 0.03f}}) {
+    INFO("seed " << c.seed << ", " << c.triangles << " triangles, " << c.rays << " rays");
+    Mesh m = random_soup(c.seed, c.triangles, c.size);
+    std::mt19937 rng(c.seed * 7 + 1);
+    std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+    std::vector<Ray> rays;
+    for (size_t i = 0; i < c.rays; ++i) {
+      vec3 o = vec3(-0.2f) + 1.4f * vec3(u01(rng), u01(rng), u01(rng));
+      vec3 d = uniform_sphere(rng) * (0.5f + 2.0f * u01(rng));  // not normalised
+      float tmin = i % 3 == 0 ? 0.0f : 0.01f * u01(rng);
+      float tmax = i % 4 == 0 ? std::numeric_limits<float>::max() : 0.1f + u01(rng);
+      rays.push_back(make_ray(o, d, tmin, tmax));
+    }
+    size_t hits = check_scene(m, rays);
+    CHECK(hits > c.rays / 10);  // the scene is actually being hit
+  }
+}
+
+TEST_CASE("Raycast: Cornell box from quads matches the reference", "[raycast]") {
+  Mesh m = cornell_box_quads();
+  std::vector<Ray> rays = rays_in_box(11, 4097, vec3(1, 1, 1), vec3(550, 547, 558), 1e30f);
+  size_t hits = check_scene(m, rays);
+  CHECK(hits > rays.size() * 7 / 10);  // a closed box except the open front (z = 0)
+}
+
+TEST_CASE("Raycast: Cornell box meshes from ../shared match the reference", "[raycast]") {
+  auto shared = psf::test::shared_dir();
+  std::optional<Mesh> m;
+  if (shared) m = load_obj_dir(*shared + "/scenes/cbox/meshes/cbox");
+  if (!m) {
+    WARN("scenes/cbox/meshes/cbox/*.obj not found under the shared folder: skipped");
+    return;
+  }
+  REQUIRE(m->triangles.size() >= 30);
+  std::vector<Ray> rays = rays_in_box(12, 3001, vec3(1, 1, 1), vec3(550, 547, 558), 1e30f);
+  check_scene(*m, rays);
+}
+
+TEST_CASE("Raycast: an empty scene is all misses", "[raycast]") {
+  psf::Bvh bvh = psf::build_bvh({}, {});
+  REQUIRE(bvh.nodes.size() == 1);
+  for (int s = 0; s < PSF_BVH_WIDTH; ++s) CHECK(bvh.nodes[0].child[s] == PSF_EMPTY_CHILD);
+  std::vector<Ray> rays = rays_in_box(3, 130, vec3(-1), vec3(1), 100.0f);
+  for (auto hits : {cast(bvh, rays, false), cast(bvh, rays, true)}) {
+    for (size_t i = 0; i < rays.size(); ++i) {
+      CHECK(hits[i].prim == PSF_NO_HIT);
+      CHECK(hits[i].t == 100.0f);
+    }
+  }
+}
+
+TEST_CASE("Raycast: one triangle", "[raycast]") {
+  Mesh m;
+  m.add_triangle({0, 0, 0}, {1, 0, 0}, {0, 1, 0});
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  CHECK(bvh.triangle_count == 1);
+  std::vector<Ray> rays = {
+      make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, 10),      // straight down onto it
+      make_ray({0.25f, 0.25f, -1}, {0, 0, 2}, 0, 10),      // from below, dir not unit: t = 0.5
+      make_ray({0.75f, 0.75f, 1}, {0, 0, -1}, 0, 10),      // beside the hypotenuse
+      make_ray({0.25f, 0.25f, 1}, {0, 0, 1}, 0, 10),       // away from it
+      make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, 0.5f),    // tmax short of it
+      make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, -1.0f),   // a dead ray
+  };
+  std::vector<Hit> hits = cast(bvh, rays, false);
+  CHECK(hits[0].prim == 0u);
+  CHECK(hits[0].t == Approx(1.0f));
+  CHECK(hits[0].u == Approx(0.25f));
+  CHECK(hits[0].v == Approx(0.25f));
+  CHECK(hits[1].prim == 0u);
+  CHECK(hits[1].t == Approx(0.5f));
+  for (int i : {2, 3, 4, 5}) {
+    INFO("ray " << i);
+    CHECK(hits[i].prim == PSF_NO_HIT);
+    CHECK(hits[i].t == rays[i].dir.s[3]);
+  }
+  std::vector<Hit> any = cast(bvh, rays, true);
+  for (size_t i = 0; i < rays.size(); ++i) CHECK((any[i].prim == PSF_NO_HIT) == (hits[i].prim == PSF_NO_HIT));
+  check_scene(m, rays_in_box(5, 515, vec3(-0.5f), vec3(1.5f), 5.0f));
+}
+
+TEST_CASE("Raycast: degenerate triangles are never hit and do not disturb others", "[raycast]") {
+  Mesh m;
+  m.add_triangle({0, 0, 0}, {0, 0, 0}, {0, 0, 0});                 // a point
+  m.add_triangle({0, 0, 0}, {1, 0, 0}, {1, 0, 0});                 // repeated vertex
+  m.add_triangle({0, 0, 0}, {1, 1, 0.5f}, {2, 2, 1});              // collinear
+  m.add_triangle({-1, 0.5f, 0}, {1, 0.5f, 0}, {0.25f, 0.5f, 0});   // collinear along x
+  m.add_triangle({0.5f, -1, -1}, {0.5f, 1, 1}, {0.5f, 1, 1});      // a segment
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  m.add_triangle({nan, 0, 0}, {1, 0, 0}, {0, 1, 0});               // non-finite vertex
+  m.add_triangle({inf, 0, 0}, {1, 0, 0}, {0, 1, 0});
+  for (int k = 0; k < 40; ++k) {                                   // and some proper ones
+    float x = -1.0f + 0.05f * k;
+    m.add_triangle({x, -1, 0.3f}, {x + 0.04f, -1, 0.3f}, {x, 1, 0.3f});
+  }
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  CHECK(bvh.skipped == 7);
+  CHECK(bvh.triangle_count == 40);
+  // Rays through the degenerate ones in many directions, and along their lines.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 1000; ++i) {
+    vec3 target = i % 2 ? vec3(u01(rng), u01(rng), 0.5f * u01(rng)) : vec3(2 * u01(rng) - 1, 0.5f, 0);
+    vec3 d = uniform_sphere(rng);
+    rays.push_back(make_ray(target - 2.0f * d, d, 0.0f, 4.0f));
+  }
+  rays.push_back(make_ray({-2, -2, -1}, {1, 1, 0.5f}, 0, 10));   // along the collinear one
+  rays.push_back(make_ray({-3, 0.5f, 0}, {1, 0, 0}, 0, 10));      // along the x-aligned one
+  rays.push_back(make_ray({0, 0, -1}, {0, 0, 1}, 0, 10));         // through the point
+  Mesh proper;                                                    // the reference sees only these
+  proper.positions = m.positions;
+  for (size_t t = 7; t < m.triangles.size(); ++t) proper.triangles.push_back(m.triangles[t]);
+  std::vector<Hit> hits = cast(bvh, rays, false);
+  std::vector<Hit> any = cast(bvh, rays, true);
+  for (size_t i = 0; i < rays.size(); ++i) {
+    INFO("ray " << i);
+    CHECK((hits[i].prim == PSF_NO_HIT || hits[i].prim >= 7));
+    CHECK((any[i].prim == PSF_NO_HIT || any[i].prim >= 7));
+    CHECK(!std::isnan(hits[i].t));
+    // Scene indices shift by 7 against `proper`.
+    Hit h = hits[i];
+    if (h.prim != PSF_NO_HIT) h.prim -= 7;
+    Verdict v = judge(proper, rays[i], h, false);
+    INFO(v.why);
+    CHECK(v.ok);
+  }
+}
+
+TEST_CASE("Raycast: rays through edges shared by two triangles hit one of them", "[raycast]") {
+  // A height field of 32 x 32 quads (two triangles each) with random heights
+  // (slopes below 0.2, facets within 12 degrees of the xy plane): every ray is
+  // aimed at a point exactly on a shared edge (a quad's diagonal or the edge between
+  // two quads) or at a shared vertex, from directions at least 37 degrees from the
+  // xy plane, so it crosses the surface there rather than touching a ridge.
+  // Watertightness within the kernel's barycentric tolerance (1e-6 + 5e-7 times
+  // distance / triangle size) means each must hit one of the triangles at that
+  // point; none may slip through. Rays start 0.5 (16 triangle sizes) and 40 (1300
+  // triangle sizes) before the aimed-at point.
+  const int n = 32;
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  Mesh m;
+  std::vector<float> height((n + 1) * (n + 1));
+  for (float& h : height) h = 0.003f * u01(rng);
+  auto p = [&](int x, int y) { return vec3(x / float(n), y / float(n), height[y * (n + 1) + x]); };
+  for (int y = 0; y <= n; ++y)
+    for (int x = 0; x <= n; ++x) m.positions.push_back(p(x, y));
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      uint32_t a = y * (n + 1) + x, b = a + 1, c = a + n + 2, d = a + n + 1;
+      m.triangles.push_back({a, b, c});
+      m.triangles.push_back({a, c, d});
+    }
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  for (float dist : {0.5f, 40.0f}) {
+    INFO("rays start " << dist << " before the edge");
+    std::vector<Ray> rays;
+    for (int i = 0; i < 3000; ++i) {
+      int x = 1 + int(u01(rng) * (n - 2)), y = 1 + int(u01(rng) * (n - 2));
+      float s = u01(rng);
+      vec3 target;
+      switch (i % 4) {
+        case 0: target = glm::mix(p(x, y), p(x + 1, y + 1), s); break;  // diagonal
+        case 1: target = glm::mix(p(x, y), p(x + 1, y), s); break;      // between quads in y
+        case 2: target = glm::mix(p(x, y), p(x, y + 1), s); break;      // between quads in x
+        default: target = p(x, y); break;                               // a vertex
+      }
+      vec3 d = uniform_sphere(rng);
+      d.z = std::copysign(std::max(std::abs(d.z), 0.6f), d.z);  // >= 37 degrees from the xy plane
+      d = glm::normalize(d);
+      rays.push_back(make_ray(target - dist * d, d, 0.0f, 1e3f));
+    }
+    std::vector<Hit> hits = cast(bvh, rays, false);
+    std::vector<Hit> any = cast(bvh, rays, true);
+    size_t missed = 0, missed_any = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      missed += hits[i].prim == PSF_NO_HIT;
+      missed_any += any[i].prim == PSF_NO_HIT;
+      if (hits[i].prim != PSF_NO_HIT) {
+        INFO("ray " << i);
+        Verdict v = judge(m, rays[i], hits[i], false);
+        INFO(v.why);
+        CHECK(v.ok);
+        CHECK(hits[i].t <= dist * (1 + 1e-4f));  // the aimed-at point, or an occluder before it
+      }
+    }
+    CHECK(missed == 0);
+    CHECK(missed_any == 0);
+  }
+}
+
+TEST_CASE("Raycast: rays leaving a surface with tmin > 0 skip it", "[raycast]") {
+  Mesh m = cornell_box_quads();
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  std::vector<Ray> rays;
+  std::vector<uint32_t> start;
+  // Points on the floor (triangles 0, 1), the back wall (4, 5) and the tall block's top.
+  const uint32_t tris[] = {0, 1, 4, 5, 22, 23};
+  for (int i = 0; i < 2000; ++i) {
+    uint32_t t = tris[i % 6];
+    float a = u01(rng), b = u01(rng);
+    if (a + b > 1) a = 1 - a, b = 1 - b;
+    const uvec3& tri = m.triangles[t];
+    vec3 v0 = m.positions[tri.x], v1 = m.positions[tri.y], v2 = m.positions[tri.z];
+    vec3 o = v0 + a * (v1 - v0) + b * (v2 - v0);
+    vec3 n = glm::normalize(glm::cross(v1 - v0, v2 - v0));
+    vec3 d = uniform_sphere(rng);
+    if (i % 5 != 0 && glm::dot(d, n) * glm::dot(vec3(278, 274, 280) - o, n) < 0) d = -d;  // mostly into the room
+    rays.push_back(make_ray(o, d, 1e-2f, 1e30f));
+    start.push_back(t);
+  }
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  std::vector<Hit> hits = cast(bvh, rays, false);
+  for (size_t i = 0; i < rays.size(); ++i) {
+    INFO("ray " << i << " from triangle " << start[i]);
+    CHECK(hits[i].prim != start[i]);
+    CHECK((hits[i].prim == PSF_NO_HIT || hits[i].t > 1e-2f));
+  }
+  check_scene(m, rays);
+}
+
+TEST_CASE("Raycast: axis-aligned and special rays give no NaN", "[raycast]") {
+  Mesh m = cornell_box_quads();
+  std::vector<Ray> rays;
+  const float inf = std::numeric_limits<float>::infinity();
+  for (vec3 o : {vec3(278, 274, 280), vec3(0, 0, 0), vec3(552.8f, 0, 0), vec3(130, 165, 65), vec3(-10, 100, 100)})
+    for (vec3 d : {vec3(1, 0, 0), vec3(-1, 0, 0), vec3(0, 1, 0), vec3(0, -1, 0), vec3(0, 0, 1), vec3(0, 0, -1),
+                   vec3(-0.0f, 0.0f, 1), vec3(1, 1, 0), vec3(0, -1, -1), vec3(1e-30f, 1, 0)})
+      for (float tmax : {1e30f, inf, 50.0f}) rays.push_back(make_ray(o, d, 0.0f, tmax));
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  for (bool any : {false, true}) {
+    std::vector<Hit> hits = cast(bvh, rays, any);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      INFO("ray " << i << (any ? " any" : " closest"));
+      CHECK(!std::isnan(hits[i].t));
+      CHECK(!std::isnan(hits[i].u));
+      CHECK(!std::isnan(hits[i].v));
+      Verdict v = judge(m, rays[i], hits[i], any);
+      INFO(v.why);
+      CHECK(v.ok);
+    }
+  }
+}
+
+TEST_CASE("Raycast: BVH structure references every triangle once inside its boxes", "[raycast]") {
+  Mesh m = random_soup(77, 5000, 0.05f);
+  m.add_triangle({0.5f, 0.5f, 0.5f}, {0.5f, 0.5f, 0.5f}, {0.6f, 0.5f, 0.5f});  // degenerate: left out
+  for (int k = 0; k < 100; ++k)  // equal centroids
+    m.add_triangle({0.2f, 0.2f, 0.2f}, {0.3f, 0.2f, 0.2f}, {0.2f, 0.3f, 0.2f});
+  for (int k = 0; k < 50; ++k)  // centroids a denormal apart: bins / extent overflows
+    m.add_triangle({k * 1e-43f, 0, 0}, {1e-3f, 0, 0}, {0, 1e-3f, 0});
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  REQUIRE(bvh.skipped == 1);
+  REQUIRE(bvh.triangle_count == m.triangles.size() - 1);
+  CHECK(bvh.depth >= 1);
+  CHECK(bvh.depth <= PSF_BVH_MAX_DEPTH);
+  std::vector<int> refs(m.triangles.size(), 0);     // leaf references of each scene triangle
+  std::vector<int> pack_refs(bvh.packs.size(), 0);  // leaf references of each pack
+  std::vector<int> node_refs(bvh.nodes.size(), 0);
+  size_t leaves = 0;
+  int depth = 0;
+  struct Item {
+    uint32_t node;
+    int level;
+  };
+  std::vector<Item> todo = {{0, 1}};
+  while (!todo.empty()) {
+    Item it = todo.back();
+    todo.pop_back();
+    depth = std::max(depth, it.level);
+    REQUIRE(it.node < bvh.nodes.size());
+    const BvhNode& n = bvh.nodes[it.node];
+    for (int s = 0; s < PSF_BVH_WIDTH; ++s) {
+      uint32_t c = n.child[s];
+      vec3 lo(n.min_x[s], n.min_y[s], n.min_z[s]), hi(n.max_x[s], n.max_y[s], n.max_z[s]);
+      if (c == PSF_EMPTY_CHILD) {
+        CHECK((lo.x > hi.x && lo.y > hi.y && lo.z > hi.z));
+        continue;
+      }
+      auto inside = [&](vec3 p) { return glm::all(glm::lessThanEqual(lo, p)) && glm::all(glm::lessThanEqual(p, hi)); };
+      if (psf::is_leaf(c)) {
+        ++leaves;
+        uint32_t first = psf::leaf_first(c), count = psf::leaf_count(c);
+        CHECK(count * PSF_BVH_WIDTH <= std::max<unsigned>(PSF_LEAF_MAX_TRIS, PSF_BVH_WIDTH));
+        REQUIRE(first + count <= bvh.packs.size());
+        uint32_t used = 0;
+        for (uint32_t k = first; k < first + count; ++k) {
+          const BvhTriPack& p = bvh.packs[k];
+          pack_refs[k] += 1;
+          for (int lane = 0; lane < PSF_BVH_WIDTH; ++lane) {
+            uint32_t prim = p.prim[lane];
+            vec3 e1(p.e1_x[lane], p.e1_y[lane], p.e1_z[lane]), e2(p.e2_x[lane], p.e2_y[lane], p.e2_z[lane]);
+            if (prim == PSF_NO_HIT) {  // unused lanes come last in a leaf, with zero edges
+              CHECK(k == first + count - 1);
+              CHECK(e1 == vec3(0));
+              CHECK(e2 == vec3(0));
+              continue;
+            }
+            ++used;
+            REQUIRE(prim < m.triangles.size());
+            refs[prim] += 1;
+            const uvec3& tri = m.triangles[prim];
+            CHECK(vec3(p.v0_x[lane], p.v0_y[lane], p.v0_z[lane]) == m.positions[tri.x]);
+            CHECK(e1 == m.positions[tri.y] - m.positions[tri.x]);
+            CHECK(e2 == m.positions[tri.z] - m.positions[tri.x]);
+            CHECK(p.inv_size[lane] > 0.0f);
+            for (int v = 0; v < 3; ++v) CHECK(inside(m.positions[tri[v]]));
+          }
+        }
+        CHECK(used <= PSF_LEAF_MAX_TRIS);
+        CHECK(used > (count - 1) * PSF_BVH_WIDTH);  // no pack without a triangle
+      } else {
+        REQUIRE(c < bvh.nodes.size());
+        REQUIRE(c != it.node);
+        node_refs[c] += 1;
+        // The child node's own boxes lie inside this slot's box.
+        const BvhNode& k = bvh.nodes[c];
+        for (int s2 = 0; s2 < PSF_BVH_WIDTH; ++s2)
+          if (k.child[s2] != PSF_EMPTY_CHILD) {
+            CHECK(inside(vec3(k.min_x[s2], k.min_y[s2], k.min_z[s2])));
+            CHECK(inside(vec3(k.max_x[s2], k.max_y[s2], k.max_z[s2])));
+          }
+        todo.push_back({c, it.level + 1});
+      }
+    }
+  }
+  CHECK(depth == bvh.depth);
+  CHECK(node_refs[0] == 0);
+  for (size_t i = 1; i < node_refs.size(); ++i) CHECK(node_refs[i] == 1);
+  for (size_t k = 0; k < pack_refs.size(); ++k) CHECK(pack_refs[k] == 1);
+  for (size_t t = 0; t < 5000; ++t) CHECK(refs[t] == 1);
+  CHECK(refs[5000] == 0);  // the degenerate one
+  for (size_t t = 5001; t < refs.size(); ++t) CHECK(refs[t] == 1);
+  CHECK(leaves >= bvh.triangle_count / PSF_LEAF_MAX_TRIS);
+}
+
+TEST_CASE("Raycast: one leaf's worth of triangles gives a root with one leaf", "[raycast]") {
+  Mesh m;
+  for (int k = 0; k < 3; ++k) m.add_triangle({0, 0, float(k)}, {1, 0, float(k)}, {0, 1, float(k)});
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  REQUIRE(!bvh.nodes.empty());
+  int used = 0;
+  for (int s = 0; s < PSF_BVH_WIDTH; ++s) used += bvh.nodes[0].child[s] != PSF_EMPTY_CHILD;
+  CHECK(used >= 1);
+  check_scene(m, rays_in_box(8, 300, vec3(-0.5f), vec3(1.5f, 1.5f, 3.0f), 10.0f));
+}

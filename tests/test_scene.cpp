@@ -1,0 +1,597 @@
+// Scene loading: Mitsuba XML (0.5 and 3), OBJ, the default Cornell box and the
+// shared scenes. Small scenes are written to a temporary directory per test.
+//
+// Tolerances: positions and matrices 1e-4 (float products of exact inputs);
+// spectra 1e-3 where the answer is exact by construction (a constant spectrum)
+// and 1% against values integrated independently with the tabulated CIE 1931
+// curves (the loader uses an analytic fit of them).
+#include <unistd.h>
+
+#include <algorithm>
+#include <catch2/catch.hpp>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "scene/scene.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// A fresh directory under the system's temporary directory, removed at the end of the test.
+class TempDir {
+ public:
+  TempDir() {
+    static int counter = 0;
+    path_ =
+        fs::temp_directory_path() / ("psf-scene-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+
+  // Writes `text` to `name` (subdirectories created) and returns its path.
+  std::string write(const std::string& name, const std::string& text) const {
+    fs::path p = path_ / name;
+    fs::create_directories(p.parent_path());
+    std::ofstream(p, std::ios::binary) << text;
+    return p.string();
+  }
+
+ private:
+  fs::path path_;
+};
+
+// A Mitsuba scene file: line 1 is <scene>, so `body` starts on line 2.
+std::string scene_xml(const std::string& body, const std::string& version = "3.0.0") {
+  return "<scene version=\"" + version + "\">\n" + body + "</scene>\n";
+}
+
+psf::Scene load_text(const std::string& body, const std::vector<std::pair<std::string, std::string>>& params = {},
+                     const std::string& version = "3.0.0") {
+  TempDir dir;
+  return psf::load_scene(dir.write("scene.xml", scene_xml(body, version)), params);
+}
+
+// The world-space corners of Mitsuba's rectangle (-1,-1), (1,-1), (1,1), (-1,1) under `transform`.
+std::vector<glm::vec3> rectangle_corners(const std::string& transform) {
+  psf::Scene s =
+      load_text("<shape type=\"rectangle\"><transform name=\"to_world\">" + transform + "</transform></shape>\n");
+  REQUIRE(s.positions.size() == 4);
+  return s.positions;
+}
+
+bool near(const glm::vec3& a, const glm::vec3& b, float tol = 1e-4f) {
+  return glm::all(glm::lessThanEqual(glm::abs(a - b), glm::vec3(tol * std::max(1.0f, glm::length(b)))));
+}
+
+glm::vec3 albedo(const Material& m) { return {m.albedo.s[0], m.albedo.s[1], m.albedo.s[2]}; }
+glm::vec3 emission(const Material& m) { return {m.emission.s[0], m.emission.s[1], m.emission.s[2]}; }
+
+// The albedo of a one-shape scene whose diffuse reflectance is `color` (an <rgb>, <srgb> or <spectrum>).
+glm::vec3 reflectance_of(const std::string& color) {
+  psf::Scene s = load_text("<shape type=\"rectangle\"><bsdf type=\"diffuse\">" + color + "</bsdf></shape>\n");
+  REQUIRE(s.materials.size() == 1);
+  return albedo(s.materials[0]);
+}
+
+// The emission of a one-shape scene whose area emitter has radiance `color`.
+glm::vec3 radiance_of(const std::string& color, const std::string& version = "3.0.0") {
+  psf::Scene s =
+      load_text("<shape type=\"rectangle\"><emitter type=\"area\">" + color + "</emitter></shape>\n", {}, version);
+  REQUIRE(s.materials.size() == 1);
+  return emission(s.materials[0]);
+}
+
+// Loads `path` and expects a SceneError naming `file` and `line` whose message contains `text`.
+void require_error(const std::string& path, const std::string& file, int line, const std::string& text) {
+  try {
+    psf::load_scene(path);
+    FAIL("no SceneError for " << path);
+  } catch (const psf::SceneError& e) {
+    INFO(e.what());
+    CHECK(e.file() == file);
+    CHECK(e.line() == line);
+    CHECK(std::string(e.what()).find(text) != std::string::npos);
+    if (line > 0) CHECK(std::string(e.what()).find(file + ":" + std::to_string(line) + ":") == 0);
+  }
+}
+
+// Expects a SceneError at line `line` of a scene made of `body` (body line 1 is file line 2).
+void require_xml_error(const std::string& body, int line, const std::string& text) {
+  TempDir dir;
+  std::string path = dir.write("bad.xml", scene_xml(body));
+  require_error(path, path, line, text);
+}
+
+size_t count_warnings(const psf::Scene& s, const std::string& text) {
+  return size_t(std::count_if(s.warnings.begin(), s.warnings.end(),
+                              [&](const std::string& w) { return w.find(text) != std::string::npos; }));
+}
+
+size_t emissive_materials(const psf::Scene& s) {
+  return size_t(std::count_if(s.materials.begin(), s.materials.end(), [](const Material& m) {
+    return glm::any(glm::greaterThan(emission(m), glm::vec3(0.0f)));
+  }));
+}
+
+}  // namespace
+
+TEST_CASE("Default Cornell box loads", "[scene]") {
+  psf::Scene s = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"));
+  CHECK(s.warnings.empty());
+  CHECK(s.triangles.size() == 36);  // 5 walls and the light: 2 each; 2 cubes: 12 each
+  CHECK(s.tri_material.size() == s.triangles.size());
+  REQUIRE(emissive_materials(s) == 1);
+  for (const Material& m : s.materials)
+    if (glm::any(glm::greaterThan(emission(m), glm::vec3(0.0f)))) CHECK(near(emission(m), {17, 12, 4}));
+  CHECK(s.camera.origin == glm::vec3(278, 273, -800));
+  CHECK(near(s.camera.target, {278, 273, -799}));
+  CHECK(near(s.camera.up, {0, 1, 0}));
+  CHECK(s.camera.fov_degrees == Approx(39.3077f));
+  CHECK(s.camera.fov_axis == "x");
+  CHECK_FALSE(s.camera.mirrored);
+  CHECK(s.width == 256);
+  CHECK(s.height == 256);
+  CHECK(s.max_depth == 8);
+  CHECK(s.default_spp == 64);
+  for (const glm::vec3& p : s.positions) {
+    CHECK(p.x >= -1e-3f);
+    CHECK(p.x <= 556.001f);
+    CHECK(p.y >= -1e-3f);
+    CHECK(p.y <= 548.801f);
+    CHECK(p.z >= -1e-3f);
+    CHECK(p.z <= 559.201f);
+  }
+  // The camera sees red on its left: make_camera's right vector points to -x.
+  Camera cam = psf::make_camera(s.camera, s.width, s.height);
+  CHECK(cam.right.s[0] < 0.0f);
+}
+
+TEST_CASE("Transform elements give Mitsuba's matrices", "[scene]") {
+  SECTION("translate") {
+    CHECK(near(rectangle_corners("<translate x=\"1\" y=\"2\" z=\"3\"/>")[0], {0, 1, 3}));
+    CHECK(near(rectangle_corners("<translate value=\"1, 2, 3\"/>")[0], {0, 1, 3}));
+  }
+  SECTION("scale") {
+    CHECK(near(rectangle_corners("<scale value=\"2\"/>")[2], {2, 2, 0}));
+    CHECK(near(rectangle_corners("<scale x=\"2\" y=\"3\"/>")[2], {2, 3, 0}));
+    CHECK(near(rectangle_corners("<scale value=\"2 3 4\"/>")[2], {2, 3, 0}));
+  }
+  SECTION("rotate: right-handed, angle in degrees") {
+    CHECK(near(rectangle_corners("<rotate z=\"1\" angle=\"90\"/>")[1], {1, 1, 0}));
+    CHECK(near(rectangle_corners("<rotate x=\"1\" angle=\"90\"/>")[2], {1, 0, 1}));
+    CHECK(near(rectangle_corners("<rotate value=\"0, 1, 0\" angle=\"90\"/>")[2], {0, 1, -1}));
+    CHECK(near(rectangle_corners("<rotate y=\"2\" angle=\"90\"/>")[2], {0, 1, -1}));  // axis normalised
+  }
+  SECTION("matrix: row-major 4x4 and 3x3") {
+    CHECK(near(rectangle_corners("<matrix value=\"1 0 0 10  0 2 0 20  0 0 3 30  0 0 0 1\"/>")[2], {11, 22, 30}));
+    CHECK(near(rectangle_corners("<matrix value=\"0 -1 0, 1 0 0, 0 0 1\"/>")[1], {1, 1, 0}));
+  }
+  SECTION("lookat: columns left, up, direction, origin") {
+    // dir = -z, left = up x dir = -x, up' = dir x left = +y.
+    CHECK(near(rectangle_corners("<lookat origin=\"0,0,0\" target=\"0,0,-1\" up=\"0,1,0\"/>")[2], {-1, 1, 0}));
+    CHECK(near(rectangle_corners("<lookat origin=\"5,6,7\" target=\"5,6,8\" up=\"0,1,0\"/>")[0], {4, 5, 7}));
+  }
+  SECTION("each element left-multiplies the ones before it") {
+    CHECK(near(rectangle_corners("<translate x=\"1\"/><scale value=\"2\"/>")[0], {0, -2, 0}));
+    CHECK(near(rectangle_corners("<scale value=\"2\"/><translate x=\"1\"/>")[0], {-1, -2, 0}));
+    CHECK(near(rectangle_corners("<rotate z=\"1\" angle=\"90\"/><translate x=\"10\"/>")[1], {11, 1, 0}));
+  }
+}
+
+TEST_CASE("Sensor to_world: lookat and the equivalent matrix give the same camera", "[scene]") {
+  auto sensor = [](const std::string& transform) {
+    return load_text(
+        "<sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>"
+        "<transform name=\"to_world\">" +
+        transform + "</transform></sensor>\n");
+  };
+  // Looking along +x with +y up: left = up x dir = -z, so the matrix columns are (-z, y, x).
+  psf::Scene a = sensor("<lookat origin=\"1,2,3\" target=\"11,2,3\" up=\"0,1,0\"/>");
+  psf::Scene b = sensor("<matrix value=\"0 0 1 1  0 1 0 2  -1 0 0 3  0 0 0 1\"/>");
+  CHECK(near(a.camera.origin, {1, 2, 3}));
+  CHECK(near(glm::normalize(a.camera.target - a.camera.origin), {1, 0, 0}));
+  CHECK(near(a.camera.up, {0, 1, 0}));
+  Camera ca = psf::make_camera(a.camera, 64, 64), cb = psf::make_camera(b.camera, 64, 64);
+  for (int i = 0; i < 3; ++i) {
+    CHECK(ca.origin.s[i] == Approx(cb.origin.s[i]).margin(1e-5));
+    CHECK(ca.forward.s[i] == Approx(cb.forward.s[i]).margin(1e-5));
+    CHECK(ca.right.s[i] == Approx(cb.right.s[i]).margin(1e-5));
+    CHECK(ca.down.s[i] == Approx(cb.down.s[i]).margin(1e-5));
+  }
+  // Mitsuba's image right is -left = +z here.
+  CHECK(ca.right.s[2] > 0.0f);
+  CHECK_FALSE(a.camera.mirrored);
+  CHECK_FALSE(b.camera.mirrored);
+
+  // A reflection before the lookat keeps the view but mirrors the image.
+  psf::Scene m = sensor("<scale x=\"-1\"/><lookat origin=\"1,2,3\" target=\"11,2,3\" up=\"0,1,0\"/>");
+  CHECK(m.camera.mirrored);
+  CHECK(near(m.camera.origin, a.camera.origin));
+  CHECK(near(m.camera.target, a.camera.target));
+  CHECK(near(m.camera.up, a.camera.up));
+}
+
+TEST_CASE("Sensor defaults and field of view", "[scene]") {
+  psf::Scene s = load_text("<sensor type=\"perspective\"/>\n");
+  CHECK(s.width == 768);  // Mitsuba's default film
+  CHECK(s.height == 576);
+  CHECK(s.camera.fov_axis == "diagonal");  // from the default 50mm focal length
+  CHECK(s.camera.fov_degrees == Approx(46.793f).epsilon(1e-3));
+  CHECK(near(s.camera.target - s.camera.origin, {0, 0, 1}));
+
+  psf::Scene d = load_text("<integrator type=\"direct\"/>\n");
+  CHECK(d.max_depth == 2);
+}
+
+TEST_CASE("$parameters and <default>", "[scene]") {
+  const std::string body =
+      "<default name=\"w\" value=\"64\"/>\n"
+      "<default name=\"depth\" value=\"5\"/>\n"
+      "<integrator type=\"path\"><integer name=\"max_depth\" value=\"$depth\"/></integrator>\n"
+      "<sensor type=\"perspective\"><film type=\"hdrfilm\">"
+      "<integer name=\"width\" value=\"$w\"/><integer name=\"height\" value=\"$w$w\"/></film></sensor>\n";
+  psf::Scene defaults = load_text(body);
+  CHECK(defaults.width == 64);
+  CHECK(defaults.height == 6464);  // substitution inside a value
+  CHECK(defaults.max_depth == 5);
+  psf::Scene given = load_text(body, {{"w", "32"}});
+  CHECK(given.width == 32);
+  CHECK(given.max_depth == 5);
+
+  require_xml_error("<integrator type=\"path\">\n<integer name=\"max_depth\" value=\"$nope\"/>\n</integrator>\n", 3,
+                    "undefined parameter '$nope'");
+}
+
+TEST_CASE("<include> is relative to the including file", "[scene]") {
+  TempDir dir;
+  // Mitsuba ignores OBJ materials: no warning about the missing MTL library.
+  dir.write("parts/quad.obj", "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl x\nf 1 2 3 4\n");
+  dir.write("parts/materials.xml", scene_xml("<bsdf type=\"diffuse\" id=\"grey\">"
+                                             "<rgb name=\"reflectance\" value=\"0.25\"/></bsdf>\n"
+                                             "<shape type=\"obj\"><string name=\"filename\" value=\"quad.obj\"/>"
+                                             "<ref id=\"grey\"/></shape>\n"));
+  std::string main = dir.write("main.xml", scene_xml("<include filename=\"parts/materials.xml\"/>\n"
+                                                     "<shape type=\"rectangle\"><ref id=\"grey\"/></shape>\n"));
+  psf::Scene s = psf::load_scene(main);
+  CHECK(s.triangles.size() == 4);
+  CHECK(s.warnings.size() == 1);     // only: no <sensor>
+  REQUIRE(s.materials.size() == 1);  // both shapes share the referenced BSDF
+  CHECK(near(albedo(s.materials[0]), glm::vec3(0.25f)));
+
+  std::string broken = dir.write("broken.xml", scene_xml("<include filename=\"missing.xml\"/>\n"));
+  require_error(broken, broken, 2, "cannot open included file");
+}
+
+TEST_CASE("Colours: rgb, srgb, spectrum", "[scene]") {
+  SECTION("rgb") {
+    CHECK(near(reflectance_of("<rgb name=\"reflectance\" value=\"0.1 0.2 0.3\"/>"), {0.1f, 0.2f, 0.3f}));
+    CHECK(near(reflectance_of("<rgb name=\"reflectance\" value=\"0.1, 0.2, 0.3\"/>"), {0.1f, 0.2f, 0.3f}));
+    CHECK(near(reflectance_of("<rgb name=\"reflectance\" value=\"0.4\"/>"), glm::vec3(0.4f)));
+    CHECK(near(reflectance_of("<rgb name=\"reflectance\" value=\"1.5, 0.5, -1\"/>"), {1, 0.5f, 0}));  // clamped
+    CHECK(near(reflectance_of(""), glm::vec3(0.5f)));                                                 // diffuse default
+  }
+  SECTION("srgb: decoded to linear") {
+    // 0x80 / 255 = 0.50196 -> ((0.50196 + 0.055) / 1.055)^2.4 = 0.21586.
+    CHECK(near(reflectance_of("<srgb name=\"reflectance\" value=\"#ff8000\"/>"), {1, 0.21586f, 0}));
+    CHECK(near(reflectance_of("<srgb name=\"reflectance\" value=\"0.5\"/>"), glm::vec3(0.21404f)));
+  }
+  SECTION("spectrum: a constant reflectance 1 is white") {
+    CHECK(near(reflectance_of("<spectrum name=\"reflectance\" value=\"1\"/>"), glm::vec3(1.0f), 1e-3f));
+    CHECK(near(reflectance_of("<spectrum name=\"reflectance\" value=\"360:1, 830:1\"/>"), glm::vec3(1.0f), 1e-3f));
+    CHECK(near(reflectance_of("<spectrum name=\"reflectance\" value=\"360:0.5, 600:0.5, 830:0.5\"/>"), glm::vec3(0.5f),
+               1e-3f));
+  }
+  SECTION("spectrum: emitted radiance as in Mitsuba 3's RGB mode") {
+    // A uniform emitted spectrum is equal-energy white: xyz_to_srgb(1, 1, 1) (version 3), or 1 (version 0.5).
+    CHECK(near(radiance_of("<spectrum name=\"radiance\" value=\"2\"/>"),
+               2.0f * glm::vec3(1.204794f, 0.948291f, 0.908916f), 1e-3f));
+    CHECK(near(radiance_of("<spectrum name=\"radiance\" value=\"2\"/>", "0.5.0"), glm::vec3(2.0f)));
+    CHECK(near(radiance_of("<spectrum name=\"radiance\" value=\"360:1, 830:1\"/>"),
+               glm::vec3(1.204794f, 0.948291f, 0.908916f), 2e-3f));
+    // The cbox light, integrated with the tabulated CIE 1931 curves at 1 nm (5 nm table, linear interpolation).
+    CHECK(near(radiance_of("<spectrum name=\"radiance\" value=\"400:0, 500:8, 600:15.6, 700:18.4\"/>"),
+               {20.714f, 10.854f, 2.771f}, 1e-2f));
+    CHECK(near(radiance_of("<rgb name=\"radiance\" value=\"17, 12, 4\"/>"), {17, 12, 4}));  // unbounded
+  }
+  SECTION("spectrum from a file") {
+    TempDir dir;
+    dir.write("flat.spd", "# wavelength value\n360 0.25\n830 0.25\n");
+    std::string path = dir.write("s.xml", scene_xml("<shape type=\"rectangle\"><bsdf type=\"diffuse\">"
+                                                    "<spectrum name=\"reflectance\" filename=\"flat.spd\"/>"
+                                                    "</bsdf></shape>\n"));
+    CHECK(near(albedo(psf::load_scene(path).materials[0]), glm::vec3(0.25f), 1e-3f));
+  }
+}
+
+TEST_CASE("camelCase (0.5) and snake_case (3) names are the same properties", "[scene]") {
+  auto body = [](const char* to_world, const char* fov_axis, const char* max_depth, const char* sample_count) {
+    return std::string("<integrator type=\"path\"><integer name=\"") + max_depth + "\" value=\"7\"/></integrator>\n" +
+           "<sensor type=\"perspective\"><float name=\"fov\" value=\"30\"/><string name=\"" + fov_axis +
+           "\" value=\"y\"/><transform name=\"" + to_world +
+           "\"><lookat origin=\"1,1,1\" target=\"0,0,0\" up=\"0,1,0\"/></transform>"
+           "<sampler type=\"independent\"><integer name=\"" +
+           sample_count +
+           "\" value=\"16\"/></sampler><film type=\"ldrfilm\"><integer name=\"width\" value=\"40\"/>"
+           "<integer name=\"height\" value=\"30\"/></film></sensor>\n"
+           "<shape type=\"rectangle\"><transform name=\"" +
+           to_world + "\"><translate x=\"3\"/></transform></shape>\n";
+  };
+  psf::Scene old_names = load_text(body("toWorld", "fovAxis", "maxDepth", "sampleCount"), {}, "0.5.0");
+  psf::Scene new_names = load_text(body("to_world", "fov_axis", "max_depth", "sample_count"));
+  CHECK(old_names.max_depth == 7);
+  CHECK(new_names.max_depth == 7);
+  CHECK(old_names.default_spp == 16);
+  CHECK(new_names.default_spp == 16);
+  CHECK(old_names.camera.fov_axis == "y");
+  CHECK(new_names.camera.fov_axis == "y");
+  CHECK(old_names.width == new_names.width);
+  CHECK(near(old_names.camera.origin, new_names.camera.origin));
+  CHECK(near(old_names.camera.target, new_names.camera.target));
+  CHECK(near(old_names.camera.up, new_names.camera.up));
+  CHECK(old_names.positions == new_names.positions);
+  CHECK(near(new_names.positions[0], {2, -1, 0}));
+}
+
+TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
+  psf::Scene s = load_text(
+      "<bsdf type=\"twosided\" id=\"two\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" "
+      "value=\"0.2\"/></bsdf></bsdf>\n"
+      "<shape type=\"cube\"><ref id=\"two\"/></shape>\n"
+      "<shape type=\"disk\"><ref id=\"two\"/></shape>\n"
+      "<shape type=\"sphere\"><point name=\"center\" x=\"10\" y=\"0\" z=\"0\"/><float name=\"radius\" value=\"2\"/>"
+      "</shape>\n"
+      "<shape type=\"rectangle\"><boolean name=\"flip_normals\" value=\"true\"/>"
+      "<emitter type=\"area\"><rgb name=\"radiance\" value=\"1, 2, 3\"/></emitter></shape>\n");
+  CHECK(s.warnings.size() == 1);
+  CHECK(count_warnings(s, "no <sensor>") == 1);
+  REQUIRE(s.materials.size() == 3);  // twosided (cube and disk), default (sphere), default + emitter
+  CHECK(near(albedo(s.materials[0]), glm::vec3(0.2f)));
+  CHECK(s.materials[0].two_sided == 1);
+  CHECK(near(albedo(s.materials[1]), glm::vec3(0.5f)));
+  CHECK(s.materials[1].two_sided == 0);
+  CHECK(near(emission(s.materials[2]), {1, 2, 3}));
+  CHECK(s.materials[2].two_sided == 0);  // area emitters emit from the front only
+
+  // Every triangle faces away from its shape's centre (outward), except the flipped rectangle.
+  const glm::vec3 centres[4] = {{0, 0, 0}, {0, 0, -1}, {10, 0, 0}, {0, 0, 1}};
+  size_t tri = 0;
+  const size_t counts[4] = {12, 64, 2 * 64 + 2 * 64 * 30, 2};
+  for (int shape = 0; shape < 4; ++shape) {
+    for (size_t k = 0; k < counts[shape]; ++k, ++tri) {
+      REQUIRE(tri < s.triangles.size());
+      glm::uvec3 t = s.triangles[tri];
+      glm::vec3 a = s.positions[t.x], b = s.positions[t.y], c = s.positions[t.z];
+      glm::vec3 n = glm::cross(b - a, c - a);
+      CHECK(glm::dot(n, (a + b + c) / 3.0f - centres[shape]) > 0.0f);
+    }
+  }
+  CHECK(tri == s.triangles.size());
+  for (const glm::vec3& p : std::vector<glm::vec3>(s.positions.begin() + 24 + 65, s.positions.end() - 4))
+    CHECK(glm::length(p - glm::vec3(10, 0, 0)) == Approx(2.0f).epsilon(1e-5));
+}
+
+TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
+  psf::Scene s = load_text(
+      "<bsdf type=\"roughplastic\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
+      "<bsdf type=\"conductor\" id=\"c\"><rgb name=\"eta\" value=\"1.5\"/><rgb name=\"k\" value=\"0\"/></bsdf>\n"
+      "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"c\"/></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture name=\"reflectance\" type=\"bitmap\">"
+      "<string name=\"filename\" value=\"x.png\"/></texture></bsdf></shape>\n"
+      "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.exr\"/></emitter>\n");
+  CHECK(s.warnings.size() == 5);
+  CHECK(count_warnings(s, "no <sensor>") == 1);
+  CHECK(count_warnings(s, ":2: bsdf 'roughplastic'") == 1);
+  CHECK(count_warnings(s, ":3: bsdf 'conductor'") == 1);
+  CHECK(count_warnings(s, ":7: texture 'bitmap'") == 1);
+  CHECK(count_warnings(s, ":8: emitter 'envmap'") == 1);
+  REQUIRE(s.materials.size() == 3);
+  CHECK(near(albedo(s.materials[0]), glm::vec3(0.3f)));
+  CHECK(near(albedo(s.materials[1]), glm::vec3(0.04f)));  // Fresnel at normal incidence, eta 1.5
+  CHECK(near(albedo(s.materials[2]), glm::vec3(0.5f)));
+}
+
+TEST_CASE("OBJ files load directly with MTL materials and a framing camera", "[scene]") {
+  TempDir dir;
+  dir.write("lit.mtl", "newmtl red\nKd 0.8 0.1 0.1\nnewmtl lamp\nKd 0 0 0\nKe 5 4 3\n");
+  std::string path = dir.write("model.obj",
+                               "mtllib lit.mtl\n"
+                               "v -2 0 0\nv 2 0 0\nv 2 1 -3\nv -2 1 -3\nv 0 3 -1\n"
+                               "usemtl red\nf 1 2 3 4\n"
+                               "usemtl lamp\nf 3 4 5\n"
+                               "f -1 -2 -3\n");
+  psf::Scene s = psf::load_scene(path);
+  CHECK(s.warnings.empty());
+  CHECK(s.triangles.size() == 4);
+  CHECK(s.width == 512);
+  CHECK(s.height == 512);
+  REQUIRE(s.materials.size() == 2);
+  CHECK(near(albedo(s.materials[s.tri_material[0]]), {0.8f, 0.1f, 0.1f}));
+  CHECK(s.tri_material[0] == s.tri_material[1]);
+  CHECK(near(emission(s.materials[s.tri_material[2]]), {5, 4, 3}));
+  CHECK(emissive_materials(s) == 1);
+  // The quad is a fan (0, 1, 2), (0, 2, 3) as in Mitsuba.
+  CHECK(s.positions[s.triangles[1].z] == glm::vec3(-2, 1, -3));
+
+  // Every vertex projects inside the image of the default camera, which looks along -z.
+  Camera cam = psf::make_camera(s.camera, s.width, s.height);
+  CHECK(s.camera.target.z < s.camera.origin.z);
+  glm::vec3 o(cam.origin.s[0], cam.origin.s[1], cam.origin.s[2]);
+  glm::vec3 f(cam.forward.s[0], cam.forward.s[1], cam.forward.s[2]);
+  glm::vec3 r(cam.right.s[0], cam.right.s[1], cam.right.s[2]);
+  glm::vec3 d(cam.down.s[0], cam.down.s[1], cam.down.s[2]);
+  for (const glm::vec3& p : s.positions) {
+    glm::vec3 v = p - o;
+    float depth = glm::dot(v, f);
+    REQUIRE(depth > 0.0f);
+    float sx = glm::dot(v, r) / (depth * glm::dot(r, r)), sy = glm::dot(v, d) / (depth * glm::dot(d, d));
+    CHECK(std::abs(sx) <= 1.0f);
+    CHECK(std::abs(sy) <= 1.0f);
+  }
+
+  // A missing MTL library is a warning; the faces get the default material.
+  std::string lonely = dir.write("lonely.obj", "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl x\nf 1 2 3\n");
+  psf::Scene l = psf::load_scene(lonely);
+  CHECK(l.triangles.size() == 1);
+  CHECK(count_warnings(l, "gone.mtl") >= 1);
+  REQUIRE(l.materials.size() == 1);
+  CHECK(near(albedo(l.materials[0]), glm::vec3(0.5f)));
+
+  // Texture maps are ignored with one warning.
+  dir.write("tex.mtl", "newmtl a\nKd 1 1 1\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n");
+  std::string textured =
+      dir.write("textured.obj", "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n");
+  CHECK(count_warnings(psf::load_scene(textured), "texture") == 1);
+}
+
+TEST_CASE("Scene errors name the file and line", "[scene]") {
+  SECTION("missing file") {
+    require_error("/nonexistent/psf/scene.xml", "/nonexistent/psf/scene.xml", 0, "no such file");
+  }
+  SECTION("malformed XML") {
+    TempDir dir;
+    std::string path = dir.write("bad.xml", "<scene version=\"3.0.0\">\n  <shape type=\"cube\">\n\n</scene>\n");
+    require_error(path, path, 4, "malformed XML");
+  }
+  SECTION("unknown shape type") { require_xml_error("\n<shape type=\"teapot\"/>\n", 3, "unknown shape type 'teapot'"); }
+  SECTION("bad number") {
+    require_xml_error("<sensor type=\"perspective\">\n<float name=\"fov\" value=\"1.0x\"/>\n</sensor>\n", 3,
+                      "'1.0x' is not a number");
+    require_xml_error(
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<rgb name=\"reflectance\" value=\"0.5 x 1\"/>"
+        "</bsdf></shape>\n",
+        3, "'x' is not a number");
+    require_xml_error(
+        "<shape type=\"rectangle\"><transform name=\"to_world\">\n<translate x=\"1e\"/>"
+        "</transform></shape>\n",
+        3, "is not a number");
+    require_xml_error("<integrator type=\"path\">\n<integer name=\"max_depth\" value=\"2.5\"/></integrator>\n", 3,
+                      "'2.5' is not an integer");
+  }
+  SECTION("unparsable values") {
+    require_xml_error(
+        "<sensor type=\"perspective\"><float name=\"fov\" value=\"30\"/>\n"
+        "<string name=\"fov_axis\" value=\"z\"/></sensor>\n",
+        3, "fov_axis 'z'");
+    require_xml_error("<shape type=\"rectangle\">\n<boolean name=\"flip_normals\" value=\"yes\"/></shape>\n", 3,
+                      "not a boolean");
+    require_xml_error(
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n<spectrum name=\"reflectance\" "
+        "value=\"500:0.5, 400:0.5\"/></bsdf></shape>\n",
+        3, "wavelengths must increase");
+    require_xml_error("<shape type=\"rectangle\">\n<transform name=\"to_world\"><shear/></transform></shape>\n", 3,
+                      "unexpected element <shear>");
+  }
+  SECTION("reference to an unknown id") {
+    require_xml_error("<shape type=\"rectangle\">\n\n<ref id=\"nowhere\"/>\n</shape>\n", 4, "unknown id 'nowhere'");
+  }
+  SECTION("missing OBJ file") {
+    require_xml_error("\n<shape type=\"obj\"><string name=\"filename\" value=\"gone.obj\"/></shape>\n", 3,
+                      "cannot open OBJ file");
+  }
+  SECTION("OBJ index out of range") {
+    TempDir dir;
+    std::string obj = dir.write("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# comment\nf 1 2 9\n");
+    require_error(obj, obj, 6, "index 9 out of range");
+    std::string xml =
+        dir.write("uses.xml", scene_xml("<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>\n"));
+    require_error(xml, obj, 6, "out of range");
+    std::string negative = dir.write("neg.obj", "v 0 0 0\nv 1 0 0\nf -1 -2 -3\n");
+    require_error(negative, negative, 3, "out of range");
+  }
+  SECTION("OBJ index zero: tinyobjloader's message") {
+    TempDir dir;
+    std::string obj = dir.write("zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+    require_error(obj, obj, 4, "OBJ parse error");
+  }
+  SECTION("non-finite OBJ vertex") {
+    TempDir dir;
+    std::string nan = dir.write("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+    require_error(nan, nan, 2, "not finite");
+    std::string inf = dir.write("inf.obj", "v 0 0 0\nv 1 0 0\n\nv 0 1e999 0\nf 1 2 3\n");
+    require_error(inf, inf, 4, "not finite");
+  }
+  SECTION("unknown format") {
+    TempDir dir;
+    std::string path = dir.write("scene.ply", "ply\n");
+    require_error(path, path, 0, "unknown scene format");
+  }
+}
+
+TEST_CASE("Shared scenes load", "[scene]") {
+  std::optional<std::string> shared = psf::test::shared_dir();
+  if (!shared) {
+    WARN("../shared not found (set PSF_SHARED): skipping the shared scenes");
+    return;
+  }
+  auto load_if_present = [&](const std::string& relative) -> std::optional<psf::Scene> {
+    std::string path = *shared + "/" + relative;
+    if (!fs::exists(path)) {
+      WARN(path << " not found: skipped");
+      return std::nullopt;
+    }
+    return psf::load_scene(path);
+  };
+
+  SECTION("cbox (Mitsuba 3, spectral reflectances, OBJ meshes)") {
+    std::optional<psf::Scene> s = load_if_present("scenes/cbox/scene.xml");
+    if (!s) return;
+    CHECK(s->warnings.empty());
+    CHECK(s->triangles.size() == 38);  // faces in the OBJ files, quads split in two
+    CHECK(emissive_materials(*s) == 1);
+    CHECK(s->max_depth == 6);
+    CHECK(s->default_spp == 256);
+    CHECK(s->width == 500);
+    CHECK(s->camera.fov_axis == "smaller");
+    CHECK(near(s->camera.origin, {278, 273, -800}));
+    for (size_t m = 0; m < s->materials.size(); ++m) {
+      glm::vec3 a = albedo(s->materials[m]);
+      INFO(s->material_names[m] << " " << a.x << " " << a.y << " " << a.z);
+      if (s->material_names[m] == "red") CHECK((a.x > 0.4f && a.y < 0.1f && a.z < 0.1f));
+      if (s->material_names[m] == "green") CHECK((a.y > 0.3f && a.x < 0.15f && a.z < 0.15f));
+      if (s->material_names[m] == "white") CHECK(near(a, glm::vec3(0.74f), 0.03f));
+      if (glm::any(glm::greaterThan(emission(s->materials[m]), glm::vec3(0.0f))))
+        CHECK(near(emission(s->materials[m]), {20.714f, 10.854f, 2.771f}, 1e-2f));
+    }
+    // The luminaire is moved 0.5 down from the ceiling (y = 548.8).
+    for (size_t t = 0; t < s->triangles.size(); ++t) {
+      if (!glm::any(glm::greaterThan(emission(s->materials[s->tri_material[t]]), glm::vec3(0.0f)))) continue;
+      for (int k = 0; k < 3; ++k) CHECK(s->positions[s->triangles[t][k]].y == Approx(548.3f));
+    }
+  }
+  SECTION("living-room (Mitsuba 0.5)") {
+    std::optional<psf::Scene> s = load_if_present("scenes/living-room/scene.xml");
+    if (!s) return;
+    CHECK(s->triangles.size() == 143163);
+    CHECK(s->width == 1280);
+    CHECK(s->height == 720);
+    CHECK(s->max_depth == 65);
+    CHECK(s->camera.fov_degrees == Approx(90.0f));
+    CHECK_FALSE(s->camera.mirrored);
+    CHECK(count_warnings(*s, "emitter 'envmap'") == 1);
+    CHECK(count_warnings(*s, "bsdf 'roughplastic'") == 3);
+    CHECK(count_warnings(*s, "texture 'bitmap'") >= 1);
+    CHECK(emissive_materials(*s) == 0);  // lit by the environment map only
+  }
+  SECTION("staircase (Mitsuba 0.5)") {
+    std::optional<psf::Scene> s = load_if_present("scenes/staircase/scene.xml");
+    if (!s) return;
+    CHECK(s->triangles.size() == 262663);
+    CHECK(s->width == 720);
+    CHECK(s->height == 1280);
+    CHECK(emissive_materials(*s) == 1);
+    CHECK(count_warnings(*s, "bsdf 'bumpmap'") == 1);
+    CHECK(count_warnings(*s, "bsdf 'conductor'") == 3);
+    for (const std::string& w : s->warnings) CHECK(w.find("scene.xml:") != std::string::npos);
+  }
+}
