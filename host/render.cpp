@@ -93,7 +93,7 @@ RenderResult Renderer::render(const RenderOptions& o) {
   const uint64_t total = pixels * uint64_t(std::max(o.spp, 0));
 
   // Batch of 2^m paths: bounded by --batch and by the device's allocation limit.
-  const size_t bytes_per_path = sizeof(PathState) + 2 * sizeof(Ray) + 2 * sizeof(Hit);
+  const size_t bytes_per_path = sizeof(PathState) + sizeof(PathVertex) + 2 * sizeof(Ray) + 2 * sizeof(Hit);
   int m = o.batch_log2;
   while (m > 8 && ((size_t(1) << m) * sizeof(PathState) > rt.device().max_alloc ||
                    (size_t(1) << m) * bytes_per_path > rt.device().global_mem / 2))
@@ -101,6 +101,7 @@ RenderResult Renderer::render(const RenderOptions& o) {
   const uint32_t batch = uint32_t(1) << m;
 
   cl::Buffer states = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(PathState));
+  cl::Buffer vertices = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(PathVertex));
   cl::Buffer rays = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Ray));
   cl::Buffer hits = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Hit));
   cl::Buffer shadow_rays = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Ray));
@@ -124,20 +125,20 @@ RenderResult Renderer::render(const RenderOptions& o) {
     p.num_emitters = s.num_emitters;
     p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
 
-    rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, rays);
+    rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, rays);
     for (int depth = 0; o.max_depth < 0 || depth < o.max_depth; ++depth) {
       s.caster->closest(rays, hits, p.batch_size);
       uint32_t zero = 0;
       rt.write(alive, &zero, sizeof(zero));
       rt.launch("shade", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
-                s.emitter_cdf, s.tri_light_pdf, hits, rays, states, shadow_rays, alive);
+                s.emitter_cdf, s.tri_light_pdf, hits, rays, states, vertices, shadow_rays, alive);
       s.caster->any(shadow_rays, shadow_hits, p.batch_size);
-      rt.launch("shade_shadows", p.batch_size, L, p.batch_size, shadow_hits, states);
+      rt.launch("shade_shadows", p.batch_size, L, p.batch_size, shadow_hits, states, vertices);
       uint32_t n_alive = 0;
       rt.read(alive, &n_alive, sizeof(n_alive));
       if (n_alive == 0) break;
     }
-    rt.launch("accumulate", pixels, L, p, states, image, nonfinite);
+    rt.launch("accumulate", pixels, L, p, states, vertices, image, nonfinite);
     rt.finish();
   }
   RenderResult r;

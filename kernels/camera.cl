@@ -4,12 +4,13 @@
  * g mod (width * height) and is that pixel's sample number g div (width * height),
  * so a path gets the same samples whatever batch, device or work-group size
  * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
- * Writes: the path's state and its camera ray (pinhole, psf_shared.h Camera). */
+ * Writes: the path's state, an empty filtering vertex and its camera ray
+ * (pinhole, psf_shared.h Camera). */
 
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
 
 __kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
-                          __global PathState* states, __global Ray* rays) {
+                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays) {
   uint j = get_global_id(0);
   if (j >= params.batch_size) return;
   ulong pixels = (ulong)params.width * (ulong)params.height;
@@ -28,6 +29,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   PathState st;
   st.throughput = (float4)(1.0f, 1.0f, 1.0f, 0.0f);
   st.radiance = (float4)(0.0f);
+  st.vertex_radiance = (float4)(0.0f);
   st.pending = (float4)(0.0f);
   st.prev_pos = (float4)(camera.origin.xyz, 0.0f);
   st.pixel = pixel;
@@ -35,4 +37,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   st.depth = 0u;
   st.flags = PSF_PATH_ALIVE;
   states[j] = st;
+  PathVertex none;
+  none.position = none.normal = none.albedo = none.alpha = (float4)(0.0f);
+  vertices[j] = none;
 }

@@ -36,6 +36,11 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(PathState, prev_pos);
   out[i++] = PSF_OFFSET(PathState, pixel);
   out[i++] = PSF_OFFSET(PathState, flags);
+  out[i++] = PSF_OFFSET(PathState, vertex_radiance);
+  out[i++] = sizeof(PathVertex);
+  out[i++] = PSF_OFFSET(PathVertex, normal);
+  out[i++] = PSF_OFFSET(PathVertex, albedo);
+  out[i++] = PSF_OFFSET(PathVertex, alpha);
   out[i++] = sizeof(FrameParams);
   out[i++] = PSF_OFFSET(FrameParams, max_depth);
   out[i++] = PSF_OFFSET(FrameParams, batch_size);

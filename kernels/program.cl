@@ -6,5 +6,7 @@
 #include "sampling.cl"
 #include "raycast.cl"
 #include "camera.cl"
+#include "bsdf.cl"
+#include "emitter.cl"
 #include "shade.cl"
 #include "accumulate.cl"

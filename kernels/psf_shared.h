@@ -129,19 +129,32 @@ typedef struct {
 } Emitter;
 
 #define PSF_PATH_ALIVE 1u
-#define PSF_PATH_SPECULAR 2u /* the last bounce was a delta lobe (no MIS) */
+#define PSF_PATH_SPECULAR 2u  /* the last bounce was a delta lobe (no MIS) */
+#define PSF_PATH_VERTEX 4u    /* the path has its filtering vertex; contributions go to c */
+#define PSF_PATH_VERTEX_NEW 8u /* the filtering vertex was made at this bounce */
 
 /* The state of one path of the wavefront between kernel stages. */
 typedef struct {
-  psf_float4 throughput; /* xyz path throughput; w: solid-angle pdf of the last BSDF sample (0 at the camera) */
-  psf_float4 radiance;   /* xyz radiance gathered so far */
+  psf_float4 throughput; /* xyz throughput from the filtering vertex (from the camera before it); w: solid-angle pdf of the last BSDF sample */
+  psf_float4 radiance;   /* xyz radiance gathered before the filtering vertex, its own emission included */
+  psf_float4 vertex_radiance; /* xyz c: radiance scattered at the filtering vertex towards the camera */
   psf_float4 pending;    /* xyz next-event contribution awaiting its shadow ray */
-  psf_float4 prev_pos;   /* xyz position of the previous vertex (MIS of emitter hits) */
+  psf_float4 prev_pos;   /* xyz position of the previous vertex (MIS of emitter hits); w: camera path length so far */
   psf_uint pixel;        /* pixel index y * width + x */
   psf_uint sample;       /* sample index within the pixel (Sobol index) */
   psf_uint depth;        /* number of surface interactions so far */
   psf_uint flags;        /* PSF_PATH_* */
 } PathState;
+
+/* The vertex of a path that path space filtering uses (Keller et al. 2016, Sec. 2):
+ * the first sufficiently diffuse vertex x_i along the camera path. The pixel gets
+ * prefix + alpha * c, where c is replaced by its filtered mean c-bar. */
+typedef struct {
+  psf_float4 position; /* xyz x_i; w: camera path length d_i to it */
+  psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: light-sample visibility (1 visible, 0 not) */
+  psf_float4 albedo;   /* xyz the BSDF's colour term at x_i; w: 1 if the path has the vertex, else 0 */
+  psf_float4 alpha;    /* xyz throughput alpha_i from the camera to x_i */
+} PathVertex;
 
 /* Render-wide constants of one batch. */
 typedef struct {

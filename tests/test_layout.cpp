@@ -37,6 +37,11 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(PathState, prev_pos)", offsetof(PathState, prev_pos)},
       {"offsetof(PathState, pixel)", offsetof(PathState, pixel)},
       {"offsetof(PathState, flags)", offsetof(PathState, flags)},
+      {"offsetof(PathState, vertex_radiance)", offsetof(PathState, vertex_radiance)},
+      {"sizeof(PathVertex)", sizeof(PathVertex)},
+      {"offsetof(PathVertex, normal)", offsetof(PathVertex, normal)},
+      {"offsetof(PathVertex, albedo)", offsetof(PathVertex, albedo)},
+      {"offsetof(PathVertex, alpha)", offsetof(PathVertex, alpha)},
       {"sizeof(FrameParams)", sizeof(FrameParams)},
       {"offsetof(FrameParams, max_depth)", offsetof(FrameParams, max_depth)},
       {"offsetof(FrameParams, batch_size)", offsetof(FrameParams, batch_size)},
@@ -53,6 +58,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
   }
   // Every buffer struct is a multiple of 16 bytes so arrays of it stay float4-aligned.
   for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriPack), sizeof(BvhNode), sizeof(Camera),
-                   sizeof(Material), sizeof(Emitter), sizeof(PathState), sizeof(FrameParams)})
+                   sizeof(Material), sizeof(Emitter), sizeof(PathState), sizeof(PathVertex),
+                   sizeof(FrameParams)})
     CHECK(s % 16 == 0);
 }
