@@ -356,11 +356,31 @@ RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
     : rt_(rt), nodes_(rt.upload(bvh.nodes)), packs_(rt.upload(bvh.packs)), depth_(bvh.depth) {}
 
 void RayCaster::closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
-  rt_.launch("raycast_closest", count, local_size, nodes_, packs_, rays, hits, count);
+  if (masked_)
+    rt_.launch("raycast_closest_masked", count, local_size, nodes_, packs_, rays, hits, count, alpha_.tri_material,
+               alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
+  else
+    rt_.launch("raycast_closest", count, local_size, nodes_, packs_, rays, hits, count);
 }
 
 void RayCaster::any(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
-  rt_.launch("raycast_any", count, local_size, nodes_, packs_, rays, hits, count);
+  if (masked_)
+    rt_.launch("raycast_any_masked", count, local_size, nodes_, packs_, rays, hits, count, alpha_.tri_material,
+               alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
+  else
+    rt_.launch("raycast_any", count, local_size, nodes_, packs_, rays, hits, count);
+}
+
+size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked) {
+  size_t marked = 0;
+  for (BvhTriPack& p : bvh.packs)
+    for (int lane = 0; lane < PSF_BVH_WIDTH; ++lane) {
+      uint32_t prim = p.prim[lane];
+      if (prim == PSF_NO_HIT || prim >= masked.size() || !masked[prim]) continue;
+      p.prim[lane] = prim | PSF_PRIM_MASKED;
+      ++marked;
+    }
+  return marked;
 }
 
 }  // namespace psf

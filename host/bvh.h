@@ -43,10 +43,30 @@ inline uint32_t leaf_count(uint32_t child) {
 }
 inline bool is_leaf(uint32_t child) { return child != PSF_EMPTY_CHILD && (child & PSF_LEAF_BIT); }
 
+// Sets PSF_PRIM_MASKED on the pack lanes of the triangles with masked[prim] set
+// (alpha-tested triangles of mask materials); returns how many lanes it marked.
+size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked);
+
+// The scene data that alpha testing reads (kernels/raycast.cl, AlphaScene).
+struct AlphaBuffers {
+  cl::Buffer tri_material;  // material index per triangle (uint)
+  cl::Buffer materials;     // Material
+  cl::Buffer attribs;       // TriAttrib per triangle (uv)
+  cl::Buffer textures;      // TextureInfo
+  cl::Buffer texels;        // RGBA halfs
+};
+
 // The BVH on a device and the ray casting kernels over it.
 class RayCaster {
  public:
   RayCaster(Runtime& rt, const Bvh& bvh);
+
+  // From now on casts with alpha testing of masked triangles (raycast_closest_masked,
+  // raycast_any_masked); the BVH should have been marked with mark_masked.
+  void enable_alpha(const AlphaBuffers& buffers) {
+    alpha_ = buffers;
+    masked_ = true;
+  }
 
   // Closest hit of each of `count` rays (Ray) into `hits` (Hit): raycast_closest.
   void closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count);
@@ -67,6 +87,8 @@ class RayCaster {
   cl::Buffer nodes_;
   cl::Buffer packs_;
   int depth_ = 0;
+  bool masked_ = false;   // enable_alpha was called
+  AlphaBuffers alpha_;    // its buffers
 };
 
 }  // namespace psf

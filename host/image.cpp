@@ -53,12 +53,19 @@ void check_writable(const std::string& path) {
   if (access(dir.c_str(), W_OK) != 0) throw std::invalid_argument(path + ": folder " + dir.string() + " is not writable");
 }
 
-void write_exr(const std::string& path, const Image& image, const std::map<std::string, std::string>& attributes) {
+void write_exr(const std::string& path, const Image& image, const std::map<std::string, std::string>& attributes,
+               const std::vector<ExrLayer>& layers) {
   std::string tmp = temp_name(path);
   try {
     Imf::Header header(image.width, image.height);
     for (const char* c : {"R", "G", "B"}) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
     for (const auto& [k, v] : attributes) header.insert(k, Imf::StringAttribute(v));
+    for (const auto& l : layers) {
+      if (l.data.size() != size_t(image.width) * image.height * l.channels)
+        throw std::invalid_argument("layer " + l.name + " has the wrong size");
+      for (const char* c : {"R", "G", "B", "Y"})
+        if ((l.channels == 1) == (c[0] == 'Y')) header.channels().insert(l.name + "." + c, Imf::Channel(Imf::FLOAT));
+    }
     Imf::OutputFile file(tmp.c_str(), header);
     Imf::FrameBuffer fb;
     char* base = reinterpret_cast<char*>(const_cast<float*>(image.rgb.data()));
@@ -66,6 +73,17 @@ void write_exr(const std::string& path, const Image& image, const std::map<std::
     fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
     fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
     fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
+    for (const auto& l : layers) {
+      char* lb = reinterpret_cast<char*>(const_cast<float*>(l.data.data()));
+      size_t lxs = l.channels * sizeof(float), lys = lxs * image.width;
+      if (l.channels == 1) {
+        fb.insert(l.name + ".Y", Imf::Slice(Imf::FLOAT, lb, lxs, lys));
+      } else {
+        fb.insert(l.name + ".R", Imf::Slice(Imf::FLOAT, lb, lxs, lys));
+        fb.insert(l.name + ".G", Imf::Slice(Imf::FLOAT, lb + sizeof(float), lxs, lys));
+        fb.insert(l.name + ".B", Imf::Slice(Imf::FLOAT, lb + 2 * sizeof(float), lxs, lys));
+      }
+    }
     file.setFrameBuffer(fb);
     file.writePixels(image.height);
   } catch (const std::exception& e) {

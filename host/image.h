@@ -14,9 +14,17 @@ struct Image {
   std::vector<float> rgb;  // linear RGB, row-major from the top-left, 3 floats a pixel
 };
 
+// An extra EXR layer (AOV): channels "<name>.R/G/B" (3 channels) or "<name>.Y" (1).
+struct ExrLayer {
+  std::string name;         // layer name, e.g. "unfiltered"
+  int channels = 3;         // 1 or 3
+  std::vector<float> data;  // width * height * channels floats, row-major
+};
+
 // Throws std::runtime_error naming the path when the file cannot be written.
 void write_exr(const std::string& path, const Image& image,
-               const std::map<std::string, std::string>& attributes = {});
+               const std::map<std::string, std::string>& attributes = {},
+               const std::vector<ExrLayer>& layers = {});
 Image read_exr(const std::string& path);
 
 // sRGB-encoded 8-bit PNG of exposure-scaled, clamped linear RGB.

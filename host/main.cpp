@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "cl/runtime.h"
+#include "compare.h"
 #include "image.h"
 #include "render.h"
 #include "scene/scene.h"
@@ -43,7 +44,9 @@ struct RenderArgs {
   std::string scene;                   // scene file
   std::string output;                  // EXR path; PNG beside it
   std::string device;                  // --device SPEC
-  std::string filter = "off";          // --filter
+  std::string filter = "psf";          // --filter
+  std::string aov;                     // --aov list
+  psf::FilterOptions fopt;             // path space filtering parameters
   std::vector<std::string> defines;    // -D name=value
   int spp = 0;                         // 0: the scene's sample count, else 16
   int width = 0, height = 0;           // 0: the scene's film
@@ -94,6 +97,21 @@ int run_render(const RenderArgs& a) {
   opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
   opt.seed = a.seed;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
+  opt.filter = a.fopt;
+  opt.filter.enabled = a.filter == "psf";
+  bool aov_unfiltered = false, aov_neighbours = false;
+  for (size_t b = 0; b <= a.aov.size();) {
+    size_t e = a.aov.find(',', b);
+    if (e == std::string::npos) e = a.aov.size();
+    std::string name = a.aov.substr(b, e - b);
+    if (name == "unfiltered") aov_unfiltered = true;
+    else if (name == "neighbours") aov_neighbours = true;
+    else if (!name.empty()) {
+      std::cerr << "psf: --aov " << name << ": unknown layer (unfiltered, neighbours)\n";
+      return kExitBadInput;
+    }
+    b = e + 1;
+  }
 
   psf::DeviceInfo device = psf::choose_device(a.device);
   psf::Runtime rt(device);
@@ -104,13 +122,23 @@ int run_render(const RenderArgs& a) {
   psf::Renderer renderer(rt, scene);
   psf::RenderResult r = renderer.render(opt);
 
+  std::vector<psf::ExrLayer> layers;
+  if (aov_unfiltered) layers.push_back({"unfiltered", 3, r.unfiltered.rgb});
+  if (aov_neighbours) layers.push_back({"neighbours", 1, r.neighbours});
   psf::write_exr(out, r.image,
-                 {{"psf:scene", a.scene}, {"psf:spp", std::to_string(opt.spp)}, {"psf:seed", std::to_string(opt.seed)}});
+                 {{"psf:scene", a.scene},
+                  {"psf:spp", std::to_string(opt.spp)},
+                  {"psf:seed", std::to_string(opt.seed)},
+                  {"psf:filter", a.filter}},
+                 layers);
   if (!a.no_png) psf::write_png(png, r.image);
   if (!a.quiet) {
     std::cerr << "psf: " << r.paths << " paths in " << r.seconds << " s (" << r.paths / r.seconds / 1e6
               << " M paths/s), batch " << r.batch_size << "; wrote " << out << (a.no_png ? "" : " and " + png)
               << "\n";
+    if (r.filter_off_after)
+      std::cerr << "psf: path space filtering switched itself off after " << r.filter_off_after
+                << " paths: no vertex had a neighbour any more\n";
     if (r.nonfinite) std::cerr << "psf: warning: " << r.nonfinite << " paths had NaN/Inf radiance and were left out\n";
   }
   if (a.stats) {
@@ -119,6 +147,29 @@ int run_render(const RenderArgs& a) {
       std::printf("%-24s %10llu %12.3f %12.4f\n", name.c_str(), (unsigned long long)t.launches, t.ms,
                   t.ms / double(t.launches));
   }
+  return 0;
+}
+
+// `psf compare TEST REFERENCE`: relMSE (the reference box-filtered to the test's
+// size when it is an integer multiple of it) and block luminance statistics.
+int run_compare(const std::string& test_path, const std::string& ref_path, int blocks_x, int blocks_y) {
+  psf::Image test = psf::read_exr(test_path), ref = psf::read_exr(ref_path);
+  std::printf("test %s: %dx%d; reference %s: %dx%d\n", test_path.c_str(), test.width, test.height, ref_path.c_str(),
+              ref.width, ref.height);
+  psf::Image ref_at_test = ref;
+  bool same = test.width == ref.width && test.height == ref.height;
+  if (!same && ref.width % test.width == 0 && ref.height % test.height == 0 &&
+      ref.width / test.width == ref.height / test.height) {
+    ref_at_test = psf::box_downsample(ref, test.width, test.height);
+    std::printf("relMSE: %.6g (reference box-filtered %dx down to the test's size)\n", psf::rel_mse(test, ref_at_test),
+                ref.width / test.width);
+  } else if (same) {
+    std::printf("relMSE: %.6g\n", psf::rel_mse(test, ref));
+  } else {
+    std::printf("relMSE: not computed (the reference is not an integer multiple of the test's size)\n");
+  }
+  if (blocks_x <= 0 || blocks_y <= 0) psf::default_grid(ref, blocks_x, blocks_y);
+  std::printf("%s", psf::describe(psf::block_stats(test, ref, blocks_x, blocks_y)).c_str());
   return 0;
 }
 
@@ -131,9 +182,15 @@ int main(int argc, char** argv) {
 
   CLI::App* devices = app.add_subcommand("devices", "List OpenCL platforms and devices");
 
+  std::string compare_test, compare_ref, compare_grid;
+  CLI::App* compare = app.add_subcommand("compare", "Compare a render with a reference (OpenEXR): relMSE and block luminance");
+  compare->add_option("test", compare_test, "The render (.exr)")->required()->check(CLI::ExistingFile);
+  compare->add_option("reference", compare_ref, "The reference (.exr)")->required()->check(CLI::ExistingFile);
+  compare->add_option("--blocks", compare_grid, "Block grid WxH (default 16x9, or 9x16 for portrait images)");
+
   RenderArgs ra;
-  CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML or OBJ) to OpenEXR and PNG");
-  render->add_option("scene", ra.scene, "Scene file (.xml, .obj)")->required();
+  CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML, OBJ, PLY or glTF) to OpenEXR and PNG");
+  render->add_option("scene", ra.scene, "Scene file (.xml, .obj, .ply, .gltf, .glb); mesh files without emitters get a default sky")->required();
   render->add_option("-o,--output", ra.output, "Output OpenEXR file (default out/<scene>.exr); a PNG is written beside it");
   render->add_option("--spp", ra.spp, "Samples per pixel (default: the scene's, else 16)")->check(CLI::PositiveNumber);
   render->add_option("--width", ra.width, "Image width (default: the scene's film)")->check(CLI::Range(1, 65536));
@@ -142,7 +199,23 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(-1, 1 << 16));
   render->add_option("--seed", ra.seed, "Sampling seed: the image is a deterministic function of it");
   render->add_option("--device", ra.device, "Device index or name substring (default: first GPU, else CPU)");
-  render->add_option("--filter", ra.filter, "Filtering: off (plain path tracing)")->check(CLI::IsMember({"off"}));
+  render->add_option("--filter", ra.filter, "psf: path space filtering (default); off: plain path tracing")
+      ->check(CLI::IsMember({"psf", "off"}));
+  render->add_option("--alpha", ra.fopt.alpha, "Radius exponent: r(n) = r0 / n^alpha, n paths per pixel so far (0.25)")
+      ->check(CLI::Range(0.0f, 1.0f));
+  render->add_option("--r0", ra.fopt.r0, "Global initial radius in scene units (default: per vertex from --footprint-pixels)")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--footprint-pixels", ra.fopt.footprint_pixels,
+                     "r0 covers the solid angle of N x N pixels at the vertex's distance (3)")
+      ->check(CLI::Range(0.01f, 1000.0f));
+  render->add_option("--iterations", ra.fopt.iterations, "Averaging passes, each over the previous result (1)")
+      ->check(CLI::Range(1, 64));
+  render->add_option("--normal-threshold", ra.fopt.normal_cos, "Similar vertices: <n_i, n_j> >= this (0.95)")
+      ->check(CLI::Range(-1.0f, 1.0f));
+  render->add_option("--albedo-threshold", ra.fopt.albedo_tol, "Similar vertices: |albedo_i - albedo_j| <= this (0.05)")
+      ->check(CLI::NonNegativeNumber);
+  render->add_flag("--cells27", ra.fopt.cells27, "Neighbour search in cells of size r (27 cells) instead of 2r (8 cells)");
+  render->add_option("--aov", ra.aov, "Extra EXR layers, comma-separated: unfiltered, neighbours");
   render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");
   render->add_flag("--stats", ra.stats, "Print device time per kernel");
   render->add_flag("-q,--quiet", ra.quiet, "Print nothing but errors");
@@ -162,6 +235,14 @@ int main(int argc, char** argv) {
   }
   try {
     if (devices->parsed()) return run_devices();
+    if (compare->parsed()) {
+      int bx = 0, by = 0;
+      if (!compare_grid.empty() && (std::sscanf(compare_grid.c_str(), "%dx%d", &bx, &by) != 2 || bx <= 0 || by <= 0)) {
+        std::cerr << "psf: --blocks " << compare_grid << ": expected WxH, e.g. 16x9\n";
+        return kExitBadInput;
+      }
+      return run_compare(compare_test, compare_ref, bx, by);
+    }
     return run_render(ra);
   } catch (const psf::NoDeviceError& e) {
     std::cerr << "psf: " << e.what() << "\n";

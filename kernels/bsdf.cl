@@ -1,19 +1,63 @@
 /* bsdf.cl: scattering at a surface, in a local frame around the shading normal.
  *
- * Interface used by shade.cl:
- *   bsdf_sample(m, frame, wo, u1, u2, uc) -> BsdfSample {wi, weight = f |cos| / pdf, pdf, flags}
- *   bsdf_eval(m, frame, wo, wi, &pdf)    -> f (without the cosine)
- *   bsdf_albedo(m)                       -> the colour term path space filtering compares
- *   bsdf_is_diffuse(m)                   -> whether a vertex is diffuse enough to filter at
- * Directions point away from the surface. Lambertian: f = albedo / pi, sampled
- * with a cosine-weighted hemisphere (Malley's method over Shirley-Chiu's
- * concentric disk), so weight = albedo. */
+ * Interface used by shade.cl (directions point away from the surface; wo towards
+ * the previous vertex, wi the sampled or light direction; `table` is the
+ * material's tex_table row in the texel buffer, used by roughplastic only):
+ *   bsdf_sample(m, table, frame, wo, u1, u2, uc) -> BsdfSample {wi, weight = f |cos| / pdf, pdf, flags}
+ *   bsdf_eval(m, table, frame, wo, wi, &pdf)    -> f (without the cosine), pdf of bsdf_sample choosing wi
+ *   bsdf_albedo(m)                              -> the colour term path space filtering compares
+ *   bsdf_is_diffuse(m)                          -> whether a vertex is diffuse enough to filter at
+ *   bsdf_scatters(m), bsdf_transmits(m)         -> whether m reflects anything at all, can transmit
+ * (u1, u2) choose the direction, uc the lobe. The Material has its textures already
+ * applied (shade.cl). Only the side of the shading normal scatters for reflective
+ * types (Mitsuba's one-sided BSDFs; twosided flips the frame in shade.cl);
+ * dielectrics scatter on both sides, eta being interior / exterior.
+ *
+ * The models are Mitsuba 3's plugins of the same names:
+ * - diffuse: f = albedo / pi, cosine-weighted sampling (Malley's method over
+ *   Shirley-Chiu's concentric disk), so weight = albedo.
+ * - conductor: a mirror with the unpolarised Fresnel reflectance of a conductor
+ *   with complex IOR eta + i k (Born & Wolf; pbrt-v3 FrConductor) times specular.
+ * - roughconductor: the Torrance-Sparrow microfacet BRDF
+ *   f = F(wo.h) D(h) G1(wo) G1(wi) / (4 cos_o cos_i) (Walter et al. 2007, Eq. 20)
+ *   with GGX or Beckmann D (anisotropic alpha_u, alpha_v), Smith's separable
+ *   G1 (Beckmann: Walter's rational approximation, < 0.35 % error). GGX samples
+ *   the distribution of visible normals (Heitz 2018, "Sampling the GGX
+ *   Distribution of Visible Normals"); Beckmann samples D(h) cos(theta_h).
+ *   Single scattering only: energy is lost at high roughness, as in Mitsuba.
+ * - plastic: a smooth dielectric coating (eta) on a Lambertian base: specular
+ *   Fresnel reflection F(cos_o) (delta) plus the base seen through the coating,
+ *   f = albedo' (1 - F(cos_o)) (1 - F(cos_i)) / (pi eta^2) where albedo' =
+ *   albedo / (1 - F_dr,int) (or / (1 - albedo F_dr,int) with `nonlinear`)
+ *   accounts for internal reflections (Mitsuba's plastic). Lobe choice by
+ *   F(cos_o) s / ((F s) + (1 - F)(1 - s)), s = specular sampling weight.
+ * - roughplastic: the same with a microfacet coating: the specular lobe is
+ *   roughconductor's with dielectric Fresnel; the base term uses the coating's
+ *   tabulated external transmittance T(cos) = 1 - (directional albedo of the
+ *   microfacet reflection) and its internal reflectance (Mitsuba 3's
+ *   roughplastic; the host computes them, host/scene/materials.cpp).
+ * - dielectric: Fresnel reflection or refraction (Snell), chosen with
+ *   probability F; refraction scales radiance by (eta_i / eta_t)^2 (Veach 1997,
+ *   Sec. 5.2; Mitsuba's TransportMode::Radiance).
+ * - roughdielectric: Walter et al. 2007, Eq. 20 (reflection) and Eq. 21
+ *   (refraction, with the same radiance scaling), the normal sampled as above
+ *   for the side of wo, reflection chosen with probability F(wo.h).
+ * - thindielectric: a thin sheet: reflection R = F + T^2 F / (1 - F^2) from the
+ *   inter-reflections inside it (T = 1 - F), transmission straight through with
+ *   1 - R (Mitsuba's thindielectric). */
 
 #define PSF_PI 3.14159265358979323846f
 #define PSF_INV_PI 0.31830988618379067154f
 
 #define BSDF_DELTA 1u        /* the sampled lobe is a Dirac delta: pdf is not comparable */
 #define BSDF_TRANSMISSION 2u /* wi is on the other side of the surface */
+
+/* The filtering vertex rule (bsdf_is_diffuse): microfacet lobes count as diffuse
+ * above this roughness sqrt(alpha_u alpha_v) ... */
+#define PSF_DIFFUSE_ALPHA 0.3f
+/* ... and plastics when the base reflects at least this many times as much as
+ * the coating under uniform illumination (80 % of the reflected light). */
+#define PSF_PLASTIC_DIFFUSE_RATIO 4.0f
 
 /* An orthonormal frame: s, t tangents and n the shading normal. */
 typedef struct {
@@ -41,6 +85,19 @@ inline Frame frame_from_normal(float3 n) {
   return f;
 }
 
+/* Frame around unit n whose s is the tangent `dpdu` projected into the tangent
+ * plane (Mitsuba's shading frame: anisotropic roughness follows dp/du). */
+inline Frame frame_from_normal_tangent(float3 n, float3 dpdu) {
+  float3 s = dpdu - n * dot(n, dpdu);
+  float len = length(s);
+  if (!(len > 1e-20f)) return frame_from_normal(n);
+  Frame f;
+  f.n = n;
+  f.s = s / len;
+  f.t = cross(n, f.s);
+  return f;
+}
+
 inline float3 frame_to_local(Frame f, float3 v) { return (float3)(dot(v, f.s), dot(v, f.t), dot(v, f.n)); }
 inline float3 frame_to_world(Frame f, float3 v) { return v.x * f.s + v.y * f.t + v.z * f.n; }
 
@@ -65,21 +122,372 @@ inline float3 square_to_cosine_hemisphere(float u1, float u2) {
   return (float3)(d.x, d.y, sqrt(fmax(0.0f, 1.0f - d.x * d.x - d.y * d.y)));
 }
 
-inline float3 bsdf_albedo(Material m) { return m.albedo.xyz; }
+inline float bsdf_mean3(float3 v) { return (v.x + v.y + v.z) * (1.0f / 3.0f); }
 
-inline bool bsdf_is_diffuse(Material m) { return m.type == PSF_MATERIAL_DIFFUSE; }
+/* --- Fresnel ------------------------------------------------------------- */
 
-inline float3 bsdf_eval(Material m, Frame f, float3 wo, float3 wi, float* pdf) {
-  float cos_o = dot(wo, f.n), cos_i = dot(wi, f.n);
-  if (cos_o <= 0.0f || cos_i <= 0.0f) {
-    *pdf = 0.0f;
-    return (float3)(0.0f);
+/* Unpolarised Fresnel reflectance of a dielectric interface, eta = interior /
+ * exterior IOR, for a direction with cosine cos_i to the normal (negative: it lies
+ * inside). *cos_t gets the cosine of the refracted direction (sign opposite to
+ * cos_i; 0 on total internal reflection), *eta_ti the IOR ratio of the
+ * direction's side over the other side (refraction scales tangential components
+ * by it). */
+inline float fresnel_dielectric(float cos_i, float eta, float* cos_t, float* eta_ti) {
+  float n = cos_i >= 0.0f ? eta : 1.0f / eta; /* transmitted over incident IOR */
+  float ci = fabs(cos_i);
+  float ct2 = 1.0f - (1.0f - ci * ci) / (n * n);
+  *eta_ti = 1.0f / n;
+  if (ct2 <= 0.0f) {
+    *cos_t = 0.0f;
+    return 1.0f;
   }
-  *pdf = cos_i * PSF_INV_PI;
-  return m.albedo.xyz * PSF_INV_PI;
+  float ct = sqrt(ct2);
+  *cos_t = cos_i >= 0.0f ? -ct : ct;
+  float rs = (ci - n * ct) / (ci + n * ct);
+  float rp = (n * ci - ct) / (n * ci + ct);
+  return 0.5f * (rs * rs + rp * rp);
 }
 
-inline BsdfSample bsdf_sample(Material m, Frame f, float3 wo, float u1, float u2, float uc) {
+/* Unpolarised Fresnel reflectance of a conductor with relative complex IOR
+ * eta + i k, for 0 <= cos_i <= 1. */
+inline float3 fresnel_conductor(float cos_i, float3 eta, float3 k) {
+  float c2 = cos_i * cos_i, s2 = 1.0f - c2, s4 = s2 * s2;
+  float3 t1 = eta * eta - k * k - s2;
+  float3 a2b2 = sqrt(t1 * t1 + 4.0f * k * k * eta * eta);
+  float3 a = sqrt(fmax(0.5f * (a2b2 + t1), 0.0f));
+  float3 term1 = a2b2 + c2, term2 = 2.0f * cos_i * a;
+  float3 rs = (term1 - term2) / (term1 + term2);
+  float3 term3 = a2b2 * c2 + s4, term4 = term2 * s2;
+  float3 rp = rs * (term3 - term4) / (term3 + term4);
+  return 0.5f * (rs + rp);
+}
+
+/* --- Microfacet distributions ------------------------------------------- */
+
+/* D(m): GGX (Trowbridge-Reitz) or Beckmann, anisotropic (Walter et al. 2007). */
+inline float mf_D(float3 m, float au, float av, bool beckmann) {
+  float ct = m.z;
+  if (ct <= 0.0f) return 0.0f;
+  float x = m.x / au, y = m.y / av, ct2 = ct * ct, r;
+  if (beckmann) {
+    r = exp(-(x * x + y * y) / ct2) / (PSF_PI * au * av * ct2 * ct2);
+  } else {
+    float d = x * x + y * y + ct2;
+    r = 1.0f / (PSF_PI * au * av * d * d);
+  }
+  return r * ct > 1e-20f ? r : 0.0f;
+}
+
+/* Smith's G1(v, m), 0 where v sees the back of m. */
+inline float mf_G1(float3 v, float3 m, float au, float av, bool beckmann) {
+  if (dot(v, m) * v.z <= 0.0f) return 0.0f;
+  float xy = au * au * v.x * v.x + av * av * v.y * v.y;
+  if (xy == 0.0f) return 1.0f;
+  float t2 = xy / (v.z * v.z);
+  if (beckmann) {
+    float a = rsqrt(t2);
+    return a >= 1.6f ? 1.0f : (3.535f * a + 2.181f * a * a) / (1.0f + 2.276f * a + 2.577f * a * a);
+  }
+  return 2.0f / (1.0f + sqrt(1.0f + t2));
+}
+
+/* A microfacet normal for direction v (v.z > 0): GGX's visible normals, Beckmann's D(m) cos(theta_m). */
+inline float3 mf_sample(float3 v, float au, float av, bool beckmann, float u1, float u2) {
+  if (beckmann) {
+    float phi = 2.0f * PSF_PI * u2;
+    float sp = sin(phi), cp = cos(phi);
+    if (au != av) {
+      float a = atan2(av * sp, au * cp);
+      sp = sin(a);
+      cp = cos(a);
+    }
+    float inv_a2 = cp * cp / (au * au) + sp * sp / (av * av);
+    float tan2 = -log(1.0f - u1) / inv_a2;
+    float ct = rsqrt(1.0f + tan2), st = sqrt(fmax(0.0f, 1.0f - ct * ct));
+    return (float3)(st * cp, st * sp, ct);
+  }
+  float3 vh = normalize((float3)(au * v.x, av * v.y, v.z));
+  float lensq = vh.x * vh.x + vh.y * vh.y;
+  float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
+  float3 t2 = cross(vh, t1);
+  float r = sqrt(u1), phi = 2.0f * PSF_PI * u2;
+  float p1 = r * cos(phi), p2 = r * sin(phi);
+  float s = 0.5f * (1.0f + vh.z);
+  p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * p2;
+  float3 nh = p1 * t1 + p2 * t2 + sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;
+  return normalize((float3)(au * nh.x, av * nh.y, fmax(1e-6f, nh.z)));
+}
+
+/* The density of mf_sample's normal m for direction v (v.z > 0). */
+inline float mf_pdf(float3 v, float3 m, float au, float av, bool beckmann) {
+  float d = mf_D(m, au, av, beckmann);
+  if (beckmann) return d * m.z;
+  return d * mf_G1(v, m, au, av, beckmann) * fabs(dot(v, m)) / v.z;
+}
+
+/* --- Material queries ----------------------------------------------------- */
+
+inline bool bsdf_transmits(Material m) {
+  return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+         m.type == PSF_MATERIAL_THIN_DIELECTRIC;
+}
+
+/* Whether bsdf_sample reads uc (a choice between lobes). */
+inline bool bsdf_chooses_lobe(Material m) {
+  return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC || bsdf_transmits(m);
+}
+
+inline bool bsdf_is_plastic(Material m) {
+  return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC;
+}
+
+/* Whether anything is reflected or transmitted at all. */
+inline bool bsdf_scatters(Material m) {
+  float s = fmax(max(m.specular.x, max(m.specular.y, m.specular.z)),
+                 max(m.transmittance.x, max(m.transmittance.y, m.transmittance.z)));
+  float d = max(m.albedo.x, max(m.albedo.y, m.albedo.z));
+  if (m.type == PSF_MATERIAL_DIFFUSE) return d > 0.0f;
+  if (bsdf_is_plastic(m)) return fmax(d, s) > 0.0f;
+  return s > 0.0f;
+}
+
+/* The colour term compared by path space filtering: the (textured) diffuse
+ * reflectance of diffuse and plastic materials, a conductor's reflectance at
+ * normal incidence, a dielectric's specular transmittance. */
+inline float3 bsdf_albedo(Material m) {
+  if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m)) return m.albedo.xyz;
+  if (m.type == PSF_MATERIAL_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_CONDUCTOR)
+    return m.specular.xyz * fresnel_conductor(1.0f, m.eta.xyz, m.k.xyz);
+  return m.transmittance.xyz;
+}
+
+/* Whether a vertex with this material is diffuse enough to be the filtering
+ * vertex: diffuse always; rough conductors and dielectrics when their roughness
+ * sqrt(alpha_u alpha_v) exceeds PSF_DIFFUSE_ALPHA; plastics when that holds or
+ * when the base dominates the coating, mean(albedo) (1 - F_ext) >=
+ * PSF_PLASTIC_DIFFUSE_RATIO mean(specular) F_ext (F_ext, in eta.w: the coating's
+ * reflectance under uniform illumination); smooth conductors and dielectrics,
+ * thin dielectrics: never. */
+inline bool bsdf_is_diffuse(Material m) {
+  if (m.type == PSF_MATERIAL_DIFFUSE) return true;
+  bool rough = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+               m.type == PSF_MATERIAL_ROUGH_PLASTIC;
+  if (rough && m.alpha_u * m.alpha_v > PSF_DIFFUSE_ALPHA * PSF_DIFFUSE_ALPHA) return true;
+  if (bsdf_is_plastic(m))
+    return bsdf_mean3(m.albedo.xyz) * (1.0f - m.eta.w) >=
+           PSF_PLASTIC_DIFFUSE_RATIO * bsdf_mean3(m.specular.xyz) * m.eta.w;
+  return false;
+}
+
+/* --- Evaluation ------------------------------------------------------------ */
+
+/* A plastic's base reflectance divided by the internal reflections' loss. */
+inline float3 plastic_base(Material m) {
+  float3 d = m.albedo.xyz;
+  return (m.flags & PSF_MATFLAG_NONLINEAR) ? d / (1.0f - d * m.eta.z) : d / (1.0f - m.eta.z);
+}
+
+/* Probability of choosing a plastic's coating lobe, given the coating's
+ * reflectance r (F(cos_o) smooth, 1 - T(cos_o) rough) at wo. */
+inline float plastic_prob_specular(Material m, float r) {
+  float ps = r * m.albedo.w, pd = (1.0f - r) * (1.0f - m.albedo.w);
+  return ps + pd > 0.0f ? ps / (ps + pd) : 0.0f;
+}
+
+/* f and pdf in the local frame (o = wo, i = wi). Delta lobes contribute nothing. */
+inline float3 bsdf_eval_local(Material m, __global const half* table, float3 o, float3 i, float* pdf) {
+  *pdf = 0.0f;
+  uint type = m.type;
+  bool beckmann = (m.flags & PSF_MATFLAG_BECKMANN) != 0u;
+  float au = m.alpha_u, av = m.alpha_v;
+  if (type == PSF_MATERIAL_DIFFUSE) {
+    if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
+    *pdf = i.z * PSF_INV_PI;
+    return m.albedo.xyz * PSF_INV_PI;
+  }
+  if (type == PSF_MATERIAL_ROUGH_CONDUCTOR) {
+    if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
+    float3 h = normalize(o + i);
+    float oh = dot(o, h);
+    float d = mf_D(h, au, av, beckmann);
+    float g = mf_G1(o, h, au, av, beckmann) * mf_G1(i, h, au, av, beckmann);
+    *pdf = mf_pdf(o, h, au, av, beckmann) / (4.0f * oh);
+    return m.specular.xyz * fresnel_conductor(oh, m.eta.xyz, m.k.xyz) * (d * g / (4.0f * o.z * i.z));
+  }
+  if (type == PSF_MATERIAL_PLASTIC) {
+    if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
+    float c, e;
+    float fo = fresnel_dielectric(o.z, m.eta.x, &c, &e), fi = fresnel_dielectric(i.z, m.eta.x, &c, &e);
+    *pdf = (1.0f - plastic_prob_specular(m, fo)) * i.z * PSF_INV_PI;
+    return plastic_base(m) * (m.eta.y * (1.0f - fo) * (1.0f - fi) * PSF_INV_PI);
+  }
+  if (type == PSF_MATERIAL_ROUGH_PLASTIC) {
+    if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
+    float to = table_lookup(table, o.z), ti = table_lookup(table, i.z);
+    float ps = plastic_prob_specular(m, 1.0f - to);
+    float3 h = normalize(o + i);
+    float oh = dot(o, h);
+    float c, e;
+    float fr = fresnel_dielectric(oh, m.eta.x, &c, &e);
+    float d = mf_D(h, au, av, beckmann);
+    float g = mf_G1(o, h, au, av, beckmann) * mf_G1(i, h, au, av, beckmann);
+    *pdf = ps * mf_pdf(o, h, au, av, beckmann) / (4.0f * oh) + (1.0f - ps) * i.z * PSF_INV_PI;
+    return m.specular.xyz * (fr * d * g / (4.0f * o.z * i.z)) +
+           plastic_base(m) * (m.eta.y * to * ti * PSF_INV_PI);
+  }
+  if (type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
+    float co = o.z, ci = i.z;
+    if (co == 0.0f || ci == 0.0f) return (float3)(0.0f);
+    bool reflect = co * ci > 0.0f;
+    float eta = co > 0.0f ? m.eta.x : 1.0f / m.eta.x; /* IOR of i's side over o's side */
+    float3 h = normalize(o + i * (reflect ? 1.0f : eta));
+    if (h.z < 0.0f) h = -h;
+    float oh = dot(o, h), ih = dot(i, h);
+    /* Neither direction may see the back of the microfacet (else no path through it). */
+    if (oh * co <= 0.0f || ih * ci <= 0.0f) return (float3)(0.0f);
+    float c, e;
+    float fr = fresnel_dielectric(oh, m.eta.x, &c, &e);
+    float d = mf_D(h, au, av, beckmann);
+    float g = mf_G1(o, h, au, av, beckmann) * mf_G1(i, h, au, av, beckmann);
+    float3 of = co > 0.0f ? o : -o; /* o on the side of the sampled normals */
+    float pm = mf_pdf(of, h, au, av, beckmann);
+    if (reflect) {
+      *pdf = pm * fr / (4.0f * fabs(ih));
+      return m.specular.xyz * (fr * d * g / (4.0f * fabs(co * ci)));
+    }
+    float denom = oh + eta * ih;
+    float jac = eta * eta * fabs(ih) / (denom * denom); /* |d h / d i| (Walter et al. Eq. 17) */
+    *pdf = pm * (1.0f - fr) * jac;
+    /* Eq. 21 with radiance scaling 1 / eta^2: the eta^2 factors cancel. */
+    return m.transmittance.xyz * fabs((1.0f - fr) * d * g * oh * ih / (co * ci * denom * denom));
+  }
+  return (float3)(0.0f); /* delta types */
+}
+
+inline float3 bsdf_eval(Material m, __global const half* table, Frame f, float3 wo, float3 wi, float* pdf) {
+  if (m.type == PSF_MATERIAL_DIFFUSE) { /* the common case, without the local frame */
+    float cos_o = dot(wo, f.n), cos_i = dot(wi, f.n);
+    if (cos_o <= 0.0f || cos_i <= 0.0f) {
+      *pdf = 0.0f;
+      return (float3)(0.0f);
+    }
+    *pdf = cos_i * PSF_INV_PI;
+    return m.albedo.xyz * PSF_INV_PI;
+  }
+  return bsdf_eval_local(m, table, frame_to_local(f, wo), frame_to_local(f, wi), pdf);
+}
+
+/* --- Sampling -------------------------------------------------------------- */
+
+/* A sample of a non-delta lobe: weight and pdf from bsdf_eval_local, so that
+ * sampling and evaluation agree by construction. */
+inline BsdfSample bsdf_finish(Material m, __global const half* table, Frame f, float3 o, float3 i) {
+  BsdfSample bs;
+  bs.wi = frame_to_world(f, i);
+  bs.flags = o.z * i.z < 0.0f ? BSDF_TRANSMISSION : 0u;
+  float pdf;
+  float3 v = bsdf_eval_local(m, table, o, i, &pdf);
+  bs.pdf = pdf > 0.0f ? pdf : 0.0f;
+  bs.weight = pdf > 0.0f ? v * (fabs(i.z) / pdf) : (float3)(0.0f);
+  return bs;
+}
+
+inline BsdfSample bsdf_delta(Frame f, float3 i, float3 weight, uint flags) {
+  BsdfSample bs;
+  bs.wi = frame_to_world(f, i);
+  bs.weight = weight;
+  bs.pdf = 0.0f;
+  bs.flags = BSDF_DELTA | flags;
+  return bs;
+}
+
+inline BsdfSample bsdf_fail(float3 wo) {
+  BsdfSample bs;
+  bs.wi = wo;
+  bs.weight = (float3)(0.0f);
+  bs.pdf = 0.0f;
+  bs.flags = 0u;
+  return bs;
+}
+
+/* bsdf_sample of the types other than diffuse. */
+inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Frame f, float3 wo, float u1, float u2,
+                                      float uc) {
+  uint type = m.type;
+  float3 o = frame_to_local(f, wo);
+  bool beckmann = (m.flags & PSF_MATFLAG_BECKMANN) != 0u;
+  float au = m.alpha_u, av = m.alpha_v;
+  float3 mirror = (float3)(-o.x, -o.y, o.z);
+  if (type == PSF_MATERIAL_CONDUCTOR) {
+    if (o.z <= 0.0f) return bsdf_fail(wo);
+    return bsdf_delta(f, mirror, m.specular.xyz * fresnel_conductor(o.z, m.eta.xyz, m.k.xyz), 0u);
+  }
+  if (type == PSF_MATERIAL_ROUGH_CONDUCTOR) {
+    if (o.z <= 0.0f) return bsdf_fail(wo);
+    float3 h = mf_sample(o, au, av, beckmann, u1, u2);
+    float3 i = 2.0f * dot(o, h) * h - o;
+    if (i.z <= 0.0f) return bsdf_fail(wo);
+    return bsdf_finish(m, table, f, o, i);
+  }
+  if (type == PSF_MATERIAL_PLASTIC) {
+    if (o.z <= 0.0f) return bsdf_fail(wo);
+    float c, e;
+    float fo = fresnel_dielectric(o.z, m.eta.x, &c, &e);
+    float ps = plastic_prob_specular(m, fo);
+    if (uc < ps) return bsdf_delta(f, mirror, m.specular.xyz * (fo / ps), 0u);
+    return bsdf_finish(m, table, f, o, square_to_cosine_hemisphere(u1, u2));
+  }
+  if (type == PSF_MATERIAL_ROUGH_PLASTIC) {
+    if (o.z <= 0.0f) return bsdf_fail(wo);
+    float ps = plastic_prob_specular(m, 1.0f - table_lookup(table, o.z));
+    float3 i;
+    if (uc < ps) {
+      float3 h = mf_sample(o, au, av, beckmann, u1, u2);
+      i = 2.0f * dot(o, h) * h - o;
+      if (i.z <= 0.0f) return bsdf_fail(wo);
+    } else {
+      i = square_to_cosine_hemisphere(u1, u2);
+    }
+    return bsdf_finish(m, table, f, o, i);
+  }
+  if (type == PSF_MATERIAL_DIELECTRIC) {
+    float cos_t, eta_ti;
+    float fr = fresnel_dielectric(o.z, m.eta.x, &cos_t, &eta_ti);
+    if (uc < fr) return bsdf_delta(f, mirror, m.specular.xyz, 0u);
+    float3 i = (float3)(-eta_ti * o.x, -eta_ti * o.y, cos_t);
+    return bsdf_delta(f, i, m.transmittance.xyz * (eta_ti * eta_ti), BSDF_TRANSMISSION);
+  }
+  if (type == PSF_MATERIAL_THIN_DIELECTRIC) {
+    float cos_t, eta_ti;
+    float r = fresnel_dielectric(fabs(o.z), m.eta.x, &cos_t, &eta_ti);
+    if (r < 1.0f) r += (1.0f - r) * (1.0f - r) * r / (1.0f - r * r);
+    if (uc < r) return bsdf_delta(f, mirror, m.specular.xyz, 0u);
+    return bsdf_delta(f, -o, m.transmittance.xyz, BSDF_TRANSMISSION);
+  }
+  if (type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
+    if (o.z == 0.0f) return bsdf_fail(wo);
+    float3 of = o.z > 0.0f ? o : -o;
+    float3 h = mf_sample(of, au, av, beckmann, u1, u2);
+    float oh = dot(o, h);
+    float cos_t, eta_ti;
+    float fr = fresnel_dielectric(oh, m.eta.x, &cos_t, &eta_ti);
+    float3 i;
+    if (uc < fr) {
+      i = 2.0f * oh * h - o;
+      if (i.z * o.z <= 0.0f) return bsdf_fail(wo);
+    } else {
+      i = h * (oh * eta_ti + cos_t) - o * eta_ti;
+      if (i.z * o.z >= 0.0f) return bsdf_fail(wo);
+    }
+    return bsdf_finish(m, table, f, o, i);
+  }
+  return bsdf_fail(wo);
+}
+
+/* Diffuse inline (the common case, no call), the other types in bsdf_sample_general. */
+inline BsdfSample bsdf_sample(Material m, __global const half* table, Frame f, float3 wo, float u1, float u2,
+                              float uc) {
+  if (m.type != PSF_MATERIAL_DIFFUSE) return bsdf_sample_general(m, table, f, wo, u1, u2, uc);
   BsdfSample bs;
   bs.flags = 0u;
   float3 wl = square_to_cosine_hemisphere(u1, u2);

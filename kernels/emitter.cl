@@ -1,19 +1,41 @@
-/* emitter.cl: light sampling for next-event estimation.
+/* emitter.cl: light sampling for next-event estimation and the environment seen
+ * by escaped rays.
  *
- * Emitters are the triangles of emissive materials (area lights), chosen in
- * proportion to their power (host/render.cpp builds the table and its cdf) and
- * sampled uniformly by area (Turk 1990: b1 = sqrt(u) (1 - v), b2 = sqrt(u) v).
- *   emitter_sample(...)   -> LightSample {wi, dist, radiance, pdf (solid angle)}
- *   emitter_pdf_hit(...)  -> solid-angle pdf of hitting an emitter triangle by chance (for MIS) */
+ * Reads: the emitter table (psf_shared.h Emitter; host/lights.cpp builds it and
+ * its selection cdf, in proportion to each light's power), the Environment and
+ * its data buffer (texels, marginal and conditional cdfs).
+ *   emitter_sample(...)  -> LightSample {wi, dist, radiance, pdf, delta}: one light
+ *                           chosen by the cdf, then a point or direction on it
+ *   emitter_pdf_hit(...) -> solid-angle pdf of hitting an emitter triangle by chance (for MIS)
+ *   env_radiance(...)    -> radiance of the environment along a world direction
+ *   env_pdf(...)         -> solid-angle pdf of env_sample for that direction
+ * Light types and their samples:
+ *   triangle:    uniform by area (Turk 1990: b1 = sqrt(u) (1 - v), b2 = sqrt(u) v);
+ *                pdf = P(light) / area * r^2 / cos_l
+ *   point:       delta; radiance I / r^2, pdf = P(light)
+ *   spot:        delta; I / r^2 times Mitsuba's falloff: 1 inside the beam width,
+ *                (cutoff - angle) / (cutoff - beam width) up to the cutoff, 0 beyond
+ *   directional: delta; wi = -direction, radiance the irradiance E, pdf = P(light)
+ *   environment: a lat-long map sampled with a 2D piecewise-constant distribution
+ *                (Pharr, Jakob & Humphreys, PBRT 3rd ed., Sec. 13.6.7 and 14.2.4):
+ *                a row from the marginal cdf of sum_x L(x, y) sin(theta_y), a
+ *                texel from that row's conditional cdf, a uniform point in the
+ *                texel; pdf(omega) = p(u, v) / (2 pi^2 sin theta). A constant
+ *                environment is sampled uniformly over the sphere (1 / 4pi).
+ * Delta lights carry delta = 1: they cannot be hit by BSDF sampling, so their
+ * samples take MIS weight 1. Directions at infinity have dist = INFINITY. */
+
+#define PSF_ENV_PI 3.14159265358979323846f
 
 typedef struct {
-  float3 wi;       /* unit direction from the shading point to the light point */
-  float dist;      /* distance to the light point */
-  float3 radiance; /* emitted radiance towards the shading point */
-  float pdf;       /* solid-angle pdf of this sample (0: no contribution) */
+  float3 wi;       /* unit direction from the shading point to the light */
+  float dist;      /* distance to the light point (INFINITY: directional, environment) */
+  float3 radiance; /* radiance arriving at the shading point (point, spot: I / r^2; directional: E) */
+  float pdf;       /* solid-angle pdf of this sample, or the selection probability of a delta light (0: none) */
+  uint delta;      /* 1: a delta light (no MIS) */
 } LightSample;
 
-/* Index of the first cdf entry > u. */
+/* Index of the first of n cdf entries > u (the last entry is 1). */
 inline uint sample_cdf(__global const float* cdf, uint n, float u) {
   uint lo = 0u, hi = n - 1u;
   while (lo < hi) {
@@ -24,15 +46,145 @@ inline uint sample_cdf(__global const float* cdf, uint n, float u) {
   return lo;
 }
 
-inline LightSample emitter_sample(__global const Emitter* emitters, __global const float* cdf, uint count, float3 p,
-                                  float ul, float ua, float ub) {
+/* --- the environment -------------------------------------------------------- */
+
+/* World direction to the map's frame. */
+inline float3 env_to_map(Environment env, float3 d) {
+  return (float3)(dot(env.to_map0.xyz, d), dot(env.to_map1.xyz, d), dot(env.to_map2.xyz, d));
+}
+
+/* Map frame to world: the transpose of the rotation. */
+inline float3 env_to_world(Environment env, float3 m) {
+  return m.x * env.to_map0.xyz + m.y * env.to_map1.xyz + m.z * env.to_map2.xyz;
+}
+
+/* Texel (x, y) holding the unit map-frame direction m. */
+inline uint2 env_texel(Environment env, float3 m) {
+  float u = atan2(m.x, -m.z) * (0.5f / PSF_ENV_PI);
+  if (u < 0.0f) u += 1.0f;
+  float v = acos(clamp(m.y, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI);
+  uint x = min((uint)(u * (float)env.width), env.width - 1u);
+  uint y = min((uint)(v * (float)env.height), env.height - 1u);
+  return (uint2)(x, y);
+}
+
+inline float3 env_texel_value(Environment env, __global const float* data, uint2 t) {
+  size_t i = 3u * ((size_t)t.y * env.width + t.x);
+  return (float3)(data[i], data[i + 1u], data[i + 2u]);
+}
+
+/* Offsets of the marginal cdf and of row y's conditional cdf in the data buffer. */
+inline size_t env_marginal_offset(Environment env) { return 3u * (size_t)env.width * env.height; }
+inline size_t env_conditional_offset(Environment env, uint y) {
+  return env_marginal_offset(env) + env.height + 1u + (size_t)y * (env.width + 1u);
+}
+
+/* Radiance arriving from world direction d (unit) from infinitely far away. */
+inline float3 env_radiance(Environment env, __global const float* data, float3 d) {
+  if (!env.present) return (float3)(0.0f);
+  if (env.width == 0u) return env.scale.xyz;
+  return env_texel_value(env, data, env_texel(env, env_to_map(env, d))) * env.scale.xyz;
+}
+
+/* Solid-angle pdf with which env_sample returns world direction d (unit). */
+inline float env_pdf(Environment env, __global const float* data, float3 d) {
+  if (!env.present) return 0.0f;
+  if (env.width == 0u) return 1.0f / (4.0f * PSF_ENV_PI);
+  float3 m = env_to_map(env, d);
+  float sin_theta = sqrt(fmax(m.x * m.x + m.z * m.z, 0.0f));
+  if (!(sin_theta > 0.0f)) return 0.0f;
+  uint2 t = env_texel(env, m);
+  __global const float* marginal = data + env_marginal_offset(env);
+  __global const float* row = data + env_conditional_offset(env, t.y);
+  float p_uv = (marginal[t.y + 1u] - marginal[t.y]) * (float)env.height * (row[t.x + 1u] - row[t.x]) * (float)env.width;
+  return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
+}
+
+/* A world direction from the environment's distribution; *pdf its solid-angle pdf. */
+inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf) {
+  if (env.width == 0u) {
+    /* Uniform over the sphere. */
+    float z = 1.0f - 2.0f * u1;
+    float r = sqrt(fmax(0.0f, 1.0f - z * z));
+    float phi = 2.0f * PSF_ENV_PI * u2;
+    *pdf = 1.0f / (4.0f * PSF_ENV_PI);
+    return (float3)(r * cos(phi), r * sin(phi), z);
+  }
+  __global const float* marginal = data + env_marginal_offset(env);
+  uint y = sample_cdf(marginal + 1, env.height, u2);
+  float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
+  __global const float* row = data + env_conditional_offset(env, y);
+  uint x = sample_cdf(row + 1, env.width, u1);
+  float col_lo = row[x], col_p = row[x + 1u] - col_lo;
+  if (!(row_p > 0.0f) || !(col_p > 0.0f)) {
+    *pdf = 0.0f;
+    return (float3)(0.0f, 1.0f, 0.0f);
+  }
+  /* A uniform point inside the texel, by the remainder of the uniform numbers. */
+  float fv = clamp((u2 - row_lo) / row_p, 0.0f, 1.0f);
+  float fu = clamp((u1 - col_lo) / col_p, 0.0f, 1.0f);
+  float v = ((float)y + fv) / (float)env.height;
+  float u = ((float)x + fu) / (float)env.width;
+  float theta = v * PSF_ENV_PI, phi = u * 2.0f * PSF_ENV_PI;
+  float sin_theta = sin(theta);
+  float3 m = (float3)(sin(phi) * sin_theta, cos(theta), -cos(phi) * sin_theta);
+  *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
+                          : 0.0f;
+  return env_to_world(env, m);
+}
+
+/* --- next-event estimation ------------------------------------------------------ */
+
+/* Mitsuba's spot falloff for cos_a = cos of the angle between the axis and the direction. */
+inline float spot_falloff(Emitter em, float cos_a) {
+  if (cos_a <= em.e1.w) return 0.0f;
+  if (cos_a >= em.e2.w) return 1.0f;
+  return clamp((em.e2.x - acos(clamp(cos_a, -1.0f, 1.0f))) * em.e2.y, 0.0f, 1.0f);
+}
+
+/* One light chosen by `ul` from the table and a point (ua, ub) on it, seen from p. */
+inline LightSample emitter_sample(__global const Emitter* emitters, __global const float* cdf, uint count, Environment env,
+                                  __global const float* env_data, float3 p, float ul, float ua, float ub) {
   LightSample ls;
   ls.pdf = 0.0f;
   ls.radiance = (float3)(0.0f);
   ls.wi = (float3)(0.0f, 0.0f, 1.0f);
   ls.dist = 0.0f;
+  ls.delta = 0u;
   if (count == 0u) return ls;
   Emitter em = emitters[sample_cdf(cdf, count, ul)];
+  float select = em.radiance.w;
+  if (em.type == PSF_EMITTER_ENVIRONMENT) {
+    float pdf;
+    float3 wi = env_sample(env, env_data, ua, ub, &pdf);
+    if (!(pdf > 0.0f)) return ls;
+    ls.wi = wi;
+    ls.dist = INFINITY;
+    ls.radiance = env_radiance(env, env_data, wi);
+    ls.pdf = select * pdf;
+    return ls;
+  }
+  if (em.type == PSF_EMITTER_DIRECTIONAL) {
+    ls.wi = -em.e1.xyz;
+    ls.dist = INFINITY;
+    ls.radiance = em.radiance.xyz;
+    ls.pdf = select;
+    ls.delta = 1u;
+    return ls;
+  }
+  if (em.type == PSF_EMITTER_POINT || em.type == PSF_EMITTER_SPOT) {
+    float3 d = em.v0.xyz - p;
+    float d2 = dot(d, d);
+    if (!(d2 > 0.0f)) return ls;
+    ls.dist = sqrt(d2);
+    ls.wi = d / ls.dist;
+    float falloff = em.type == PSF_EMITTER_SPOT ? spot_falloff(em, -dot(ls.wi, em.e1.xyz)) : 1.0f;
+    if (!(falloff > 0.0f)) return ls;
+    ls.radiance = em.radiance.xyz * (falloff / d2);
+    ls.pdf = select;
+    ls.delta = 1u;
+    return ls;
+  }
   float su = sqrt(ua);
   float3 lp = em.v0.xyz + su * (1.0f - ub) * em.e1.xyz + su * ub * em.e2.xyz;
   float3 ln = normalize(cross(em.e1.xyz, em.e2.xyz));
@@ -44,7 +196,7 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
   float cos_l = -dot(ln, ls.wi);
   if (em.two_sided) cos_l = fabs(cos_l);
   if (cos_l <= 0.0f) return ls;
-  ls.pdf = em.radiance.w / em.v0.w * d2 / cos_l;
+  ls.pdf = select / em.v0.w * d2 / cos_l;
   ls.radiance = em.radiance.xyz;
   return ls;
 }
@@ -53,4 +205,29 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
  * distance `dist` on triangle `prim` with cosine `cos_l` to its normal. */
 inline float emitter_pdf_hit(__global const float* tri_light_pdf, uint prim, float dist, float cos_l) {
   return cos_l > 0.0f ? tri_light_pdf[prim] * dist * dist / cos_l : 0.0f;
+}
+
+/* --- test hooks ------------------------------------------------------------------- */
+
+/* Light samples seen from point p for count triples of uniform numbers u[i].xyz
+ * (light choice, two for the point): out[3i] = (wi, pdf), out[3i+1] = (radiance,
+ * dist), out[3i+2] = (delta, 0, 0, 0). Used by tests/test_emitter.cpp. */
+__kernel void light_sample_points(uint count, __global const Emitter* emitters, __global const float* cdf, uint num_emitters,
+                                  Environment env, __global const float* env_data, float4 p, __global const float4* u,
+                                  __global float4* out) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  LightSample ls = emitter_sample(emitters, cdf, num_emitters, env, env_data, p.xyz, u[i].x, u[i].y, u[i].z);
+  out[3u * i] = (float4)(ls.wi, ls.pdf);
+  out[3u * i + 1u] = (float4)(ls.radiance, ls.dist);
+  out[3u * i + 2u] = (float4)((float)ls.delta, 0.0f, 0.0f, 0.0f);
+}
+
+/* The environment along count world directions: out[i] = (radiance, env_pdf). */
+__kernel void env_eval_points(uint count, Environment env, __global const float* env_data, __global const float4* dirs,
+                              __global float4* out) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  float3 d = normalize(dirs[i].xyz);
+  out[i] = (float4)(env_radiance(env, env_data, d), env_pdf(env, env_data, d));
 }

@@ -30,13 +30,17 @@ typedef cl_uint psf_uint;
 /* Sample dimensions: 0,1 pixel position; then PSF_DIMS_PER_BOUNCE per bounce. */
 #define PSF_DIM_PIXEL 0
 #define PSF_DIM_BOUNCE0 2
-#define PSF_DIMS_PER_BOUNCE 6
+#define PSF_DIMS_PER_BOUNCE 7
 #define PSF_DIM_LIGHT_SELECT 0 /* offset within a bounce: which emitter */
 #define PSF_DIM_LIGHT_UV 1     /* two dimensions: point on the emitter */
 #define PSF_DIM_BSDF_UV 3      /* two dimensions: BSDF direction */
 #define PSF_DIM_RR 5           /* Russian roulette */
+#define PSF_DIM_BSDF_LOBE 6    /* BSDF lobe choice (reflection or transmission, specular or diffuse) */
 
 #define PSF_NO_HIT 0xFFFFFFFFu
+/* Bit of BvhTriPack.prim marking an alpha-tested triangle (a mask material):
+ * raycast.cl's masked kernels test its opacity; hits report the prim without it. */
+#define PSF_PRIM_MASKED 0x80000000u
 #define PSF_EMPTY_CHILD 0xFFFFFFFFu
 /* A BVH child reference with this bit set is a leaf: bits 0..26 its first
  * triangle pack (BvhTriPack), bits 27..30 the number of packs minus one. */
@@ -104,29 +108,125 @@ typedef struct {
   psf_uint pad1;      /* padding */
 } Camera;
 
-#define PSF_MATERIAL_DIFFUSE 0u
+/* Material types (Material.type): Mitsuba's BSDF plugins of the same names
+ * (kernels/bsdf.cl has the equations). */
+#define PSF_MATERIAL_DIFFUSE 0u          /* diffuse: Lambertian */
+#define PSF_MATERIAL_CONDUCTOR 1u        /* conductor: smooth mirror, complex Fresnel */
+#define PSF_MATERIAL_ROUGH_CONDUCTOR 2u  /* roughconductor: microfacet reflection, complex Fresnel */
+#define PSF_MATERIAL_PLASTIC 3u          /* plastic: smooth dielectric coating on a diffuse base */
+#define PSF_MATERIAL_ROUGH_PLASTIC 4u    /* roughplastic: rough coating on a diffuse base */
+#define PSF_MATERIAL_DIELECTRIC 5u       /* dielectric: smooth interface (glass, water) */
+#define PSF_MATERIAL_ROUGH_DIELECTRIC 6u /* roughdielectric: microfacet reflection and refraction */
+#define PSF_MATERIAL_THIN_DIELECTRIC 7u  /* thindielectric: thin sheet, straight transmission */
 
-/* A surface's scattering and emission. */
+/* Material.flags */
+#define PSF_MATFLAG_BECKMANN 1u  /* microfacet distribution Beckmann (else GGX) */
+#define PSF_MATFLAG_NONLINEAR 2u /* plastics: Mitsuba's `nonlinear` (colour shift by internal scattering) */
+#define PSF_MATFLAG_MASKED 4u    /* opacity below 1 somewhere (mask): alpha-tested during ray traversal */
+#define PSF_MATFLAG_NORMALS 8u   /* some triangle of it has vertex normals (set by host/render.cpp) */
+
+/* Texture index meaning "none": entry 0 of the texture table is a placeholder, so
+ * that a zero-initialised Material is a plain diffuse one. */
+#define PSF_NO_TEXTURE 0u
+
+/* A surface's scattering and emission. Colours are linear RGB. */
 typedef struct {
-  psf_float4 albedo;   /* xyz diffuse reflectance */
-  psf_float4 emission; /* xyz emitted radiance (both sides if two-sided) */
-  psf_uint type;       /* PSF_MATERIAL_* */
-  psf_uint two_sided;  /* 1: emission and scattering on both sides */
-  psf_uint pad0;       /* padding */
-  psf_uint pad1;       /* padding */
+  psf_float4 albedo;        /* xyz diffuse reflectance (diffuse, plastics); w: plastics' specular sampling weight */
+  psf_float4 emission;      /* xyz emitted radiance (both sides if two-sided) */
+  psf_float4 specular;      /* xyz specular reflectance (conductors, plastics, dielectrics) */
+  psf_float4 transmittance; /* xyz specular transmittance (dielectrics) */
+  psf_float4 eta;           /* conductors: xyz real part of the relative IOR; plastics, dielectrics: x int/ext IOR,
+                               y 1/x^2; plastics: z the coat's internal reflectance (F_dr(1/eta); roughplastic:
+                               Mitsuba 3's), w its reflectance under uniform illumination (F_dr(eta)) */
+  psf_float4 k;             /* conductors: xyz imaginary part (absorption) of the relative IOR */
+  float alpha_u;            /* microfacet roughness along the shading tangent (rough types) */
+  float alpha_v;            /* microfacet roughness along the bitangent */
+  psf_uint type;            /* PSF_MATERIAL_* */
+  psf_uint two_sided;       /* 1: emission and scattering on both sides */
+  psf_uint flags;           /* PSF_MATFLAG_* */
+  psf_uint tex_color;       /* texture replacing albedo (diffuse, plastics) or specular (others), or PSF_NO_TEXTURE */
+  psf_uint tex_opacity;     /* opacity texture (mask; x channel), or PSF_NO_TEXTURE */
+  psf_uint tex_bump;        /* bump map height texture (x channel), or PSF_NO_TEXTURE */
+  float opacity;            /* with PSF_MATFLAG_MASKED: constant opacity, times tex_opacity (mask; 1 opaque) */
+  float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
+  psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
+  psf_uint pad0;            /* padding */
 } Material;
 
-/* An emissive triangle for next-event estimation. */
+/* TriAttrib.flags */
+#define PSF_TRI_NORMALS 1u /* the triangle has per-vertex shading normals */
+
+/* Shading attributes of one triangle, in scene order. A mesh without texture
+ * coordinates has uv (0,0), (1,0), (0,1) at its corners, so that uv are the
+ * barycentrics (b1, b2), as in Mitsuba. */
 typedef struct {
-  psf_float4 v0;       /* xyz first vertex, w: area */
-  psf_float4 e1;       /* xyz v1 - v0 */
-  psf_float4 e2;       /* xyz v2 - v0 */
-  psf_float4 radiance; /* xyz emitted radiance, w: selection probability */
-  psf_uint prim;       /* triangle index in scene order */
-  psf_uint two_sided;  /* 1: emits on both sides */
-  psf_uint pad0;       /* padding */
+  psf_float4 n0;   /* xyz unit shading normal at vertex 0 (world space), with PSF_TRI_NORMALS */
+  psf_float4 n1;   /* at vertex 1 */
+  psf_float4 n2;   /* at vertex 2 */
+  psf_float4 uv01; /* xy uv at vertex 0, zw uv at vertex 1 */
+  float u2;        /* uv at vertex 2 */
+  float v2;
+  psf_uint flags;  /* PSF_TRI_* */
+  psf_uint pad0;   /* padding */
+} TriAttrib;
+
+/* Entries of roughplastic's external transmittance table over cos theta in [0, 1] (as Mitsuba 3). */
+#define PSF_ROUGH_TABLE_RES 64
+
+/* TextureInfo.flags */
+#define PSF_TEX_BILINEAR 1u /* bilinear filtering (else nearest texel) */
+#define PSF_TEX_CLAMP 2u    /* uv outside [0,1] clamps to the border (else the image repeats) */
+#define PSF_TEX_MIRROR 4u   /* the image repeats mirrored (Mitsuba's wrap_mode mirror) */
+
+/* A texture: an image in the texel buffer, RGBA as four halfs per texel
+ * (vload_half4), rows from the top of the image. uv (0,0) is the top-left corner
+ * of the image and (1,1) the bottom-right, as in Mitsuba (whose OBJ loader flips v). */
+typedef struct {
+  psf_float4 uv_u;   /* texture u = dot(xyz, (u, v, 1)) of the surface's (u, v): Mitsuba's to_uv, uvscale/uoffset */
+  psf_float4 uv_v;   /* texture v likewise */
+  psf_uint offset;   /* index of the first texel in the texel buffer */
+  psf_uint width;    /* texels across */
+  psf_uint height;   /* texels down */
+  psf_uint flags;    /* PSF_TEX_* */
+} TextureInfo;
+
+/* Emitter types (Emitter.type). */
+#define PSF_EMITTER_TRIANGLE 0u    /* an emissive triangle (area light) */
+#define PSF_EMITTER_POINT 1u       /* isotropic point light */
+#define PSF_EMITTER_SPOT 2u        /* point light restricted to a cone */
+#define PSF_EMITTER_DIRECTIONAL 3u /* parallel light from infinitely far away */
+#define PSF_EMITTER_ENVIRONMENT 4u /* the Environment (envmap or constant) */
+
+/* One entry of the next-event estimation table: an emissive triangle, a delta
+ * light or the environment (whose data is the Environment struct). */
+typedef struct {
+  psf_float4 v0;       /* triangle: xyz first vertex, w area; point, spot: xyz position */
+  psf_float4 e1;       /* triangle: xyz v1 - v0; spot: xyz unit axis, w cos(cutoff); directional: xyz unit direction of travel */
+  psf_float4 e2;       /* triangle: xyz v2 - v0; spot: x cutoff angle, y 1 / (cutoff - beam width) (radians), w cos(beam width) */
+  psf_float4 radiance; /* xyz radiance (triangle), intensity (point, spot) or irradiance (directional); w: selection probability */
+  psf_uint prim;       /* triangle: index in scene order */
+  psf_uint two_sided;  /* triangle: 1 emits on both sides */
+  psf_uint type;       /* PSF_EMITTER_* */
   psf_uint pad1;       /* padding */
 } Emitter;
+
+/* The environment: radiance from infinitely far away along every direction that
+ * escapes the scene. A latitude-longitude map in Mitsuba's convention (map
+ * direction d = rotation * world direction; u = atan2(d.x, -d.z) / 2pi wrapped
+ * to [0,1), v = acos(d.y) / pi, texel row 0 at v = 0, i.e. +y up), piecewise
+ * constant per texel, or a constant radiance when width is 0. Its data buffer
+ * (floats) holds the texels (width * height * 3, RGB, row-major), the marginal
+ * cdf over rows (height + 1) and each row's conditional cdf (width + 1 each). */
+typedef struct {
+  psf_float4 to_map0;   /* rows of the world-to-map rotation (the inverse of to_world) */
+  psf_float4 to_map1;
+  psf_float4 to_map2;
+  psf_float4 scale;     /* xyz radiance scale of the map, or the constant radiance; w: selection probability in NEE */
+  psf_uint width;       /* texels across (0: constant radiance) */
+  psf_uint height;      /* texels down */
+  psf_uint present;     /* 1: the scene has an environment (0: escaped rays see black) */
+  psf_uint pad0;        /* padding */
+} Environment;
 
 #define PSF_PATH_ALIVE 1u
 #define PSF_PATH_SPECULAR 2u  /* the last bounce was a delta lobe (no MIS) */
@@ -171,5 +271,27 @@ typedef struct {
   psf_uint pad1;           /* padding */
   psf_uint pad2;           /* padding */
 } FrameParams;
+
+/* Path space filtering of one batch (Keller et al. 2016, Eq. 1-2; filter.cl). */
+#define PSF_NO_KEY 0xFFFFFFFFu /* key of a path without a filtering vertex */
+
+typedef struct {
+  float r0;          /* global radius r0 (--r0); <= 0: per vertex from the footprint */
+  float footprint;   /* sqrt(dOmega / pi) of the footprint's solid angle: r0_i = d_i * footprint */
+  float n_scale;     /* 1 / n^alpha: r(n) = r0 * n_scale */
+  float normal_cos;  /* smallest <n_i, n_j> of similar vertices (0.95) */
+  float albedo_tol;  /* largest |albedo_i - albedo_j| of similar vertices (0.05) */
+  psf_uint count;    /* tuples in the batch */
+  psf_uint key_bits; /* cell keys lie in [0, 2^key_bits) */
+  psf_uint cells27;  /* 1: cells of size r searched 3x3x3; 0: cells of size 2r searched 2x2x2 */
+} FilterParams;
+
+/* A tuple of the batch in cell order (tuples.cl gathers them for locality);
+ * the values c_j being averaged live in a separate float4 array. */
+typedef struct {
+  psf_float4 position; /* xyz x_j; w: query radius r_j */
+  psf_float4 normal;   /* xyz n_j; w: light-sample visibility */
+  psf_float4 albedo;   /* xyz albedo_j; w: level of the cell grid (an integer, as float) */
+} FilterTuple;
 
 #endif /* PSF_SHARED_H */

@@ -30,6 +30,12 @@
  *   (size = sqrt(|e1 x e2|), stored inverted in the pack): a ray through an edge
  *   shared by two triangles hits at least one of them. The tests are written so
  *   that NaN (det = 0: unused lanes, degenerate triangles) rejects.
+ * - Alpha testing (raycast_closest_masked, raycast_any_masked): packs mark the
+ *   triangles of mask materials with PSF_PRIM_MASKED in their prim; a hit on
+ *   one counts only if the material's opacity (constant times texture, at the
+ *   hit's uv) exceeds a hash of the ray and the triangle in [0,1) (stochastic
+ *   transparency: binary cut-outs exactly, partial opacity on average). The
+ *   unmasked kernels never test and cost nothing extra.
  * No barriers; kernels guard the rounded-up tail of the global range. */
 
 #if PSF_BVH_WIDTH == 8
@@ -185,17 +191,76 @@ BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_flo
   hit->t = tl[k];
   hit->u = ul[k];
   hit->v = vl[k];
-  hit->prim = ((__global const uint*)(p + PACK_PRIM))[k];
+  hit->prim = ((__global const uint*)(p + PACK_PRIM))[k] & ~PSF_PRIM_MASKED;
+}
+
+/* The scene data the alpha test reads (masked kernels); a null pointer to it
+ * means no alpha testing, which the compiler removes after inlining. */
+typedef struct {
+  __global const uint* tri_material;
+  __global const Material* materials;
+  __global const TriAttrib* attribs;
+  __global const TextureInfo* textures;
+  __global const half* texels;
+} AlphaScene;
+
+/* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` is opaque. */
+inline bool alpha_opaque(const AlphaScene* as, uint prim, float b1, float b2, float3 org, float3 dir) {
+  __global const Material* m = as->materials + as->tri_material[prim];
+  float opacity = m->opacity;
+  uint tex = m->tex_opacity;
+  if (tex != PSF_NO_TEXTURE) {
+    __global const TriAttrib* a = as->attribs + prim;
+    float4 uv01 = a->uv01;
+    float2 uv = (1.0f - b1 - b2) * uv01.xy + b1 * uv01.zw + b2 * (float2)(a->u2, a->v2);
+    opacity *= texture_eval(as->textures, as->texels, tex, uv).x;
+  }
+  if (opacity >= 1.0f) return true;
+  if (opacity <= 0.0f) return false;
+  uint h = psf_hash_combine(psf_hash_combine(psf_hash_combine(psf_hash(prim), as_uint(org.x)), as_uint(org.y) ^ as_uint(dir.x)),
+                            as_uint(org.z) ^ as_uint(dir.y) ^ as_uint(dir.z));
+  return opacity > bits_to_float(h);
+}
+
+/* Removes from a pack test's lane mask the masked triangles whose hit is cut out
+ * (their t becomes infinity). */
+BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, bvh_floatw u, bvh_floatw v,
+                             const AlphaScene* as, float3 org, float3 dir) {
+  __global const int* prims = (__global const int*)(p + PACK_PRIM);
+#if PSF_BVH_WIDTH == 8
+  uint masked = mask & bvh_lane_mask(vload8(0, prims) < (int8)(0));
+#else
+  uint masked = mask & bvh_lane_mask(vload4(0, prims) < (int4)(0));
+#endif
+  if (masked == 0u) return mask;
+  float tl[PSF_BVH_WIDTH], ul[PSF_BVH_WIDTH], vl[PSF_BVH_WIDTH];
+  BVH_VSTORE(*t, 0, tl);
+  BVH_VSTORE(u, 0, ul);
+  BVH_VSTORE(v, 0, vl);
+  while (masked != 0u) {
+    uint k = bvh_first_lane(masked);
+    masked &= masked - 1u;
+    if (!alpha_opaque(as, (uint)prims[k] & ~PSF_PRIM_MASKED, ul[k], vl[k], org, dir)) {
+      mask &= ~(1u << k);
+      tl[k] = INFINITY;
+    }
+  }
+  *t = BVH_VLOAD(0, tl);
+  return mask;
 }
 
 /* The closest hit among a leaf's packs [first, end), updating *hit. */
 BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, float3 org, float3 dir,
-                             float dir_len, float tmin, Hit* hit) {
+                             float dir_len, float tmin, Hit* hit, const AlphaScene* as) {
   for (uint k = first; k < end; ++k) {
     __global const float* p = (__global const float*)(packs + k);
     bvh_floatw t, u, v;
     uint mask = pack_test(p, org, dir, dir_len, tmin, hit->t, &t, &u, &v);
     if (mask == 0u) continue;
+    if (as) {
+      mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
+      if (mask == 0u) continue;
+    }
     /* Several lanes hit: the nearest (the other lanes hold infinity). */
     if (mask & (mask - 1u)) mask = bvh_lane_mask(t == (bvh_floatw)(BVH_HMIN(t)));
     uint lane = bvh_first_lane(mask);
@@ -213,8 +278,9 @@ inline Hit hit_none(Ray ray) {
   return hit;
 }
 
-/* The closest hit of `ray` (see the file comment). */
-inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+/* The closest hit of `ray` (see the file comment); alpha-tested if `as` is not null. */
+BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                       const AlphaScene* as) {
   Hit hit = hit_none(ray);
   float tmin = ray.org.w;
   if (!(ray.dir.w >= 0.0f)) return hit;
@@ -230,7 +296,7 @@ inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTr
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
-      leaf_closest(packs, first, end, org, dir, dir_len, tmin, &hit);
+      leaf_closest(packs, first, end, org, dir, dir_len, tmin, &hit, as);
     } else {
       __global const float* f = (__global const float*)(nodes + ref);
       bvh_floatw tn;
@@ -291,8 +357,15 @@ inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTr
   }
 }
 
-/* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none. */
-inline Hit intersect_any_hit(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+/* The closest hit of `ray` (see the file comment). */
+inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+  return intersect_closest_alpha(nodes, packs, ray, 0);
+}
+
+/* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none;
+ * alpha-tested if `as` is not null. */
+BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                       const AlphaScene* as) {
   Hit hit = hit_none(ray);
   float tmin = ray.org.w;
   if (!(ray.dir.w >= 0.0f)) return hit;
@@ -312,6 +385,7 @@ inline Hit intersect_any_hit(__global const BvhNode* nodes, __global const BvhTr
         __global const float* p = (__global const float*)(packs + k);
         bvh_floatw t, u, v;
         uint mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);
+        if (mask != 0u && as) mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
         if (mask != 0u) {
           pack_take(p, bvh_first_lane(mask), t, u, v, &hit);
           return hit;
@@ -332,6 +406,11 @@ inline Hit intersect_any_hit(__global const BvhNode* nodes, __global const BvhTr
   return hit;
 }
 
+/* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none. */
+inline Hit intersect_any_hit(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
+  return intersect_any_hit_alpha(nodes, packs, ray, 0);
+}
+
 /* Whether anything blocks `ray` within (tmin, tmax). */
 inline bool intersect_any(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
   return intersect_any_hit(nodes, packs, ray).prim != PSF_NO_HIT;
@@ -349,4 +428,27 @@ __kernel void raycast_any(__global const BvhNode* nodes, __global const BvhTriPa
   uint i = get_global_id(0);
   if (i >= count) return;
   hits[i] = intersect_any_hit(nodes, packs, rays[i]);
+}
+
+/* raycast_closest and raycast_any with alpha testing of masked triangles. */
+__kernel void raycast_closest_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                     __global const Ray* rays, __global Hit* hits, uint count,
+                                     __global const uint* tri_material, __global const Material* materials,
+                                     __global const TriAttrib* attribs, __global const TextureInfo* textures,
+                                     __global const half* texels) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  AlphaScene as = {tri_material, materials, attribs, textures, texels};
+  hits[i] = intersect_closest_alpha(nodes, packs, rays[i], &as);
+}
+
+__kernel void raycast_any_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                 __global const Ray* rays, __global Hit* hits, uint count,
+                                 __global const uint* tri_material, __global const Material* materials,
+                                 __global const TriAttrib* attribs, __global const TextureInfo* textures,
+                                 __global const half* texels) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  AlphaScene as = {tri_material, materials, attribs, textures, texels};
+  hits[i] = intersect_any_hit_alpha(nodes, packs, rays[i], &as);
 }

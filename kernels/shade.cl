@@ -4,8 +4,9 @@
  * record of each path's filtering vertex (Keller et al. 2016, Sec. 2).
  *
  * shade: reads each path's closest hit; adds emission reached by the BSDF-sampled
- * ray (MIS-weighted against light sampling); at the first sufficiently diffuse
- * vertex writes the PathVertex (x, n, albedo, alpha, d) and from there on gathers
+ * ray (MIS-weighted against light sampling), or for a ray that escaped the scene
+ * the environment's radiance (likewise weighted, emitter.cl); at the first
+ * sufficiently diffuse vertex writes the PathVertex (x, n, albedo, alpha, d) and from there on gathers
  * the path's radiance into c = vertex_radiance relative to alpha, so that the
  * pixel gets radiance + alpha * c; samples a light (shadow ray + pending
  * contribution) and the BSDF (next ray). Depth follows Mitsuba's max_depth: the
@@ -41,9 +42,11 @@ inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * f
 __kernel void shade(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
                     __global const uint* tri_material, __global const Material* materials,
                     __global const Emitter* emitters, __global const float* emitter_cdf,
-                    __global const float* tri_light_pdf, __global const Hit* hits, __global Ray* rays,
+                    __global const float* tri_light_pdf, Environment env, __global const float* env_data,
+                    __global const Hit* hits, __global Ray* rays,
                     __global PathState* states, __global PathVertex* vertices, __global Ray* shadow_rays,
-                    __global uint* alive_count) {
+                    __global uint* alive_count, __global const TriAttrib* tri_attribs,
+                    __global const TextureInfo* textures, __global const half* texels) {
   uint j = get_global_id(0);
   if (j >= params.batch_size) return;
   PathState st = states[j];
@@ -55,6 +58,15 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   Ray ray = rays[j];
   Hit hit = hits[j];
   if (!(st.flags & PSF_PATH_ALIVE) || hit.prim == PSF_NO_HIT) {
+    /* An escaped ray sees the environment, MIS-weighted against its light samples
+     * unless it left the camera or a delta lobe (emitter.cl). */
+    if ((st.flags & PSF_PATH_ALIVE) && env.present) {
+      float3 d = normalize(ray.dir.xyz);
+      float w = 1.0f;
+      if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR))
+        w = power_heuristic(st.throughput.w, env.scale.w * env_pdf(env, env_data, d));
+      add_radiance(&st, st.throughput.xyz * env_radiance(env, env_data, d) * w);
+    }
     st.flags &= ~PSF_PATH_ALIVE;
     ray.dir.w = -1.0f;
     rays[j] = ray;
@@ -83,11 +95,13 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
     add_radiance(&st, beta * m.emission.xyz * w);
   }
 
-  /* The shading frame faces the incoming ray (two-sided scattering). */
-  float3 n = front ? ng : -ng;
-  Frame frame = frame_from_normal(n);
+  /* The shading frame (interpolated normal, bump map; turned towards wo if
+   * two-sided) and the material's textures (surface.cl). */
+  Frame frame = surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels);
+  float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
+  __global const half* table = m.tex_table != PSF_NO_TEXTURE ? texels + 4u * textures[m.tex_table].offset : texels;
   uint segments = st.depth + 1u; /* segments of the path up to this vertex */
-  bool scatter = depth_allows(params, segments + 1u) && max3(bsdf_albedo(m)) > 0.0f;
+  bool scatter = depth_allows(params, segments + 1u) && bsdf_scatters(m);
 
   /* The filtering vertex: the first diffuse one. From here on the throughput
    * and the gathered radiance are relative to it. */
@@ -104,27 +118,32 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
 
   /* Next-event estimation: one point on one emitter, chosen by power. */
   if (scatter && params.num_emitters > 0u) {
-    LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, pos,
+    LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
                                     bounce_sample(sobol, params, st, PSF_DIM_LIGHT_SELECT),
                                     bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV),
                                     bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV + 1u));
     float bsdf_pdf;
-    float3 f = ls.pdf > 0.0f ? bsdf_eval(m, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);
-    float cos_s = dot(n, ls.wi);
+    float3 f = ls.pdf > 0.0f ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);
+    float cos_s = fabs(dot(frame.n, ls.wi)); /* the BSDF decides which side scatters */
     if (ls.pdf > 0.0f && cos_s > 0.0f && max3(f) > 0.0f) {
-      float w = power_heuristic(ls.pdf, bsdf_pdf);
+      float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf); /* delta lights: no MIS */
       st.pending.xyz = beta * f * cos_s * ls.radiance * (w / ls.pdf);
-      shadow.org = (float4)(offset_origin(pos, n), 0.0f);
-      float3 lp = pos + ls.wi * ls.dist;
-      shadow.dir = (float4)(lp - shadow.org.xyz, 1.0f - PSF_RAY_EPS);
+      shadow.org = (float4)(offset_origin(pos, dot(ls.wi, ng) >= 0.0f ? ng : -ng), 0.0f);
+      if (isinf(ls.dist)) {
+        shadow.dir = (float4)(ls.wi, INFINITY); /* directional light or environment */
+      } else {
+        float3 lp = pos + ls.wi * ls.dist;
+        shadow.dir = (float4)(lp - shadow.org.xyz, 1.0f - PSF_RAY_EPS);
+      }
     }
   }
   shadow_rays[j] = shadow;
 
   /* BSDF sampling for the next segment, then Russian roulette. */
   if (scatter) {
-    BsdfSample bs = bsdf_sample(m, frame, wo, bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV),
-                                bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV + 1u), 0.5f);
+    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV),
+                                bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV + 1u),
+                                bsdf_chooses_lobe(m) ? bounce_sample(sobol, params, st, PSF_DIM_BSDF_LOBE) : 0.5f);
     beta *= bs.weight;
     if (segments >= params.rr_depth) {
       /* Survival by the throughput since the filtering vertex: any probability
@@ -138,7 +157,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       st.prev_pos.xyz = pos;
       if (bs.flags & BSDF_DELTA) st.flags |= PSF_PATH_SPECULAR;
       else st.flags &= ~PSF_PATH_SPECULAR;
-      float3 side = (bs.flags & BSDF_TRANSMISSION) ? -n : n;
+      float3 side = dot(bs.wi, ng) >= 0.0f ? ng : -ng; /* the geometric side wi leaves on */
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
       st.depth += 1u;

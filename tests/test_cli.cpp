@@ -2,6 +2,9 @@
 // devices, and a render to OpenEXR and PNG.
 #include <catch2/catch.hpp>
 
+#include <ImfChannelList.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
 #include <sys/wait.h>
 
 #include <array>
@@ -155,4 +158,21 @@ TEST_CASE("CLI: render writes an OpenEXR and a PNG, deterministically per seed",
     sum += v;
   }
   CHECK(sum > 0);
+}
+
+TEST_CASE("CLI: --aov adds the unfiltered image and the neighbour count as EXR layers", "[cli]") {
+  fs::path dir = temp_dir();
+  write_file(dir / "tiny.xml", kTinyScene);
+  fs::path out = dir / "aov.exr";
+  Run r = run("render " + (dir / "tiny.xml").string() + " --spp 4 -q --aov unfiltered,neighbours -o " + out.string());
+  REQUIRE(r.status == 0);
+  Imf::InputFile file(out.string().c_str());
+  const Imf::ChannelList& ch = file.header().channels();
+  for (const char* c : {"R", "G", "B", "unfiltered.R", "unfiltered.G", "unfiltered.B", "neighbours.Y"})
+    CHECK(ch.findChannel(c) != nullptr);
+  Run bad = run("render " + (dir / "tiny.xml").string() + " --spp 1 -q --aov unfiltered,nonsense -o " + out.string());
+  CHECK(bad.status == 2);
+  CHECK(bad.output.find("nonsense") != std::string::npos);
+  Run off = run("render " + (dir / "tiny.xml").string() + " --spp 1 -q --filter bogus");
+  CHECK(off.status == 2);
 }

@@ -28,10 +28,32 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Material, emission)", offsetof(Material, emission)},
       {"offsetof(Material, type)", offsetof(Material, type)},
       {"offsetof(Material, two_sided)", offsetof(Material, two_sided)},
+      {"offsetof(Material, specular)", offsetof(Material, specular)},
+      {"offsetof(Material, k)", offsetof(Material, k)},
+      {"offsetof(Material, alpha_u)", offsetof(Material, alpha_u)},
+      {"offsetof(Material, flags)", offsetof(Material, flags)},
+      {"offsetof(Material, tex_bump)", offsetof(Material, tex_bump)},
+      {"offsetof(Material, opacity)", offsetof(Material, opacity)},
+      {"offsetof(Material, tex_table)", offsetof(Material, tex_table)},
+      {"offsetof(Material, pad0)", offsetof(Material, pad0)},
+      {"sizeof(TextureInfo)", sizeof(TextureInfo)},
+      {"offsetof(TextureInfo, uv_v)", offsetof(TextureInfo, uv_v)},
+      {"offsetof(TextureInfo, offset)", offsetof(TextureInfo, offset)},
+      {"offsetof(TextureInfo, flags)", offsetof(TextureInfo, flags)},
+      {"sizeof(TriAttrib)", sizeof(TriAttrib)},
+      {"offsetof(TriAttrib, uv01)", offsetof(TriAttrib, uv01)},
+      {"offsetof(TriAttrib, u2)", offsetof(TriAttrib, u2)},
+      {"offsetof(TriAttrib, flags)", offsetof(TriAttrib, flags)},
       {"sizeof(Emitter)", sizeof(Emitter)},
       {"offsetof(Emitter, radiance)", offsetof(Emitter, radiance)},
       {"offsetof(Emitter, prim)", offsetof(Emitter, prim)},
       {"offsetof(Emitter, two_sided)", offsetof(Emitter, two_sided)},
+      {"offsetof(Emitter, type)", offsetof(Emitter, type)},
+      {"sizeof(Environment)", sizeof(Environment)},
+      {"offsetof(Environment, to_map2)", offsetof(Environment, to_map2)},
+      {"offsetof(Environment, scale)", offsetof(Environment, scale)},
+      {"offsetof(Environment, width)", offsetof(Environment, width)},
+      {"offsetof(Environment, present)", offsetof(Environment, present)},
       {"sizeof(PathState)", sizeof(PathState)},
       {"offsetof(PathState, radiance)", offsetof(PathState, radiance)},
       {"offsetof(PathState, prev_pos)", offsetof(PathState, prev_pos)},
@@ -49,7 +71,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, pad2)", offsetof(FrameParams, pad2)},
   };
   auto& rt = psf::test::runtime();
-  cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 64 * sizeof(cl_uint));
+  cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 128 * sizeof(cl_uint));
   rt.launch("layout_report", 1, 1, out);
   auto device = rt.download<cl_uint>(out, host.size());
   for (size_t i = 0; i < host.size(); ++i) {
@@ -58,7 +80,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
   }
   // Every buffer struct is a multiple of 16 bytes so arrays of it stay float4-aligned.
   for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriPack), sizeof(BvhNode), sizeof(Camera),
-                   sizeof(Material), sizeof(Emitter), sizeof(PathState), sizeof(PathVertex),
+                   sizeof(Material), sizeof(TextureInfo), sizeof(TriAttrib), sizeof(Emitter), sizeof(Environment), sizeof(PathState), sizeof(PathVertex),
                    sizeof(FrameParams)})
     CHECK(s % 16 == 0);
 }

@@ -56,6 +56,7 @@ TEST_CASE("Render: closed emitting diffuse box gives Le/(1-albedo)", "[render]")
   psf::Scene s = furnace_box(le, albedo, 16);
   psf::Renderer r(rt, s);
   psf::RenderOptions o;
+  o.filter.enabled = false;  // the plain path tracer; filtering keeps the mean too, tested in test_filter.cpp
   o.spp = 64;
   o.max_depth = -1;
   auto res = r.render(o);
@@ -79,6 +80,7 @@ TEST_CASE("Render: the image is a function of the seed alone, not of the batch s
   psf::Scene s = furnace_box(1.0f, 0.7f, 13);  // 169 pixels: batches wrap around the image
   psf::Renderer r(rt, s);
   psf::RenderOptions o;
+  o.filter.enabled = false;  // filtering averages within a batch, so it depends on the batch size
   o.spp = 5;
   o.seed = 3;
   o.batch_log2 = 9;
@@ -90,4 +92,12 @@ TEST_CASE("Render: the image is a function of the seed alone, not of the batch s
   o.seed = 4;
   auto c = r.render(o);
   CHECK(c.image.rgb != a.image.rgb);
+  // Filtered: the same options give the same image, and the unfiltered layer is
+  // the plain path tracer's whatever the batch size.
+  o.seed = 3;
+  o.filter.enabled = true;
+  auto f1 = r.render(o);
+  auto f2 = r.render(o);
+  CHECK(f1.image.rgb == f2.image.rgb);
+  CHECK(f1.unfiltered.rgb == a.image.rgb);
 }

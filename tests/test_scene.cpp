@@ -381,23 +381,24 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
 
 TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
   psf::Scene s = load_text(
-      "<bsdf type=\"roughplastic\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
-      "<bsdf type=\"conductor\" id=\"c\"><rgb name=\"eta\" value=\"1.5\"/><rgb name=\"k\" value=\"0\"/></bsdf>\n"
+      "<bsdf type=\"principled\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
+      "<bsdf type=\"blendbsdf\" id=\"c\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
+      "<bsdf type=\"conductor\"/></bsdf>\n"
       "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"c\"/></shape>\n"
       "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture name=\"reflectance\" type=\"bitmap\">"
       "<string name=\"filename\" value=\"x.png\"/></texture></bsdf></shape>\n"
-      "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.exr\"/></emitter>\n");
+      "<emitter type=\"sunsky\"/>\n");
   CHECK(s.warnings.size() == 5);
   CHECK(count_warnings(s, "no <sensor>") == 1);
-  CHECK(count_warnings(s, ":2: bsdf 'roughplastic'") == 1);
-  CHECK(count_warnings(s, ":3: bsdf 'conductor'") == 1);
-  CHECK(count_warnings(s, ":7: texture 'bitmap'") == 1);
-  CHECK(count_warnings(s, ":8: emitter 'envmap'") == 1);
+  CHECK(count_warnings(s, ":2: bsdf 'principled'") == 1);
+  CHECK(count_warnings(s, ":3: bsdf 'blendbsdf'") == 1);
+  CHECK(count_warnings(s, ":7: texture file 'x.png' not found") == 1);  // the default reflectance instead
+  CHECK(count_warnings(s, ":8: emitter 'sunsky'") == 1);
   REQUIRE(s.materials.size() == 3);
   CHECK(near(albedo(s.materials[0]), glm::vec3(0.3f)));
-  CHECK(near(albedo(s.materials[1]), glm::vec3(0.04f)));  // Fresnel at normal incidence, eta 1.5
+  CHECK(near(albedo(s.materials[1]), glm::vec3(0.6f)));  // the mean of diffuse 0.2 and a mirror's 1
   CHECK(near(albedo(s.materials[2]), glm::vec3(0.5f)));
 }
 
@@ -447,11 +448,14 @@ TEST_CASE("OBJ files load directly with MTL materials and a framing camera", "[s
   REQUIRE(l.materials.size() == 1);
   CHECK(near(albedo(l.materials[0]), glm::vec3(0.5f)));
 
-  // Texture maps are ignored with one warning.
+  // Missing texture maps: one warning each, the material keeps Kd (tests/test_bsdf.cpp has the rest).
   dir.write("tex.mtl", "newmtl a\nKd 1 1 1\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n");
   std::string textured =
       dir.write("textured.obj", "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n");
-  CHECK(count_warnings(psf::load_scene(textured), "texture") == 1);
+  psf::Scene t = psf::load_scene(textured);
+  CHECK(count_warnings(t, "tex.mtl:1: map_Kd 'a.png' of material 'a' not found") == 1);
+  CHECK(count_warnings(t, "tex.mtl:4: map_Kd 'b.png' of material 'b' not found") == 1);
+  CHECK(near(albedo(t.materials[0]), glm::vec3(1.0f)));
 }
 
 TEST_CASE("Scene errors name the file and line", "[scene]") {
@@ -523,7 +527,7 @@ TEST_CASE("Scene errors name the file and line", "[scene]") {
   }
   SECTION("unknown format") {
     TempDir dir;
-    std::string path = dir.write("scene.ply", "ply\n");
+    std::string path = dir.write("scene.fbx", "Kaydara FBX Binary\n");
     require_error(path, path, 0, "unknown scene format");
   }
 }
@@ -578,9 +582,23 @@ TEST_CASE("Shared scenes load", "[scene]") {
     CHECK(s->max_depth == 65);
     CHECK(s->camera.fov_degrees == Approx(90.0f));
     CHECK_FALSE(s->camera.mirrored);
-    CHECK(count_warnings(*s, "emitter 'envmap'") == 1);
-    CHECK(count_warnings(*s, "bsdf 'roughplastic'") == 3);
-    CHECK(count_warnings(*s, "texture 'bitmap'") >= 1);
+    REQUIRE(s->lights.size() == 1);  // the envmap, 2048x1024, rotated about +y
+    CHECK(s->lights[0].type == psf::LightType::Envmap);
+    CHECK(s->lights[0].width == 2048);
+    CHECK(s->lights[0].height == 1024);
+    CHECK(count_warnings(*s, "bsdf") == 0);  // every BSDF and texture is supported
+    CHECK(count_warnings(*s, "texture") == 0);
+    for (size_t m = 0; m < s->materials.size(); ++m) {
+      const Material& mat = s->materials[m];
+      if (s->material_names[m] == "Leaves") {  // mask of a diffuse leaf texture, opacity from its alpha
+        CHECK((mat.flags & PSF_MATFLAG_MASKED) != 0u);
+        CHECK(mat.tex_opacity != PSF_NO_TEXTURE);
+        CHECK(mat.tex_color != PSF_NO_TEXTURE);
+      }
+      if (s->material_names[m] == "Floor") CHECK(mat.type == PSF_MATERIAL_ROUGH_PLASTIC);
+      if (s->material_names[m] == "Mirror") CHECK(mat.type == PSF_MATERIAL_CONDUCTOR);
+      if (s->material_names[m] == "Glass") CHECK(mat.type == PSF_MATERIAL_DIELECTRIC);
+    }
     CHECK(emissive_materials(*s) == 0);  // lit by the environment map only
   }
   SECTION("staircase (Mitsuba 0.5)") {
@@ -590,8 +608,24 @@ TEST_CASE("Shared scenes load", "[scene]") {
     CHECK(s->width == 720);
     CHECK(s->height == 1280);
     CHECK(emissive_materials(*s) == 1);
-    CHECK(count_warnings(*s, "bsdf 'bumpmap'") == 1);
-    CHECK(count_warnings(*s, "bsdf 'conductor'") == 3);
+    CHECK(count_warnings(*s, "bsdf") == 0);  // every BSDF and texture is supported
+    CHECK(count_warnings(*s, "texture") == 0);
+    REQUIRE(s->normals.size() == s->positions.size());  // the meshes' vn (faceNormals on most shapes)
+    REQUIRE(s->uvs.size() == s->positions.size());
+    for (size_t m = 0; m < s->materials.size(); ++m) {
+      const Material& mat = s->materials[m];
+      if (s->material_names[m] == "Gold") {
+        CHECK(mat.type == PSF_MATERIAL_CONDUCTOR);
+        CHECK(mat.eta.s[0] == Approx(0.143119f / 1.000277f));
+      }
+      if (s->material_names[m] == "WoodFloor") {
+        CHECK(mat.type == PSF_MATERIAL_ROUGH_PLASTIC);
+        CHECK(mat.two_sided == 1u);
+        CHECK(mat.tex_color != PSF_NO_TEXTURE);
+        CHECK((mat.flags & PSF_MATFLAG_BECKMANN) == 0u);  // ggx
+      }
+      if (s->material_names[m] == "Brass") CHECK(mat.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+    }
     for (const std::string& w : s->warnings) CHECK(w.find("scene.xml:") != std::string::npos);
   }
 }

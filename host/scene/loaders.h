@@ -15,7 +15,14 @@ namespace psf::detail {
 struct TriMesh {
   std::vector<glm::vec3> positions;   // vertex positions
   std::vector<glm::uvec3> triangles;  // vertex indices, counter-clockwise seen from the front
+  std::vector<glm::vec3> normals;     // per vertex shading normal, or empty (face normals)
+  std::vector<glm::vec2> uvs;         // per vertex uv (v = 0 at the image top, Mitsuba's), or empty
 };
+
+// Smooth vertex normals of `mesh`: the face normals around each vertex weighted
+// by the face's angle at it (Thuermer & Wuethrich 1998), as Mitsuba computes
+// them for meshes without normals.
+void compute_vertex_normals(TriMesh& mesh);
 
 // Mitsuba's rectangle: [-1,1]^2 in the plane z = 0, facing +z (2 triangles).
 TriMesh make_rectangle();
@@ -28,17 +35,38 @@ TriMesh make_disk(int segments = 64);
 TriMesh make_sphere(const glm::vec3& center, float radius, int rings = 32, int segments = 64);
 
 // Appends `mesh` transformed by `to_world` with material `material` to the scene,
-// reversing the winding when `flip` is set. Throws SceneError(file, line) if a
+// reversing the winding and the normals when `flip` is set; normals are
+// transformed by the inverse transpose. Throws SceneError(file, line) if a
 // transformed position is not finite.
 void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, uint32_t material, bool flip,
                  const std::string& file, int line);
 
+// A texture map of an MTL material (map_Kd, map_d, map_bump).
+struct ObjTexture {
+  std::string file;          // file name as written, relative to the MTL file; empty: none
+  glm::vec2 scale{1.0f};     // -s u v
+  glm::vec2 offset{0.0f};    // -o u v
+  bool clamp = false;        // -clamp on
+  float bump_multiplier = 1; // -bm (bump maps)
+};
+
 // A material of an OBJ file's MTL library.
 struct ObjMaterial {
-  std::string name;       // newmtl name
-  glm::vec3 kd{0.5f};     // Kd, diffuse reflectance
-  glm::vec3 ke{0.0f};     // Ke, emitted radiance
-  bool textured = false;  // has a texture map (ignored for now)
+  std::string name;        // newmtl name
+  std::string mtl_file;    // the MTL file defining it, "" if unknown
+  int line = 0;            // line of its newmtl there, 0 if unknown
+  glm::vec3 kd{0.0f};      // Kd, diffuse reflectance
+  glm::vec3 ks{0.0f};      // Ks, specular reflectance
+  glm::vec3 ke{0.0f};      // Ke, emitted radiance
+  glm::vec3 tf{1.0f};      // Tf, transmission filter
+  float ns = 0.0f;         // Ns, Phong exponent
+  float ni = 1.0f;         // Ni, index of refraction
+  float d = 1.0f;          // d (or 1 - Tr), dissolve = opacity
+  int illum = 2;           // illumination model
+  ObjTexture map_kd;       // map_Kd
+  ObjTexture map_d;        // map_d
+  ObjTexture map_bump;     // map_bump / bump
+  std::vector<std::string> unsupported;  // other statements given (map_Ks, norm, disp, ...), for a warning
 };
 
 // The contents of an OBJ file, triangulated as fans (as Mitsuba does).
@@ -49,7 +77,8 @@ struct ObjData {
   std::vector<std::string> warnings;   // tinyobjloader's warnings, each "file: message"
 };
 
-// Reads an OBJ file; with `with_materials` also its MTL library. Throws
+// Reads an OBJ file with its vt (v flipped to Mitsuba's convention) and vn, a
+// vertex per distinct (v, vt, vn); with `with_materials` also its MTL library. Throws
 // SceneError(path, line) for a missing file, a parse error reported by
 // tinyobjloader, an out-of-range index or a non-finite vertex position.
 ObjData read_obj(const std::string& path, bool with_materials);
@@ -58,7 +87,8 @@ ObjData read_obj(const std::string& path, bool with_materials);
 // field of view along the larger film axis that fits the box.
 CameraDesc camera_framing(const std::vector<glm::vec3>& positions);
 
-// Loads a Wavefront OBJ file: MTL Kd and Ke as materials, camera_framing, 512x512 film.
+// Loads a Wavefront OBJ file: MTL materials mapped onto the BSDFs (obj.cpp),
+// textures, vertex normals and uvs as given, camera_framing, 512x512 film.
 Scene load_obj_scene(const std::string& path);
 
 // Loads a Mitsuba 0.5 / 2 / 3 XML scene; `params` override the file's <default> values.

@@ -31,7 +31,9 @@
 #include <string_view>
 #include <unordered_map>
 
+#include "scene/formats.h"
 #include "scene/loaders.h"
+#include "scene/materials.h"
 
 namespace fs = std::filesystem;
 
@@ -250,11 +252,19 @@ enum class ColorUse {
   Unbounded     // spectra under D65, >= 0 (indices of refraction)
 };
 
-// A BSDF reduced to what the renderer supports.
+// A diffuse material of reflectance `albedo` (Mitsuba's default BSDF: 0.5).
+Material diffuse_material(const glm::vec3& albedo) {
+  Material m{};
+  m.type = PSF_MATERIAL_DIFFUSE;
+  m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+  return m;
+}
+
+// A BSDF as the renderer represents it.
 struct Bsdf {
-  glm::vec3 albedo{0.5f};  // diffuse reflectance
-  bool two_sided = false;  // scatters on both sides (Mitsuba's twosided)
-  std::string name;        // the element's id, else its type
+  Material m = diffuse_material(glm::vec3(0.5f));  // type, parameters, textures (emission zero)
+  bool two_sided = false;                          // scatters on both sides (Mitsuba's twosided)
+  std::string name;                                // the element's id, else its type
 };
 
 // Element tags that hold a plugin (a nested object) rather than a property value.
@@ -270,16 +280,6 @@ const std::set<std::string>& property_tags() {
   static const std::set<std::string> tags = {"float",    "integer",   "boolean", "string", "rgb",      "srgb",
                                              "spectrum", "blackbody", "point",   "vector", "transform"};
   return tags;
-}
-
-// Approximate normal-incidence reflectance (F0) of a few metals in linear sRGB,
-// the values commonly tabulated for real-time rendering, for conductors given by
-// a material name instead of eta and k.
-const std::map<std::string, glm::vec3>& metal_reflectance() {
-  static const std::map<std::string, glm::vec3> metals = {{"ag", {0.95f, 0.93f, 0.88f}}, {"al", {0.91f, 0.92f, 0.92f}},
-                                                          {"au", {1.00f, 0.71f, 0.29f}}, {"cr", {0.55f, 0.56f, 0.55f}},
-                                                          {"cu", {0.95f, 0.64f, 0.54f}}, {"fe", {0.56f, 0.57f, 0.58f}}};
-  return metals;
 }
 
 class MitsubaLoader {
@@ -878,7 +878,9 @@ class MitsubaLoader {
 
   void load_top_emitter(pugi::xml_node node) {
     std::string type = attr(node, "type").value_or("");
-    if (type != "area") {
+    if (light_plugins().count(type)) {
+      load_light(node);
+    } else if (type != "area") {
       emitter(node);
     } else if (!node.attribute("id")) {
       warn(node, "emitter:area", "an area emitter outside a <shape> has no surface; ignored");
@@ -894,7 +896,8 @@ class MitsubaLoader {
                                                                 {"rectangle", &MitsubaLoader::shape_rectangle},
                                                                 {"cube", &MitsubaLoader::shape_cube},
                                                                 {"disk", &MitsubaLoader::shape_disk},
-                                                                {"sphere", &MitsubaLoader::shape_sphere}};
+                                                                {"sphere", &MitsubaLoader::shape_sphere},
+                                                                {"ply", &MitsubaLoader::shape_ply}};
     return plugins;
   }
 
@@ -928,7 +931,31 @@ class MitsubaLoader {
     if (!fs::is_regular_file(path)) fail(e.node, "cannot open OBJ file '" + path + "'");
     ObjData obj = read_obj(path, false);
     for (const std::string& w : obj.warnings) scene_.warnings.push_back(where(e.node) + ": " + w);
-    return std::move(obj.mesh);
+    TriMesh mesh = std::move(obj.mesh);
+    // Mitsuba flips v on loading (flip_tex_coords, default true; read_obj already did).
+    if (!get_bool(e, "flip_tex_coords", true))
+      for (glm::vec2& uv : mesh.uvs) uv.y = 1.0f - uv.y;
+    // face_normals discards the file's normals; without any, Mitsuba computes smooth ones.
+    if (get_bool(e, "face_normals", false)) mesh.normals.clear();
+    else if (mesh.normals.empty()) compute_vertex_normals(mesh);
+    return mesh;
+  }
+
+  TriMesh shape_ply(const Element& e) {
+    std::optional<std::string> name = get_string(e, "filename");
+    if (!name) fail(e.node, "<shape type=\"ply\"> needs a 'filename'");
+    std::string path = resolve(e.node, *name);
+    if (!fs::is_regular_file(path)) fail(e.node, "cannot open PLY file '" + path + "'");
+    PlyMesh ply = read_ply(path);
+    if (!ply.ignored.empty()) {
+      std::string list;
+      for (const std::string& n : ply.ignored) list += (list.empty() ? "" : ", ") + n;
+      warn(e.node, "ply-data", "PLY data of '" + path + "' not used: " + list);
+    }
+    // As for OBJ: face_normals discards the file's normals; without any, smooth ones.
+    if (get_bool(e, "face_normals", false)) ply.mesh.normals.clear();
+    else if (ply.mesh.normals.empty()) compute_vertex_normals(ply.mesh);
+    return std::move(ply.mesh);
   }
 
   TriMesh shape_rectangle(const Element&) { return make_rectangle(); }
@@ -941,7 +968,7 @@ class MitsubaLoader {
     return make_sphere(get_point(e, "center", glm::vec3(0.0f)), radius);
   }
 
-  // --- materials, BSDFs, emitters -----------------------------------------
+  // --- materials, BSDFs, textures -------------------------------------------
 
   // The material of a shape with this BSDF and emitter (either may be null), shared between shapes.
   uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node) {
@@ -955,10 +982,8 @@ class MitsubaLoader {
     glm::vec3 radiance = emitter_node ? emitter(emitter_node) : glm::vec3(0.0f);
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
 
-    Material m{};
-    m.albedo = {{b.albedo.x, b.albedo.y, b.albedo.z, 0}};
+    Material m = b.m;
     m.emission = {{radiance.x, radiance.y, radiance.z, 0}};
-    m.type = PSF_MATERIAL_DIFFUSE;
     // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
     m.two_sided = b.two_sided && !emits ? 1u : 0u;
     uint32_t index = uint32_t(scene_.materials.size());
@@ -972,10 +997,16 @@ class MitsubaLoader {
 
   using BsdfBuilder = Bsdf (MitsubaLoader::*)(const Element&);
 
-  // BSDFs the renderer reproduces exactly; every other type goes to approximate_bsdf.
+  // BSDFs the renderer reproduces (Mitsuba 3's semantics, kernels/bsdf.cl); every
+  // other type goes to approximate_bsdf.
   static const std::map<std::string, BsdfBuilder>& bsdf_plugins() {
-    static const std::map<std::string, BsdfBuilder> plugins = {{"diffuse", &MitsubaLoader::bsdf_diffuse},
-                                                               {"twosided", &MitsubaLoader::bsdf_twosided}};
+    static const std::map<std::string, BsdfBuilder> plugins = {
+        {"diffuse", &MitsubaLoader::bsdf_diffuse},          {"conductor", &MitsubaLoader::bsdf_conductor},
+        {"roughconductor", &MitsubaLoader::bsdf_conductor}, {"plastic", &MitsubaLoader::bsdf_plastic},
+        {"roughplastic", &MitsubaLoader::bsdf_plastic},     {"dielectric", &MitsubaLoader::bsdf_dielectric},
+        {"roughdielectric", &MitsubaLoader::bsdf_dielectric}, {"thindielectric", &MitsubaLoader::bsdf_dielectric},
+        {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
+        {"mask", &MitsubaLoader::bsdf_mask}};
     return plugins;
   }
 
@@ -991,67 +1022,402 @@ class MitsubaLoader {
     return bsdfs_.emplace(node.internal_object(), b).first->second;
   }
 
+  // One warning per property of `e` not in `known` (snake_case names).
+  void check_properties(const Element& e, std::initializer_list<const char*> known) {
+    for (const auto& [name, p] : e.props) {
+      bool ok = false;
+      for (const char* k : known) ok = ok || name == k;
+      if (!ok)
+        warn(p.node, "bsdf:" + e.type + ":" + name,
+             "property '" + name + "' of bsdf '" + e.type + "' is not supported; ignored");
+    }
+  }
+
+  // The only nested BSDF of a wrapper (twosided, bumpmap, mask).
+  pugi::xml_node nested_bsdf(const Element& e) {
+    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
+    if (nested.empty()) fail(e.node, "<bsdf type=\"" + e.type + "\"> needs a nested BSDF");
+    if (nested.size() > 1 && e.type != "twosided") fail(nested[1], "bsdf '" + e.type + "' takes one nested BSDF");
+    return nested[0];
+  }
+
+  // A colour parameter: a constant or a texture (texture index, `value` then the
+  // fallback used when the texture's file is missing).
+  struct ColorParam {
+    glm::vec3 value{0.0f};
+    uint32_t texture = PSF_NO_TEXTURE;
+  };
+
+  ColorParam color_param(const Element& e, const std::string& name, const glm::vec3& fallback) {
+    const Property* p = find(e, name);
+    if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
+      ColorParam c{fallback};
+      c.texture = texture(p->object, TextureUse::Color, "using " + fmt(fallback) + " for '" + name + "'");
+      return c;
+    }
+    return {get_color(e, name, ColorUse::Reflectance).value_or(fallback)};
+  }
+
+  // A colour parameter that cannot be textured: a texture gives a warning and its mean.
+  glm::vec3 constant_color(const Element& e, const std::string& name, const glm::vec3& fallback) {
+    ColorParam c = color_param(e, name, fallback);
+    if (c.texture == PSF_NO_TEXTURE) return c.value;
+    warn(find(e, name)->node, "bsdf:" + e.type + ":" + name + ":texture",
+         "a texture for '" + name + "' of bsdf '" + e.type + "' is not supported; using its mean colour");
+    return store_.mean(c.texture);
+  }
+
+  // An index of refraction: a number or one of Mitsuba's names ("bk7", "air", ...).
+  float get_ior(const Element& e, const std::string& name, float fallback) {
+    const Property* p = find(e, name);
+    if (!p) return fallback;
+    if (p->kind == Property::Kind::Number || p->kind == Property::Kind::Integer) {
+      if (!(p->number > 0.0)) fail(p->node, "'" + name + "' must be positive");
+      return float(p->number);
+    }
+    if (p->kind != Property::Kind::String) wrong_type(*p, name, "<float> or <string>");
+    std::optional<float> ior = ior_by_name(p->text);
+    if (!ior) fail(p->node, "unknown index of refraction '" + p->text + "'");
+    return *ior;
+  }
+
+  // Microfacet roughness (alpha, or alpha_u and alpha_v) and distribution into m.
+  void microfacet(const Element& e, Material& m, bool isotropic) {
+    const Property* a = find(e, "alpha");
+    const Property* au = find(e, "alpha_u");
+    const Property* av = find(e, "alpha_v");
+    if (a && (au || av)) fail(a->node, "give either 'alpha' or 'alpha_u' and 'alpha_v'");
+    if ((au != nullptr) != (av != nullptr)) fail((au ? au : av)->node, "give both 'alpha_u' and 'alpha_v'");
+    auto value = [&](const Property* p, const char* name) -> float {
+      if (!p) return 0.1f;
+      if (p->kind == Property::Kind::Object) {
+        warn(p->node, "bsdf:" + e.type + ":" + name + ":texture",
+             std::string("a texture for '") + name + "' is not supported; using 0.1");
+        return 0.1f;
+      }
+      return float(get_float(e, name, 0.1));
+    };
+    float alpha_u = a ? value(a, "alpha") : value(au, "alpha_u");
+    float alpha_v = a ? alpha_u : value(av, "alpha_v");
+    if (alpha_u < 0.0f || alpha_v < 0.0f) fail((a ? a : au)->node, "the roughness must not be negative");
+    if (isotropic && alpha_u != alpha_v) {
+      warn(au->node, "bsdf:" + e.type + ":anisotropic",
+           "bsdf '" + e.type + "' is isotropic; using alpha = sqrt(alpha_u alpha_v)");
+      alpha_u = alpha_v = std::sqrt(alpha_u * alpha_v);
+    }
+    m.alpha_u = std::max(alpha_u, 1e-4f);  // Mitsuba's lower bound
+    m.alpha_v = std::max(alpha_v, 1e-4f);
+    std::string distribution = lower(get_string(e, "distribution").value_or("beckmann"));
+    if (distribution == "beckmann") {
+      m.flags |= PSF_MATFLAG_BECKMANN;
+    } else if (distribution == "phong" || distribution == "as") {
+      warn(find(e, "distribution")->node, "bsdf:" + e.type + ":" + distribution,
+           "distribution '" + distribution + "' is not supported; using beckmann");
+      m.flags |= PSF_MATFLAG_BECKMANN;
+    } else if (distribution != "ggx") {
+      fail(find(e, "distribution")->node, "unknown distribution '" + distribution + "' (beckmann or ggx)");
+    }
+  }
+
   Bsdf bsdf_diffuse(const Element& e) {
+    check_properties(e, {"reflectance"});
+    ColorParam c = color_param(e, "reflectance", glm::vec3(0.5f));
     Bsdf b;
-    b.albedo = get_color(e, "reflectance", ColorUse::Reflectance).value_or(glm::vec3(0.5f));
+    b.m = diffuse_material(c.value);
+    b.m.tex_color = c.texture;
+    return b;
+  }
+
+  // conductor and roughconductor: eta, k from `material` (Mitsuba 3 default
+  // "none", a perfect mirror; 0.5 default "Cu") or given (eta 0, k 1 when one
+  // is missing, as Mitsuba 3), divided by ext_eta; specular_reflectance.
+  Bsdf bsdf_conductor(const Element& e) {
+    bool rough = e.type == "roughconductor";
+    if (rough)
+      check_properties(e, {"material", "eta", "k", "ext_eta", "specular_reflectance", "alpha", "alpha_u", "alpha_v",
+                           "distribution", "sample_visible"});
+    else
+      check_properties(e, {"material", "eta", "k", "ext_eta", "specular_reflectance"});
+    Bsdf b;
+    Material& m = b.m;
+    m = Material{};
+    m.type = rough ? PSF_MATERIAL_ROUGH_CONDUCTOR : PSF_MATERIAL_CONDUCTOR;
+    ColorParam spec = color_param(e, "specular_reflectance", glm::vec3(1.0f));
+    m.specular = {{spec.value.x, spec.value.y, spec.value.z, 0}};
+    m.tex_color = spec.texture;
+    std::optional<glm::vec3> eta = get_color(e, "eta", ColorUse::Unbounded);
+    std::optional<glm::vec3> k = get_color(e, "k", ColorUse::Unbounded);
+    glm::vec3 eta_v(0.0f), k_v(1.0f);  // material "none"
+    std::optional<std::string> metal = get_string(e, "material");
+    std::string name = metal.value_or(version_major_ >= 2 || eta || k ? "none" : "Cu");
+    if (name != "none" && !conductor_by_name(name, eta_v, k_v))
+      fail(find(e, "material") ? find(e, "material")->node : e.node, "unknown conductor material '" + name + "'");
+    if (eta) eta_v = *eta;
+    if (k) k_v = *k;
+    float ext = get_ior(e, "ext_eta", 1.000277f);
+    eta_v /= ext;
+    k_v /= ext;
+    m.eta = {{eta_v.x, eta_v.y, eta_v.z, 0}};
+    m.k = {{k_v.x, k_v.y, k_v.z, 0}};
+    if (rough) microfacet(e, m, false);
+    return b;
+  }
+
+  // plastic and roughplastic: int_ior (polypropylene) / ext_ior (air),
+  // diffuse_reflectance (0.5, texture), specular_reflectance (1), nonlinear.
+  Bsdf bsdf_plastic(const Element& e) {
+    bool rough = e.type == "roughplastic";
+    if (rough)
+      check_properties(e, {"int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance", "nonlinear", "alpha",
+                           "alpha_u", "alpha_v", "distribution", "sample_visible"});
+    else
+      check_properties(e, {"int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance", "nonlinear"});
+    Bsdf b;
+    Material& m = b.m;
+    m = Material{};
+    m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
+    float eta = get_ior(e, "int_ior", 1.49f) / get_ior(e, "ext_ior", 1.000277f);
+    if (rough && eta == 1.0f) fail(e.node, "the interior and exterior indices of refraction must differ");
+    ColorParam d = color_param(e, "diffuse_reflectance", glm::vec3(0.5f));
+    glm::vec3 s = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
+    m.albedo = {{d.value.x, d.value.y, d.value.z, 0}};
+    m.tex_color = d.texture;
+    m.specular = {{s.x, s.y, s.z, 0}};
+    m.eta = {{eta, 0, 0, 0}};
+    if (get_bool(e, "nonlinear", false)) m.flags |= PSF_MATFLAG_NONLINEAR;
+    if (rough) microfacet(e, m, true);
+    glm::vec3 dm = d.texture != PSF_NO_TEXTURE ? store_.mean(d.texture) : d.value;
+    finish_plastic(m, (dm.x + dm.y + dm.z) / 3.0f, (s.x + s.y + s.z) / 3.0f, store_);
+    return b;
+  }
+
+  // dielectric, roughdielectric, thindielectric: int_ior (bk7) / ext_ior (air),
+  // specular_reflectance and specular_transmittance (1).
+  Bsdf bsdf_dielectric(const Element& e) {
+    bool rough = e.type == "roughdielectric";
+    if (rough)
+      check_properties(e, {"int_ior", "ext_ior", "specular_reflectance", "specular_transmittance", "alpha", "alpha_u",
+                           "alpha_v", "distribution", "sample_visible"});
+    else
+      check_properties(e, {"int_ior", "ext_ior", "specular_reflectance", "specular_transmittance"});
+    Bsdf b;
+    Material& m = b.m;
+    m = Material{};
+    m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC
+                   : e.type == "thindielectric" ? PSF_MATERIAL_THIN_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
+    float eta = get_ior(e, "int_ior", 1.5046f) / get_ior(e, "ext_ior", 1.000277f);
+    glm::vec3 r = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
+    glm::vec3 t = constant_color(e, "specular_transmittance", glm::vec3(1.0f));
+    m.eta = {{eta, 1.0f / (eta * eta), 0, 0}};
+    m.specular = {{r.x, r.y, r.z, 0}};
+    m.transmittance = {{t.x, t.y, t.z, 0}};
+    if (rough) microfacet(e, m, false);
     return b;
   }
 
   Bsdf bsdf_twosided(const Element& e) {
+    check_properties(e, {});
     std::vector<pugi::xml_node> nested = objects(e, "bsdf");
-    if (nested.empty()) fail(e.node, "<bsdf type=\"twosided\"> needs a nested BSDF");
-    Bsdf b = bsdf(nested[0]);
-    if (nested.size() > 1) {
-      // Mitsuba 3: different front and back BSDFs; the renderer has one albedo for both sides.
-      b.albedo = 0.5f * (b.albedo + bsdf(nested[1]).albedo);
-      warn(e.node, "bsdf:twosided2", "twosided with separate front and back BSDFs; using their average albedo");
-    }
+    Bsdf b = bsdf(nested_bsdf(e));
+    if (nested.size() > 1)
+      warn(e.node, "bsdf:twosided2", "twosided with separate front and back BSDFs is not supported; the front one "
+                                     "is used on both sides");
+    uint32_t type = b.m.type;
+    if (type == PSF_MATERIAL_DIELECTRIC || type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+        type == PSF_MATERIAL_THIN_DIELECTRIC)
+      warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
     b.two_sided = true;
     b.name.clear();
     return b;
   }
 
-  // A diffuse stand-in for a BSDF type the renderer does not support yet:
-  // wrappers (mask, bumpmap, coating, blendbsdf, ...) average their nested BSDFs;
-  // conductors reflect their normal-incidence Fresnel reflectance; otherwise the
-  // first of reflectance, diffuse_reflectance, specular_reflectance, else 0.5 grey.
-  Bsdf approximate_bsdf(const Element& e) {
-    Bsdf b;
-    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
-    if (!nested.empty()) {
-      b.albedo = glm::vec3(0.0f);
-      for (pugi::xml_node n : nested) {
-        const Bsdf& inner = bsdf(n);
-        b.albedo += inner.albedo / float(nested.size());
-        b.two_sided = b.two_sided || inner.two_sided;
-      }
-    } else if (e.type == "conductor" || e.type == "roughconductor") {
-      b.albedo = conductor_albedo(e);
-    } else {
-      std::optional<glm::vec3> c;
-      for (const char* name : {"reflectance", "diffuse_reflectance", "specular_reflectance"})
-        if (!c) c = get_color(e, name, ColorUse::Reflectance);
-      b.albedo = c.value_or(glm::vec3(0.5f));
+  // bumpmap: the nested BSDF with its shading normal perturbed by the gradient of
+  // a height texture (luminance) times `scale` (Mitsuba 3; Mitsuba 0.5 scales
+  // with a `scale` texture around the bitmap).
+  Bsdf bsdf_bumpmap(const Element& e) {
+    check_properties(e, {"scale", "map", "texture"});
+    Bsdf b = bsdf(nested_bsdf(e));
+    std::vector<pugi::xml_node> textures = objects(e, "texture");
+    if (textures.empty()) fail(e.node, "<bsdf type=\"bumpmap\"> needs a height texture");
+    pugi::xml_node tex = textures[0];
+    float scale = float(get_float(e, "scale", 1.0));
+    if (attr(tex, "type").value_or("") == "scale") {
+      Element s = parse_element(tex);
+      scale *= float(get_float(s, "scale", 1.0));
+      std::vector<pugi::xml_node> inner = objects(s, "texture");
+      if (inner.empty()) fail(tex, "<texture type=\"scale\"> needs a nested texture");
+      tex = inner[0];
     }
-    warn(e.node, "bsdf:" + e.type,
-         "bsdf '" + e.type + "' is not supported yet; approximated by diffuse reflectance " + fmt(b.albedo));
+    if (b.m.tex_bump != PSF_NO_TEXTURE)
+      warn(e.node, "bsdf:bumpmap-nested", "nested bump maps are not supported; the outer one is used");
+    uint32_t index = texture(tex, TextureUse::Height, "no bump mapping");
+    if (index != PSF_NO_TEXTURE) {
+      b.m.tex_bump = index;
+      b.m.bump_scale = scale;
+    }
+    b.name.clear();
     return b;
   }
 
-  // R0 = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2) per channel, times specular_reflectance.
-  glm::vec3 conductor_albedo(const Element& e) {
-    glm::vec3 specular = get_color(e, "specular_reflectance", ColorUse::Reflectance).value_or(glm::vec3(1.0f));
-    std::optional<glm::vec3> eta = get_color(e, "eta", ColorUse::Unbounded);
-    std::optional<glm::vec3> k = get_color(e, "k", ColorUse::Unbounded);
-    if (eta && k) {
-      glm::vec3 r0 = ((*eta - 1.0f) * (*eta - 1.0f) + *k * *k) / ((*eta + 1.0f) * (*eta + 1.0f) + *k * *k);
-      return glm::clamp(r0 * specular, 0.0f, 1.0f);
+  // mask: the nested BSDF cut out where the opacity (a constant or a texture:
+  // its alpha channel, else luminance; default 0.5) is low: hits are kept with
+  // probability opacity during ray traversal (kernels/raycast.cl).
+  Bsdf bsdf_mask(const Element& e) {
+    check_properties(e, {"opacity"});
+    Bsdf b = bsdf(nested_bsdf(e));
+    const Property* p = find(e, "opacity");
+    float opacity = 0.5f;
+    uint32_t index = PSF_NO_TEXTURE;
+    if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
+      opacity = 1.0f;
+      index = texture(p->object, TextureUse::Opacity, "opaque");
+    } else if (p) {
+      glm::vec3 c = get_color(e, "opacity", ColorUse::Reflectance).value_or(glm::vec3(0.5f));
+      if (c.x != c.y || c.y != c.z)
+        warn(p->node, "bsdf:mask:rgb", "a coloured opacity is not supported; using its mean");
+      opacity = (c.x + c.y + c.z) / 3.0f;
     }
-    std::string metal = lower(get_string(e, "material").value_or(version_major_ >= 2 ? "none" : "cu"));
-    if (metal == "none") return specular;
-    auto it = metal_reflectance().find(metal);
-    return specular * (it != metal_reflectance().end() ? it->second : glm::vec3(0.9f));
+    if (b.m.flags & PSF_MATFLAG_MASKED)
+      warn(e.node, "bsdf:mask-nested", "nested masks are not supported; the outer one is used");
+    b.m.opacity = std::clamp(opacity, 0.0f, 1.0f);
+    b.m.tex_opacity = index;
+    if (b.m.opacity < 1.0f || index != PSF_NO_TEXTURE) b.m.flags |= PSF_MATFLAG_MASKED;
+    else b.m.flags &= ~PSF_MATFLAG_MASKED;
+    b.name.clear();
+    return b;
   }
+
+  // A diffuse stand-in for a BSDF type the renderer does not support yet:
+  // wrappers (coating, blendbsdf, ...) average their nested BSDFs' colour terms;
+  // otherwise the first of reflectance, diffuse_reflectance,
+  // specular_reflectance, else 0.5 grey.
+  Bsdf approximate_bsdf(const Element& e) {
+    Bsdf b;
+    glm::vec3 albedo(0.5f);
+    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
+    if (!nested.empty()) {
+      albedo = glm::vec3(0.0f);
+      for (pugi::xml_node n : nested) {
+        const Bsdf& inner = bsdf(n);
+        const Material& im = inner.m;
+        bool coloured = im.type == PSF_MATERIAL_DIFFUSE || im.type == PSF_MATERIAL_PLASTIC ||
+                        im.type == PSF_MATERIAL_ROUGH_PLASTIC;
+        const psf_float4& c = coloured ? im.albedo : im.specular;
+        albedo += glm::vec3(c.s[0], c.s[1], c.s[2]) / float(nested.size());
+        b.two_sided = b.two_sided || inner.two_sided;
+      }
+    } else {
+      std::optional<glm::vec3> c;
+      for (const char* name : {"reflectance", "diffuse_reflectance", "specular_reflectance"}) {
+        const Property* p = find(e, name);
+        if (!c && p && p->kind != Property::Kind::Object) c = get_color(e, name, ColorUse::Reflectance);
+      }
+      albedo = c.value_or(glm::vec3(0.5f));
+    }
+    b.m = diffuse_material(albedo);
+    warn(e.node, "bsdf:" + e.type,
+         "bsdf '" + e.type + "' is not supported yet; approximated by diffuse reflectance " + fmt(albedo));
+    return b;
+  }
+
+  // A <texture> element loaded for `use` (memoised): bitmap or checkerboard.
+  // A bitmap whose file is missing (also ignoring case) gives a warning naming
+  // `fallback` and PSF_NO_TEXTURE; one that cannot be decoded is an error.
+  uint32_t texture(pugi::xml_node node, TextureUse use, const std::string& fallback) {
+    auto key = std::make_pair(node.internal_object(), int(use));
+    auto cached = textures_.find(key);
+    if (cached != textures_.end()) return cached->second;
+    Element e = parse_element(node);
+    TextureDesc d;
+    d.use = use;
+    // The uv transform: Mitsuba 3's to_uv, Mitsuba 0.5's uscale, vscale, uoffset, voffset.
+    glm::mat4 to_uv = get_transform(e, "to_uv");
+    glm::vec2 uv_scale(float(get_float(e, "uscale", 1.0)), float(get_float(e, "vscale", 1.0)));
+    glm::vec2 uv_offset(float(get_float(e, "uoffset", 0.0)), float(get_float(e, "voffset", 0.0)));
+    d.uv_u = glm::vec3(to_uv[0][0], to_uv[1][0], to_uv[3][0]) * uv_scale.x + glm::vec3(0, 0, uv_offset.x);
+    d.uv_v = glm::vec3(to_uv[0][1], to_uv[1][1], to_uv[3][1]) * uv_scale.y + glm::vec3(0, 0, uv_offset.y);
+    uint32_t index = PSF_NO_TEXTURE;
+    if (e.type == "bitmap") {
+      for (const auto& [name, p] : e.props) {
+        static const std::set<std::string> known = {"filename", "filter_type", "wrap_mode", "wrap_mode_u",
+                                                    "wrap_mode_v", "raw", "gamma", "to_uv", "uscale", "vscale",
+                                                    "uoffset", "voffset", "format", "max_anisotropy", "cache"};
+        if (!known.count(name))
+          warn(p.node, "texture:bitmap:" + name, "property '" + name + "' of texture 'bitmap' is not supported; ignored");
+      }
+      std::optional<std::string> name = get_string(e, "filename");
+      if (!name) fail(node, "<texture type=\"bitmap\"> needs a 'filename'");
+      std::string filter = lower(get_string(e, "filter_type").value_or("bilinear"));
+      if (filter == "nearest") {
+        d.bilinear = false;
+      } else if (filter != "bilinear") {  // Mitsuba 0.5's ewa and trilinear filter mip maps
+        warn(find(e, "filter_type")->node, "texture:filter:" + filter,
+             "filter_type '" + filter + "' is not supported; using bilinear");
+      }
+      std::string wrap = lower(get_string(e, "wrap_mode").value_or(get_string(e, "wrap_mode_u").value_or("repeat")));
+      std::string wrap_v = lower(get_string(e, "wrap_mode_v").value_or(wrap));
+      if (wrap_v != wrap)
+        warn(node, "texture:wrap", "different wrap modes along u and v are not supported; using '" + wrap + "'");
+      if (wrap == "clamp") {
+        d.wrap = PSF_TEX_CLAMP;
+      } else if (wrap == "mirror") {
+        d.wrap = PSF_TEX_MIRROR;
+      } else if (wrap != "repeat") {
+        warn(node, "texture:wrap:" + wrap, "wrap mode '" + wrap + "' is not supported; using clamp");
+        d.wrap = PSF_TEX_CLAMP;
+      }
+      d.raw = get_bool(e, "raw", false);
+      if (find(e, "gamma")) {
+        double gamma = get_float(e, "gamma", 0.0);
+        if (gamma == 1.0) d.raw = true;
+        else if (gamma != -1.0 && gamma != 0.0)  // -1: sRGB, Mitsuba 0.5's default
+          warn(find(e, "gamma")->node, "texture:gamma", "gamma other than 1 (linear) or sRGB is not supported");
+      }
+      std::optional<std::string> file = find_file_nocase(resolve(node, *name));
+      if (!file && fs::path(*name).is_relative())  // as resolve(): else relative to the main file
+        file = find_file_nocase((fs::path(files_.front()->path).parent_path() / *name).string());
+      if (!file) {
+        warn(node, "texture:missing", "texture file '" + *name + "' not found; " + fallback);
+      } else {
+        d.path = *file;
+        try {
+          index = store_.image(d);
+        } catch (const std::exception& ex) {
+          fail(node, "texture '" + *file + "': " + ex.what());
+        }
+      }
+    } else if (e.type == "checkerboard") {
+      // Mitsuba's checkerboard: color0 where frac(u) and frac(v) are both below or
+      // both above 1/2, else color1; a 2 x 2 texture with nearest filtering.
+      check_texture_properties(e, {"color0", "color1", "to_uv", "uscale", "vscale", "uoffset", "voffset"});
+      glm::vec3 c0 = get_color(e, "color0", ColorUse::Reflectance).value_or(glm::vec3(0.4f));
+      glm::vec3 c1 = get_color(e, "color1", ColorUse::Reflectance).value_or(glm::vec3(0.2f));
+      d.bilinear = false;
+      std::vector<float> px;
+      for (const glm::vec3& c : {c0, c1, c1, c0}) {
+        float v = use == TextureUse::Color ? 0.0f : 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z;
+        if (use == TextureUse::Color) px.insert(px.end(), {c.x, c.y, c.z, 1.0f});
+        else px.insert(px.end(), {v, v, v, 1.0f});
+      }
+      index = store_.pixels(d, 2, 2, px);
+    } else {
+      warn(node, "texture:" + e.type, "texture '" + e.type + "' is not supported yet; " + fallback);
+    }
+    textures_.emplace(key, index);
+    return index;
+  }
+
+  void check_texture_properties(const Element& e, std::initializer_list<const char*> known) {
+    for (const auto& [name, p] : e.props) {
+      bool ok = false;
+      for (const char* k : known) ok = ok || name == k;
+      if (!ok)
+        warn(p.node, "texture:" + e.type + ":" + name,
+             "property '" + name + "' of texture '" + e.type + "' is not supported; ignored");
+    }
+  }
+
+  // --- emitters -------------------------------------------------------------
 
   using EmitterBuilder = glm::vec3 (MitsubaLoader::*)(const Element&);
 
@@ -1080,6 +1446,148 @@ class MitsubaLoader {
     return get_color(e, "radiance", ColorUse::Radiance).value_or(glm::vec3(1.0f));
   }
 
+  // --- lights: point, spot, directional, constant, envmap ------------------
+
+  using LightBuilder = LightDesc (MitsubaLoader::*)(const Element&);
+
+  // Emitters that are not surfaces. Property names in snake_case: Mitsuba 0.5's
+  // cutoffAngle, beamWidth, toWorld are cutoff_angle, beam_width, to_world.
+  static const std::map<std::string, LightBuilder>& light_plugins() {
+    static const std::map<std::string, LightBuilder> plugins = {{"point", &MitsubaLoader::light_point},
+                                                                {"spot", &MitsubaLoader::light_spot},
+                                                                {"directional", &MitsubaLoader::light_directional},
+                                                                {"constant", &MitsubaLoader::light_constant},
+                                                                {"envmap", &MitsubaLoader::light_envmap}};
+    return plugins;
+  }
+
+  void load_light(pugi::xml_node node) {
+    Element e = parse_element(node);
+    LightDesc l = (this->*light_plugins().at(e.type))(e);
+    l.source = where(node);
+    // Properties that only steer sampling do not change the image and are ignored quietly.
+    static const std::map<std::string, std::set<std::string>> known = {
+        {"point", {"intensity", "position", "to_world"}},
+        {"spot", {"intensity", "cutoff_angle", "beam_width", "to_world"}},
+        {"directional", {"irradiance", "direction", "to_world"}},
+        {"constant", {"radiance"}},
+        {"envmap", {"filename", "scale", "to_world", "cache", "mis_compensation"}}};
+    for (const auto& [name, prop] : e.props)
+      if (!known.at(e.type).count(name) && name != "sampling_weight")
+        warn(prop.node, "emitter:" + e.type + ":" + name,
+             "property '" + name + "' of emitter '" + e.type + "' is not supported yet; ignored");
+    for (pugi::xml_node o : e.objects)
+      if (!e.props.count(attr(o, "name").value_or("")))
+        warn(o, std::string(o.name()), "<" + std::string(o.name()) + "> in emitter '" + e.type + "' is not supported yet; ignored");
+    if (l.type == LightType::Constant || l.type == LightType::Envmap) {
+      if (has_environment_) {
+        warn(node, "emitter:" + e.type, "only one environment emitter is supported; this one is ignored");
+        return;
+      }
+      has_environment_ = true;
+    }
+    scene_.lights.push_back(std::move(l));
+  }
+
+  glm::vec3 emitted(const Element& e, const char* name) {
+    glm::vec3 c = get_color(e, name, ColorUse::Radiance).value_or(glm::vec3(1.0f));
+    if (glm::any(glm::lessThan(c, glm::vec3(0.0f)))) fail(find(e, name)->node, std::string("'") + name + "' is negative");
+    return c;
+  }
+
+  // A unit direction; `what` names it in the message when it is zero.
+  glm::vec3 unit(const glm::vec3& v, pugi::xml_node node, const std::string& what) const {
+    float len = glm::length(v);
+    if (!(len > 0.0f) || !std::isfinite(len)) fail(node, what + " is zero or not finite");
+    return v / len;
+  }
+
+  LightDesc light_point(const Element& e) {
+    LightDesc l;
+    l.type = LightType::Point;
+    l.color = emitted(e, "intensity");
+    if (find(e, "position") && find(e, "to_world"))
+      fail(find(e, "position")->node, "give either 'position' or 'to_world', not both");
+    l.position = find(e, "position") ? get_point(e, "position", glm::vec3(0.0f))
+                                     : glm::vec3(get_transform(e, "to_world") * glm::vec4(0, 0, 0, 1));
+    return l;
+  }
+
+  LightDesc light_spot(const Element& e) {
+    LightDesc l;
+    l.type = LightType::Spot;
+    l.color = emitted(e, "intensity");
+    glm::mat4 m = get_transform(e, "to_world");
+    l.position = glm::vec3(m * glm::vec4(0, 0, 0, 1));
+    l.direction = unit(glm::mat3(m) * glm::vec3(0, 0, 1), e.node, "the spot's axis (to_world applied to +z)");
+    double cutoff = get_float(e, "cutoff_angle", 20.0);
+    double beam = get_float(e, "beam_width", cutoff * 0.75);
+    if (!(cutoff > 0.0 && cutoff <= 180.0)) fail(find(e, "cutoff_angle")->node, "cutoff_angle must lie in (0, 180] degrees");
+    if (!(beam >= 0.0)) fail(find(e, "beam_width")->node, "beam_width must not be negative");
+    l.cutoff_angle = float(glm::radians(cutoff));
+    l.beam_width = float(glm::radians(std::min(beam, cutoff)));
+    return l;
+  }
+
+  LightDesc light_directional(const Element& e) {
+    LightDesc l;
+    l.type = LightType::Directional;
+    l.color = emitted(e, "irradiance");
+    if (find(e, "direction") && find(e, "to_world"))
+      fail(find(e, "direction")->node, "give either 'direction' or 'to_world', not both");
+    if (const Property* d = find(e, "direction")) {
+      l.direction = unit(get_point(e, "direction", glm::vec3(0, 0, 1)), d->node, "'direction'");
+    } else {
+      l.direction = unit(glm::mat3(get_transform(e, "to_world")) * glm::vec3(0, 0, 1), e.node,
+                         "the light's direction (to_world applied to +z)");
+    }
+    return l;
+  }
+
+  LightDesc light_constant(const Element& e) {
+    LightDesc l;
+    l.type = LightType::Constant;
+    l.color = emitted(e, "radiance");
+    return l;
+  }
+
+  LightDesc light_envmap(const Element& e) {
+    LightDesc l;
+    l.type = LightType::Envmap;
+    std::optional<std::string> name = get_string(e, "filename");
+    if (!name) fail(e.node, "<emitter type=\"envmap\"> needs a 'filename'");
+    std::string path = resolve(e.node, *name);
+    EnvImage img;
+    try {
+      img = read_env_image(path);
+    } catch (const SceneError& err) {
+      fail(find(e, "filename")->node, err.what());
+    }
+    if (img.negative)
+      warn(e.node, "emitter:envmap:negative",
+           std::to_string(img.negative) + " negative values in '" + path + "' were set to 0");
+    l.width = img.width;
+    l.height = img.height;
+    l.texels = std::move(img.rgb);
+    double scale = get_float(e, "scale", 1.0);
+    if (!(scale >= 0.0)) fail(find(e, "scale")->node, "scale must not be negative");
+    l.color = glm::vec3(float(scale));
+    // The map's frame: the rotation part of to_world. A uniform scale is divided
+    // out; anything else is made orthonormal (Gram-Schmidt) with a warning.
+    glm::mat3 m(get_transform(e, "to_world"));
+    glm::vec3 x = m[0], y = m[1];
+    bool orthogonal = std::abs(glm::dot(glm::normalize(x), glm::normalize(y))) < 1e-4f &&
+                      std::abs(glm::dot(glm::normalize(x), glm::normalize(m[2]))) < 1e-4f &&
+                      std::abs(glm::dot(glm::normalize(y), glm::normalize(m[2]))) < 1e-4f;
+    x = unit(x, e.node, "to_world's x axis");
+    y = unit(y - glm::dot(y, x) * x, e.node, "to_world's y axis");
+    glm::vec3 z = glm::cross(x, y);
+    if (glm::dot(z, m[2]) < 0.0f) z = -z;  // keep a mirroring to_world mirrored
+    if (!orthogonal) warn(e.node, "emitter:envmap:to_world", "the envmap's to_world is not a rotation; using its orthonormalised axes");
+    l.to_world = glm::mat3(x, y, z);
+    return l;
+  }
+
   // --- state ----------------------------------------------------------------
 
   Scene scene_;                                                        // the result
@@ -1089,11 +1597,14 @@ class MitsubaLoader {
   std::map<std::string, pugi::xml_node> ids_;                          // id -> element
   std::set<std::string> warned_;                                       // "file:line plugin" already warned about
   std::map<const void*, Bsdf> bsdfs_;                                  // BSDF element -> built BSDF
+  TextureStore store_{scene_};                                         // scene_'s textures and texels
+  std::map<std::pair<const void*, int>, uint32_t> textures_;           // (texture element, use) -> texture
   std::set<const void*> in_progress_;                                  // BSDFs being built (cycle check)
   std::map<const void*, glm::vec3> emitters_;                          // emitter element -> radiance
   std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
+  bool has_environment_ = false;                                       // an envmap or constant emitter was loaded
 };
 
 }  // namespace

@@ -1,6 +1,6 @@
 // Wavefront OBJ loading with tinyobjloader: used by <shape type="obj"> in Mitsuba
-// scenes (geometry only) and by load_scene("x.obj") (geometry, MTL Kd/Ke, a
-// camera framing the model).
+// scenes (geometry, vertex normals and uvs) and by load_scene("x.obj") (the same,
+// MTL materials mapped onto the BSDFs with their textures, a camera framing the model).
 //
 // tinyobjloader is asked not to triangulate: its triangulation reads vertex
 // positions before indices are range-checked, and Mitsuba triangulates polygons
@@ -8,7 +8,10 @@
 #include <tiny_obj_loader.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
+#include <unordered_map>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +19,7 @@
 #include <sstream>
 
 #include "scene/loaders.h"
+#include "scene/materials.h"
 
 namespace psf::detail {
 namespace {
@@ -127,8 +131,10 @@ ObjData read_obj(const std::string& path, bool with_materials) {
     // The end-of-file index bounds messages are replaced by the exact check below;
     // without an MTL library, usemtl lines are expected not to resolve.
     bool about_materials = line.find("aterial") != std::string::npos || line.find("mtl") != std::string::npos;
+    // "Both d and Tr defined ... use d": d is what the material mapping reads, nothing is lost.
+    bool d_and_tr = line.find("Both `d` and `Tr`") != std::string::npos;
     if (line.empty() || line == "." || line.find("indices out of bounds") != std::string::npos ||
-        (!with_materials && about_materials))
+        (!with_materials && about_materials) || d_and_tr)
       continue;
     std::string message = path + ": " + line;
     if (std::find(data.warnings.begin(), data.warnings.end(), message) == data.warnings.end())
@@ -136,7 +142,23 @@ ObjData read_obj(const std::string& path, bool with_materials) {
   }
 
   const size_t num_vertices = attrib.vertices.size() / 3;
-  std::vector<int64_t> remap(num_vertices, -1);
+  const size_t num_uvs = attrib.texcoords.size() / 2;
+  const size_t num_normals = attrib.normals.size() / 3;
+  // One vertex per distinct (position, uv, normal) index triple, as Mitsuba's OBJ loader.
+  struct TripleHash {
+    size_t operator()(const std::array<int, 3>& a) const {
+      return size_t(uint32_t(a[0])) * 0x9E3779B97F4A7C15ull ^ size_t(uint32_t(a[1] + 1)) * 0xC2B2AE3D27D4EB4Full ^
+             size_t(uint32_t(a[2] + 1)) * 0x165667B19E3779F9ull;
+    }
+  };
+  std::unordered_map<std::array<int, 3>, uint32_t, TripleHash> remap;
+  std::vector<std::array<int, 3>> corners;  // the triple of each new vertex
+  auto out_of_range = [&](size_t face_index, const char* what, int idx, size_t count) {
+    std::string given = idx < 0 ? std::to_string(idx - int(count)) : std::to_string(idx + 1);
+    throw SceneError(path, face_line(text, face_index),
+                     std::string("face ") + what + " index " + given + " out of range (the file has " +
+                         std::to_string(count) + " " + what + (count == 1 ? "" : "s") + ")");
+  };
   size_t face_index = 0;
   for (const tinyobj::shape_t& shape : shapes) {
     const tinyobj::mesh_t& mesh = shape.mesh;
@@ -145,19 +167,21 @@ ObjData read_obj(const std::string& path, bool with_materials) {
       size_t n = mesh.num_face_vertices[f];
       uint32_t corner[3] = {0, 0, 0};
       for (size_t k = 0; k < n; ++k) {
-        int idx = mesh.indices[offset + k].vertex_index;
+        const tinyobj::index_t& ix = mesh.indices[offset + k];
+        int idx = ix.vertex_index, ti = ix.texcoord_index, ni = ix.normal_index;
         if (idx < 0 || size_t(idx) >= num_vertices) {
           std::string given = idx < 0 ? std::to_string(idx - int(num_vertices)) : std::to_string(idx + 1);
           throw SceneError(path, face_line(text, face_index),
                            "face vertex index " + given + " out of range (the file has " +
                                std::to_string(num_vertices) + " vertices)");
         }
-        if (remap[size_t(idx)] < 0) {
-          remap[size_t(idx)] = int64_t(data.mesh.positions.size());
-          const float* p = &attrib.vertices[3 * size_t(idx)];
-          data.mesh.positions.emplace_back(p[0], p[1], p[2]);
-        }
-        uint32_t v = uint32_t(remap[size_t(idx)]);
+        if (ti >= 0 && size_t(ti) >= num_uvs) out_of_range(face_index, "texture coordinate", ti, num_uvs);
+        if (ni >= 0 && size_t(ni) >= num_normals) out_of_range(face_index, "normal", ni, num_normals);
+        if (ti < -1) ti = -1;
+        if (ni < -1) ni = -1;
+        auto [it, inserted] = remap.emplace(std::array<int, 3>{idx, ti, ni}, uint32_t(corners.size()));
+        if (inserted) corners.push_back(it->first);
+        uint32_t v = it->second;
         // Fan triangulation: (0, k-1, k) for k >= 2.
         if (k == 0) corner[0] = v;
         corner[1] = corner[2];
@@ -170,14 +194,93 @@ ObjData read_obj(const std::string& path, bool with_materials) {
       offset += n;
     }
   }
+  bool any_uv = false, any_normal = false;
+  for (const auto& c : corners) {
+    any_uv = any_uv || c[1] >= 0;
+    any_normal = any_normal || c[2] >= 0;
+  }
+  data.mesh.positions.reserve(corners.size());
+  for (const auto& c : corners) {
+    const float* p = &attrib.vertices[3 * size_t(c[0])];
+    data.mesh.positions.emplace_back(p[0], p[1], p[2]);
+    if (any_uv) {
+      // OBJ's v points up the image; Mitsuba's (and the texture table's) down.
+      const float nan = std::numeric_limits<float>::quiet_NaN();
+      data.mesh.uvs.push_back(c[1] >= 0 ? glm::vec2(attrib.texcoords[2 * size_t(c[1])],
+                                                    1.0f - attrib.texcoords[2 * size_t(c[1]) + 1])
+                                        : glm::vec2(nan));
+    }
+    if (any_normal) {
+      glm::vec3 nv(0.0f);
+      if (c[2] >= 0) {
+        const float* q = &attrib.normals[3 * size_t(c[2])];
+        nv = glm::vec3(q[0], q[1], q[2]);
+        float len = glm::length(nv);
+        nv = len > 0.0f && std::isfinite(len) ? nv / len : glm::vec3(0.0f);
+      }
+      data.mesh.normals.push_back(nv);
+    }
+  }
+
+  // Where each material is defined, for messages: the newmtl lines of the mtllib files.
+  std::map<std::string, std::pair<std::string, int>> defined_at;
+  if (with_materials) {
+    for_each_keyword_line(text, "mtllib", [&](int, const char* b, const char* e) {
+      std::istringstream names(std::string(b, e));
+      for (std::string name; names >> name;) {
+        std::string mtl = (std::filesystem::path(base_dir) / name).string();
+        std::ifstream m(mtl, std::ios::binary);
+        if (!m) continue;
+        std::string mtext((std::istreambuf_iterator<char>(m)), std::istreambuf_iterator<char>());
+        for_each_keyword_line(mtext, "newmtl", [&](int line, const char* nb, const char* ne) {
+          std::string mname(nb, ne);
+          while (!mname.empty() && std::isspace(static_cast<unsigned char>(mname.back()))) mname.pop_back();
+          size_t first = mname.find_first_not_of(" \t");
+          if (first != std::string::npos) defined_at.emplace(mname.substr(first), std::make_pair(mtl, line));
+          return true;
+        });
+      }
+      return true;
+    });
+  }
 
   for (const tinyobj::material_t& m : materials) {
     ObjMaterial om;
     om.name = m.name;
+    if (auto it = defined_at.find(m.name); it != defined_at.end()) {
+      om.mtl_file = it->second.first;
+      om.line = it->second.second;
+    }
     om.kd = {m.diffuse[0], m.diffuse[1], m.diffuse[2]};
+    om.ks = {m.specular[0], m.specular[1], m.specular[2]};
     om.ke = {m.emission[0], m.emission[1], m.emission[2]};
-    om.textured = !m.diffuse_texname.empty() || !m.emissive_texname.empty() || !m.alpha_texname.empty() ||
-                  !m.bump_texname.empty() || !m.normal_texname.empty();
+    om.tf = {m.transmittance[0], m.transmittance[1], m.transmittance[2]};
+    om.ns = m.shininess;
+    om.ni = m.ior;
+    om.d = m.dissolve;
+    om.illum = m.illum;
+    auto texture = [](const std::string& name, const tinyobj::texture_option_t& o) {
+      ObjTexture t;
+      t.file = name;
+      std::replace(t.file.begin(), t.file.end(), '\\', '/');
+      t.scale = {o.scale[0], o.scale[1]};
+      t.offset = {o.origin_offset[0], o.origin_offset[1]};
+      t.clamp = o.clamp;
+      t.bump_multiplier = o.bump_multiplier;
+      return t;
+    };
+    om.map_kd = texture(m.diffuse_texname, m.diffuse_texopt);
+    om.map_d = texture(m.alpha_texname, m.alpha_texopt);
+    om.map_bump = texture(m.bump_texname, m.bump_texopt);
+    // Ambient (Ka, map_Ka) has no meaning in a path tracer and is left out without a warning.
+    const std::pair<const std::string*, const char*> others[] = {
+        {&m.specular_texname, "map_Ks"},        {&m.specular_highlight_texname, "map_Ns"},
+        {&m.displacement_texname, "disp"},      {&m.reflection_texname, "refl"},
+        {&m.normal_texname, "norm"},            {&m.roughness_texname, "map_Pr"},
+        {&m.metallic_texname, "map_Pm"},        {&m.sheen_texname, "map_Ps"},
+        {&m.emissive_texname, "map_Ke"}};
+    for (const auto& [name, what] : others)
+      if (!name->empty()) om.unsupported.push_back(what);
     data.materials.push_back(om);
   }
   return data;
@@ -203,27 +306,133 @@ CameraDesc camera_framing(const std::vector<glm::vec3>& positions) {
   return cam;
 }
 
+namespace {
+
+// Heights of an MTL bump map (map_bump -bm m) are m * kObjBumpScale texture
+// widths: the MTL format gives no unit; 1/200 gives stone and brick textures
+// (Sponza) a plausible relief of a few millimetres per metre of texture.
+constexpr float kObjBumpScale = 1.0f / 200.0f;
+
+// A texture map's file next to the MTL file (case-insensitive lookup), loaded
+// for `use`; PSF_NO_TEXTURE with a warning when it is missing or unreadable.
+uint32_t obj_texture(const ObjMaterial& om, const ObjTexture& t, TextureUse use, const char* statement,
+                     const std::string& fallback, TextureStore& store, Scene& scene) {
+  std::string where = (om.mtl_file.empty() ? std::string("MTL") : om.mtl_file) +
+                      (om.line > 0 ? ":" + std::to_string(om.line) : std::string());
+  std::filesystem::path dir = std::filesystem::path(om.mtl_file).parent_path();
+  std::optional<std::string> file = find_file_nocase((dir / t.file).string());
+  if (!file) {
+    scene.warnings.push_back(where + ": " + statement + " '" + t.file + "' of material '" + om.name +
+                             "' not found; " + fallback);
+    return PSF_NO_TEXTURE;
+  }
+  TextureDesc d;
+  d.path = *file;
+  d.use = use;
+  d.wrap = t.clamp ? PSF_TEX_CLAMP : 0u;
+  // -s and -o act on OBJ's uv (v up); the table's v points down: v' = 1 - (s v_obj + o).
+  d.uv_u = {t.scale.x, 0.0f, t.offset.x};
+  d.uv_v = {0.0f, t.scale.y, 1.0f - t.scale.y - t.offset.y};
+  try {
+    return store.image(d);
+  } catch (const std::exception& e) {
+    throw SceneError(om.mtl_file.empty() ? *file : om.mtl_file, om.line,
+                     std::string(statement) + " '" + *file + "' of material '" + om.name + "': " + e.what());
+  }
+}
+
+float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
+
+// An MTL material as one of the renderer's BSDFs. There is no standard for
+// this; the usual reading of the illumination models:
+// - illum 4, 6, 7 or 9 (the refraction models): dielectric with IOR Ni (1.5 if
+//   Ni <= 1) and specular transmittance Tf; d, Kd and Ks are not used.
+// - otherwise Ks > 0: a glossy coating of roughness alpha = sqrt(2 / (Ns + 2))
+//   (Beckmann equivalent of the Phong exponent, Walter et al. 2007, Sec. 5.2):
+//   without diffuse colour (Kd = 0, no map_Kd) a conductor reflecting Ks
+//   (Mitsuba's material "none"), else roughplastic with diffuse Kd, specular Ks
+//   and IOR Ni (1.5 if Ni <= 1); alpha below 0.001 gives the smooth variants.
+// - otherwise diffuse Kd.
+// map_Kd replaces Kd (Kd stays the colour if the file is missing); d < 1 or
+// map_d make a mask of opacity d times map_d (its alpha channel, else
+// luminance); map_bump / bump a bump map (heights: luminance). Ke is emission.
+// OBJ has no one-sided surfaces: all but dielectrics scatter on both sides.
+Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) {
+  Material m{};
+  m.emission = {{om.ke.x, om.ke.y, om.ke.z, 0}};
+  std::string where = (om.mtl_file.empty() ? std::string("MTL") : om.mtl_file) +
+                      (om.line > 0 ? ":" + std::to_string(om.line) : std::string());
+  if (!om.unsupported.empty()) {
+    std::string list;
+    for (const std::string& u : om.unsupported) list += (list.empty() ? "" : ", ") + u;
+    scene.warnings.push_back(where + ": material '" + om.name + "': " + list + " not supported; ignored");
+  }
+  const float eta = om.ni > 1.0f ? om.ni : 1.5f;
+  const bool glass = om.illum == 4 || om.illum == 6 || om.illum == 7 || om.illum == 9;
+  if (glass) {
+    m.type = PSF_MATERIAL_DIELECTRIC;
+    m.eta = {{eta, 0, 0, 0}};
+    m.specular = {{1, 1, 1, 0}};
+    m.transmittance = {{om.tf.x, om.tf.y, om.tf.z, 0}};
+    return m;
+  }
+  m.two_sided = 1;
+  uint32_t kd_tex = PSF_NO_TEXTURE;
+  if (!om.map_kd.file.empty())
+    kd_tex = obj_texture(om, om.map_kd, TextureUse::Color, "map_Kd", "using Kd", store, scene);
+  glm::vec3 kd = om.kd;
+  const bool diffuse_colour = max3(kd) > 0.0f || kd_tex != PSF_NO_TEXTURE;
+  const float alpha = std::sqrt(2.0f / (std::max(om.ns, 0.0f) + 2.0f));
+  if (max3(om.ks) > 0.0f && !diffuse_colour) {
+    m.type = alpha < 1e-3f ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR;
+    m.specular = {{om.ks.x, om.ks.y, om.ks.z, 0}};
+    m.eta = {{0, 0, 0, 0}};  // eta 0 + i: reflectance 1 at every angle
+    m.k = {{1, 1, 1, 0}};
+    m.alpha_u = m.alpha_v = alpha;
+    m.flags |= PSF_MATFLAG_BECKMANN;
+  } else if (max3(om.ks) > 0.0f) {
+    m.type = alpha < 1e-3f ? PSF_MATERIAL_PLASTIC : PSF_MATERIAL_ROUGH_PLASTIC;
+    m.albedo = {{kd.x, kd.y, kd.z, 0}};
+    m.specular = {{om.ks.x, om.ks.y, om.ks.z, 0}};
+    m.eta = {{eta, 0, 0, 0}};
+    m.alpha_u = m.alpha_v = alpha;
+    m.flags |= PSF_MATFLAG_BECKMANN;
+    m.tex_color = kd_tex;
+    glm::vec3 dm = kd_tex != PSF_NO_TEXTURE ? store.mean(kd_tex) : kd;
+    finish_plastic(m, (dm.x + dm.y + dm.z) / 3.0f, (om.ks.x + om.ks.y + om.ks.z) / 3.0f, store);
+  } else {
+    m.type = PSF_MATERIAL_DIFFUSE;
+    m.albedo = {{kd.x, kd.y, kd.z, 0}};
+    m.tex_color = kd_tex;
+  }
+  if (om.d < 1.0f || !om.map_d.file.empty()) {
+    m.opacity = std::clamp(om.d, 0.0f, 1.0f);
+    if (!om.map_d.file.empty())
+      m.tex_opacity = obj_texture(om, om.map_d, TextureUse::Opacity, "map_d", "using d alone", store, scene);
+    if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
+  }
+  if (!om.map_bump.file.empty()) {
+    m.tex_bump = obj_texture(om, om.map_bump, TextureUse::Height, "map_bump", "no bump mapping", store, scene);
+    if (m.tex_bump != PSF_NO_TEXTURE) m.bump_scale = om.map_bump.bump_multiplier * kObjBumpScale;
+  }
+  return m;
+}
+
+}  // namespace
+
 Scene load_obj_scene(const std::string& path) {
   ObjData obj = read_obj(path, true);
   Scene scene;
   scene.warnings = obj.warnings;
+  TextureStore store(scene);
 
-  // OBJ has no notion of one-sided surfaces: every material scatters and emits on both sides.
   std::vector<uint32_t> material_index(obj.materials.size());
-  bool any_textured = false;
   for (size_t i = 0; i < obj.materials.size(); ++i) {
     const ObjMaterial& om = obj.materials[i];
-    Material m{};
-    m.albedo = {{om.kd.x, om.kd.y, om.kd.z, 0}};
-    m.emission = {{om.ke.x, om.ke.y, om.ke.z, 0}};
-    m.type = PSF_MATERIAL_DIFFUSE;
-    m.two_sided = 1;
     material_index[i] = uint32_t(scene.materials.size());
-    scene.materials.push_back(m);
+    scene.materials.push_back(obj_material(om, store, scene));
     scene.material_names.push_back(om.name);
-    any_textured = any_textured || om.textured;
   }
-  if (any_textured) scene.warnings.push_back(path + ": MTL texture maps are not supported yet; using Kd and Ke");
 
   uint32_t default_material = uint32_t(-1);
   std::vector<uint32_t> tri_material(obj.tri_material.size());
@@ -245,8 +454,11 @@ Scene load_obj_scene(const std::string& path) {
     tri_material[t] = default_material;
   }
 
+  // Vertex normals and uvs as the file gives them (no vn: flat shading, as the file asks for no smoothing).
   scene.positions = std::move(obj.mesh.positions);
   scene.triangles = std::move(obj.mesh.triangles);
+  scene.normals = std::move(obj.mesh.normals);
+  scene.uvs = std::move(obj.mesh.uvs);
   scene.tri_material = std::move(tri_material);
   scene.camera = camera_framing(scene.positions);
   scene.width = 512;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "scene/formats.h"
 #include "scene/loaders.h"
 
 namespace psf {
@@ -49,12 +50,15 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
   if (ext == ".xml") return detail::load_mitsuba(path, params);
-  if (ext == ".obj") {
-    Scene scene = detail::load_obj_scene(path);
-    if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for OBJ files");
-    return scene;
-  }
-  throw SceneError(path, 0, "unknown scene format '" + ext + "' (expected .xml or .obj)");
+  Scene scene;
+  if (ext == ".obj") scene = detail::load_obj_scene(path);
+  else if (ext == ".ply") scene = detail::load_ply_scene(path);
+  else if (ext == ".gltf" || ext == ".glb") scene = detail::load_gltf_scene(path);
+  else throw SceneError(path, 0, "unknown scene format '" + ext + "' (expected .xml, .obj, .ply, .gltf or .glb)");
+  if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for " + ext + " files");
+  // A bare mesh file without any emitter is lit by the default sky.
+  if (!detail::has_emitters(scene)) scene.lights.push_back(default_sky());
+  return scene;
 }
 
 }  // namespace psf

@@ -9,6 +9,7 @@
 #include <glm/glm.hpp>
 
 #include "psf_shared.h"
+#include "scene/light.h"
 
 namespace psf {
 
@@ -36,21 +37,38 @@ struct CameraDesc {
 struct Scene {
   std::vector<glm::vec3> positions;      // vertex positions in world space
   std::vector<glm::uvec3> triangles;     // vertex indices of each triangle
+  std::vector<glm::vec3> normals;        // per vertex shading normal (world space) or empty; (0,0,0): none, face normal
+  std::vector<glm::vec2> uvs;            // per vertex uv (Mitsuba's: v = 0 at the image top) or empty; NaN: none
   std::vector<uint32_t> tri_material;    // material index of each triangle
   std::vector<Material> materials;       // albedo and emission (psf_shared.h)
   std::vector<std::string> material_names;  // per material: bsdf id or MTL name, for messages and tests
+  std::vector<TextureInfo> textures;     // texture table; entry 0 (PSF_NO_TEXTURE) a placeholder; may be empty
+  std::vector<uint16_t> texels;          // every texture's RGBA texels as halfs (TextureInfo.offset counts texels)
   CameraDesc camera;                     // the sensor
   int width = 512;                       // film width in pixels
   int height = 512;                      // film height in pixels
   int max_depth = -1;                    // Mitsuba's max_depth: -1 unbounded, 1 emitters only, 2 direct light
   int default_spp = 0;                   // the scene's sampler sampleCount, 0 if none
+  std::vector<LightDesc> lights;         // point, spot, directional lights and the environment (emissive surfaces are materials)
   std::vector<std::string> warnings;     // unsupported features, each with file:line
 };
 
-// Loads a scene by file extension (.xml: Mitsuba; .obj: Wavefront OBJ).
+// Loads a scene by file extension (.xml: Mitsuba; .obj: Wavefront OBJ; .ply: PLY;
+// .gltf, .glb: glTF 2.0). Mesh files without any emitter get default_sky().
 // `params` are Mitsuba `$name` substitutions given on the command line (name=value).
 // Throws SceneError with file and line.
 Scene load_scene(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params = {});
+
+// The shading attributes of every triangle (psf_shared.h TriAttrib): the vertex
+// normals and uvs of `scene`, barycentric uvs where a vertex has none.
+std::vector<TriAttrib> triangle_attributes(const Scene& scene);
+
+// The materials as the device gets them: PSF_MATFLAG_NORMALS set on those with
+// a triangle with vertex normals in `attributes` (so that the others skip reading them).
+std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes);
+
+// Per triangle: whether its material is alpha-tested (PSF_MATFLAG_MASKED).
+std::vector<bool> masked_triangles(const Scene& scene);
 
 // Camera for the film: pinhole rays as in kernels/camera.cl.
 Camera make_camera(const CameraDesc& desc, int width, int height);

@@ -1,7 +1,9 @@
 // Tessellation of Mitsuba's analytic shapes (rectangle, cube, disk, sphere) in
 // their object-space conventions, and the transform-and-append step shared by
 // every shape loader.
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <glm/gtc/constants.hpp>
 
 #include "scene/loaders.h"
@@ -12,6 +14,7 @@ TriMesh make_rectangle() {
   TriMesh m;
   m.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
   m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  m.uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};  // Mitsuba's: (x, y) * 0.5 + 0.5
   return m;
 }
 
@@ -30,6 +33,7 @@ TriMesh make_cube() {
     m.positions.push_back(n - u + v);
     m.triangles.push_back({base, base + 1, base + 2});
     m.triangles.push_back({base, base + 2, base + 3});
+    m.uvs.insert(m.uvs.end(), {{0, 0}, {1, 0}, {1, 1}, {0, 1}});  // each face spans the texture
   }
   return m;
 }
@@ -50,19 +54,26 @@ TriMesh make_disk(int segments) {
 
 TriMesh make_sphere(const glm::vec3& center, float radius, int rings, int segments) {
   TriMesh m;
-  // Vertex (ring r, segment s) for 0 < r < rings; the poles are separate vertices.
-  m.positions.push_back(center + glm::vec3(0, 0, radius));
+  // Vertex (ring r, segment s) for 0 < r < rings and 0 <= s <= segments (the
+  // seam s = segments repeats s = 0 with u = 1); the poles are separate
+  // vertices. Normals are the sphere's, uv Mitsuba's (phi / 2pi, theta / pi).
+  auto add = [&](const glm::vec3& d, const glm::vec2& uv) {
+    m.positions.push_back(center + radius * d);
+    m.normals.push_back(d);
+    m.uvs.push_back(uv);
+  };
+  add({0, 0, 1}, {0.5f, 0.0f});
   for (int r = 1; r < rings; ++r) {
     float theta = glm::pi<float>() * float(r) / float(rings);
-    for (int s = 0; s < segments; ++s) {
-      float phi = 2 * glm::pi<float>() * float(s) / float(segments);
+    for (int s = 0; s <= segments; ++s) {
+      float phi = 2 * glm::pi<float>() * float(s % segments) / float(segments);
       glm::vec3 d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
-      m.positions.push_back(center + radius * d);
+      add(d, {float(s) / float(segments), float(r) / float(rings)});
     }
   }
   uint32_t south = uint32_t(m.positions.size());
-  m.positions.push_back(center - glm::vec3(0, 0, radius));
-  auto at = [&](int r, int s) { return uint32_t(1 + (r - 1) * segments + (s % segments)); };
+  add({0, 0, -1}, {0.5f, 1.0f});
+  auto at = [&](int r, int s) { return uint32_t(1 + (r - 1) * (segments + 1) + s); };
   for (int s = 0; s < segments; ++s) {
     // theta grows towards -z and phi counter-clockwise around +z: (r, s), (r+1, s), (r+1, s+1) faces outwards.
     m.triangles.push_back({0, at(1, s), at(1, s + 1)});
@@ -75,9 +86,54 @@ TriMesh make_sphere(const glm::vec3& center, float radius, int rings, int segmen
   return m;
 }
 
+void compute_vertex_normals(TriMesh& mesh) {
+  std::vector<glm::dvec3> sum(mesh.positions.size(), glm::dvec3(0.0));
+  for (const glm::uvec3& t : mesh.triangles) {
+    glm::dvec3 p[3] = {mesh.positions[t.x], mesh.positions[t.y], mesh.positions[t.z]};
+    glm::dvec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
+    double len = glm::length(n);
+    if (!(len > 0.0)) continue;
+    n /= len;
+    for (int k = 0; k < 3; ++k) {
+      glm::dvec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
+      double la = glm::length(a), lb = glm::length(b);
+      if (!(la > 0.0 && lb > 0.0)) continue;
+      double angle = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0, 1.0));
+      sum[t[k]] += n * angle;
+    }
+  }
+  mesh.normals.resize(mesh.positions.size());
+  for (size_t i = 0; i < sum.size(); ++i) {
+    double len = glm::length(sum[i]);
+    mesh.normals[i] = len > 0.0 ? glm::vec3(sum[i] / len) : glm::vec3(0.0f);
+  }
+}
+
 void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, uint32_t material, bool flip,
                  const std::string& file, int line) {
   uint32_t base = uint32_t(scene.positions.size());
+  // Shading normals and uvs: per vertex of the scene once any mesh has them;
+  // (0,0,0) and NaN mark the vertices of meshes without.
+  const bool has_normals = mesh.normals.size() == mesh.positions.size() && !mesh.positions.empty();
+  const bool has_uvs = mesh.uvs.size() == mesh.positions.size() && !mesh.positions.empty();
+  const glm::vec2 no_uv(std::numeric_limits<float>::quiet_NaN());
+  if (has_normals || !scene.normals.empty()) {
+    scene.normals.resize(base, glm::vec3(0.0f));
+    glm::mat3 normal_matrix = glm::transpose(glm::inverse(glm::mat3(to_world)));
+    for (size_t i = 0; i < mesh.positions.size(); ++i) {
+      glm::vec3 n(0.0f);
+      if (has_normals && glm::dot(mesh.normals[i], mesh.normals[i]) > 0.0f) {
+        n = normal_matrix * mesh.normals[i];
+        float len = glm::length(n);
+        n = len > 0.0f && std::isfinite(len) ? n / len * (flip ? -1.0f : 1.0f) : glm::vec3(0.0f);
+      }
+      scene.normals.push_back(n);
+    }
+  }
+  if (has_uvs || !scene.uvs.empty()) {
+    scene.uvs.resize(base, no_uv);
+    for (size_t i = 0; i < mesh.positions.size(); ++i) scene.uvs.push_back(has_uvs ? mesh.uvs[i] : no_uv);
+  }
   scene.positions.reserve(scene.positions.size() + mesh.positions.size());
   for (const glm::vec3& p : mesh.positions) {
     glm::vec4 w = to_world * glm::vec4(p, 1.0f);

@@ -1,0 +1,129 @@
+// Helpers shared by the benchmarks: scene paths, summaries of timed trials,
+// the report printed to stderr, and "--key=value" argument parsing.
+#pragma once
+#include <algorithm>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "cl/runtime.h"
+
+namespace bench {
+
+namespace fs = std::filesystem;
+
+// Min and median of timed trials (seconds).
+struct Timing {
+  double min_s = 0, median_s = 0;  // over the trials
+};
+
+inline Timing summarize(std::vector<double> s) {
+  std::sort(s.begin(), s.end());
+  Timing t;
+  if (s.empty()) return t;
+  t.min_s = s.front();
+  t.median_s = s.size() % 2 ? s[s.size() / 2] : 0.5 * (s[s.size() / 2 - 1] + s[s.size() / 2]);
+  return t;
+}
+
+// A file of the shared data folder: $PSF_SHARED, else ../shared beside the source tree.
+inline std::string shared_path(const std::string& rel) {
+  if (const char* env = std::getenv("PSF_SHARED"); env && *env) return (fs::path(env) / rel).string();
+  return (fs::path(PSF_SOURCE_DIR) / "../shared" / rel).lexically_normal().string();
+}
+
+// "living-room" for .../living-room/scene.xml, "cornell-box" for .../cornell-box.xml.
+inline std::string scene_name(const std::string& path) {
+  fs::path p(path);
+  std::string stem = p.stem().string();
+  if (stem == "scene" || stem == "sponza") stem = p.parent_path().filename().string();
+  return stem;
+}
+
+inline void report(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+inline void report(const char* fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  std::vfprintf(stderr, fmt, ap);
+  va_end(ap);
+}
+
+// Device time (ms) of the kernels in Runtime::stats() whose names start with one of `prefixes`.
+inline double kernel_ms(const std::map<std::string, psf::KernelTime>& stats, const std::vector<std::string>& prefixes) {
+  double ms = 0;
+  for (const auto& [name, t] : stats)
+    for (const auto& p : prefixes)
+      if (name.compare(0, p.size(), p) == 0) {
+        ms += t.ms;
+        break;
+      }
+  return ms;
+}
+
+// The path tracing stages of a batch (host/render.cpp) and the filter stages (host/filter.cpp).
+inline const std::vector<std::string>& pathtrace_kernels() {
+  static const std::vector<std::string> k = {"camera_rays", "raycast_", "shade", "store_tuples", "accumulate"};
+  return k;
+}
+inline const std::vector<std::string>& filter_kernels() {
+  static const std::vector<std::string> k = {"cell_keys",   "radix_", "clear_ranges", "cell_ranges",
+                                             "gather_tuples", "filter", "scatter_values"};
+  return k;
+}
+
+// "--key=value" arguments after Google Benchmark has taken its own.
+class Args {
+ public:
+  Args(int argc, char** argv, const char* program) : program_(program) {
+    for (int i = 1; i < argc; ++i) rest_.push_back(argv[i]);
+  }
+  // The value of --key=..., or nullptr; every match is consumed.
+  bool take(const char* key, std::string& out) {
+    bool found = false;
+    std::string k = std::string("--") + key + "=";
+    for (auto it = rest_.begin(); it != rest_.end();) {
+      if (it->compare(0, k.size(), k) == 0) {
+        out = it->substr(k.size());
+        found = true;
+        it = rest_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    return found;
+  }
+  std::vector<std::string> take_all(const char* key) {
+    std::vector<std::string> v;
+    std::string k = std::string("--") + key + "=";
+    for (auto it = rest_.begin(); it != rest_.end();) {
+      if (it->compare(0, k.size(), k) == 0) {
+        v.push_back(it->substr(k.size()));
+        it = rest_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    return v;
+  }
+  template <class T>
+  void take_number(const char* key, T& out) {
+    std::string s;
+    if (take(key, s)) out = T(std::stod(s));
+  }
+  // Reports arguments nobody took; false if there were any.
+  bool done() const {
+    for (const auto& a : rest_) std::fprintf(stderr, "%s: unknown argument '%s'\n", program_, a.c_str());
+    return rest_.empty();
+  }
+
+ private:
+  const char* program_;
+  std::vector<std::string> rest_;
+};
+
+}  // namespace bench

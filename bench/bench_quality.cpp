@@ -1,0 +1,339 @@
+// bench_quality: equal-time image quality of plain path tracing (pt), path space
+// filtering (psf, 1 averaging pass) and path space filtering with 2 passes (psf2),
+// as relMSE against a reference.
+//
+// relMSE = mean over pixels and channels of (x - y)^2 / (y^2 + 0.01) (x the
+// render, y the reference).
+// Reference: for the living-room, Tungsten's TungstenRender.exr (same camera and
+//   film; psf still approximates some of its materials, so a bias remains); for
+//   other scenes a long plain path tracing render of psf itself (--ref_spp, default
+//   4096, with another seed than the measured renders so their errors are
+//   independent), cached as <build>/quality/<scene>_ref_<spp>spp_<w>x<h>.exr
+//   (--ref_refresh=1 renders it again; delete it after renderer changes).
+// quality/<scene>/<method>/spp:<N>: one render of N spp (N = 1, 2, 4, ... up to
+//   the scene's maximum), its wall time (RenderResult::seconds, median of 3 renders
+//   for N <= 16) and relMSE: the convergence curve (bench/plot_quality.py plots it).
+// equal_time/<scene>/spp:<N> for N in --equal (default 4,16,64,1024): the wall
+//   time t of pt at N spp; psf and psf2 get the largest spp count s whose wall time
+//   stays within 1.1 t (first guess s = N t / t_method(N), then refined by measured
+//   times, up to 5 renders; 1 spp if even that takes longer); reported: s, the
+//   actual times, relMSE and relMSE(pt) / relMSE(method).
+// Goals: >= 10x lower relMSE than pt at equal time at 4 spp; never worse at 1024.
+// Side-by-side images (pt | psf | psf2 | reference, the whole image or a crop)
+// at the --crops spp counts go to --images (default <build>/quality).
+//
+// A scene is skipped when it has no light (e.g. the living-room while its envmap
+// is not supported) or no reference.
+//
+// Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
+//                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64]
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <set>
+#include <sstream>
+
+#include "bench_common.h"
+#include "image.h"
+#include "render.h"
+#include "scene/scene.h"
+
+namespace {
+
+using bench::report;
+
+struct Options {
+  std::vector<std::string> scenes;              // scene files; empty: the defaults
+  std::vector<int> equal = {4, 16, 64, 1024};   // pt spp counts of the equal-time rows
+  std::vector<int> crops = {4, 64};             // rows that get side-by-side images
+  int max_spp = 0;                              // 0: per scene (living-room 64, others 1024)
+  int ref_spp = 4096;                           // spp of a rendered reference
+  bool ref_refresh = false;                     // render the reference even when cached
+  std::string images;                           // folder of the PNGs
+};
+
+struct Method {
+  const char* name;  // pt, psf, psf2
+  bool filter;       // path space filtering on
+  int iterations;    // averaging passes
+};
+const Method kMethods[] = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}};
+
+struct Point {
+  int spp = 0;
+  double seconds = 0;  // wall time of the render (median)
+  double relmse = 0;
+  psf::Image image;
+};
+
+struct Bench {
+  std::string name, path;
+  psf::Scene scene;
+  psf::Image reference;
+  std::string reference_source;
+  int max_spp = 1024;
+  std::unique_ptr<psf::Renderer> renderer;
+  std::map<std::string, std::map<int, Point>> points;  // method -> spp -> result
+};
+
+double relmse(const psf::Image& x, const psf::Image& y) {
+  double sum = 0;
+  for (size_t i = 0; i < x.rgb.size(); ++i) {
+    double d = double(x.rgb[i]) - y.rgb[i];
+    sum += d * d / (double(y.rgb[i]) * y.rgb[i] + 0.01);
+  }
+  return x.rgb.empty() ? 0 : sum / x.rgb.size();
+}
+
+std::vector<int> parse_list(const std::string& s) {
+  std::vector<int> v;
+  std::stringstream in(s);
+  std::string item;
+  while (std::getline(in, item, ','))
+    if (!item.empty()) v.push_back(std::stoi(item));
+  return v;
+}
+
+psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t seed = 0) {
+  psf::RenderOptions o;
+  o.spp = spp;
+  o.seed = seed;
+  o.max_depth = b.scene.max_depth;
+  o.filter.enabled = m.filter;
+  o.filter.iterations = m.iterations;
+  return o;
+}
+
+// Renders `spp` with method m (median time of `repeats` renders; they are identical images).
+Point render(psf::Runtime& rt, Bench& b, const Method& m, int spp, int repeats) {
+  std::vector<double> t;
+  Point p;
+  p.spp = spp;
+  for (int k = 0; k < repeats; ++k) {
+    psf::RenderResult r = b.renderer->render(options(b, m, spp));
+    rt.finish();
+    t.push_back(r.seconds);
+    if (k == 0) p.image = std::move(r.image);
+  }
+  p.seconds = bench::summarize(t).median_s;
+  p.relmse = relmse(p.image, b.reference);
+  return p;
+}
+
+int repeats_for(int spp) { return spp <= 16 ? 3 : 1; }
+
+// Side by side, 4 px white gaps: pt | psf | psf2 | reference, the whole image when
+// it is at most 320 px wide, else a 320 x 240 crop about the centre.
+void write_side_by_side(const std::string& path, const std::vector<const psf::Image*>& images) {
+  const psf::Image& first = *images.front();
+  int cw = std::min(first.width, 320), ch = std::min(first.height, first.width <= 320 ? first.height : 240);
+  int x0 = (first.width - cw) / 2, y0 = (first.height - ch) / 2;
+  const int gap = 4;
+  psf::Image out;
+  out.width = int(images.size()) * cw + (int(images.size()) - 1) * gap;
+  out.height = ch;
+  out.rgb.assign(size_t(out.width) * out.height * 3, 1.0f);
+  for (size_t k = 0; k < images.size(); ++k)
+    for (int y = 0; y < ch; ++y)
+      for (int x = 0; x < cw; ++x)
+        for (int c = 0; c < 3; ++c)
+          out.rgb[(size_t(y) * out.width + k * (cw + gap) + x) * 3 + c] =
+              images[k]->rgb[(size_t(y0 + y) * images[k]->width + x0 + x) * 3 + c];
+  psf::write_png(path, out);
+}
+
+bool has_light(const psf::Scene& s) {
+  if (!s.lights.empty()) return true;
+  for (const auto& m : s.materials)
+    if (m.emission.s[0] > 0 || m.emission.s[1] > 0 || m.emission.s[2] > 0) return true;
+  return false;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  Options opt;
+  bench::Args args(argc, argv, "bench_quality");
+  opt.scenes = args.take_all("scene");
+  std::string s;
+  if (args.take("equal", s)) opt.equal = parse_list(s);
+  if (args.take("crops", s)) opt.crops = parse_list(s);
+  args.take_number("max_spp", opt.max_spp);
+  args.take_number("ref_spp", opt.ref_spp);
+  int refresh = 0;
+  args.take_number("ref_refresh", refresh);
+  opt.ref_refresh = refresh != 0;
+  opt.images = (bench::fs::path(PSF_BINARY_DIR) / "quality").string();
+  args.take("images", opt.images);
+  if (!args.done()) return 2;
+  if (opt.scenes.empty())
+    opt.scenes = {(bench::fs::path(PSF_SOURCE_DIR) / "scenes/cornell-box.xml").string(),
+                  bench::shared_path("scenes/living-room/scene.xml")};
+  const std::string cache = (bench::fs::path(PSF_BINARY_DIR) / "quality").string();
+  bench::fs::create_directories(cache);
+  bench::fs::create_directories(opt.images);
+
+  psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
+  psf::Runtime rt(dev);
+  benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
+  benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
+  benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
+  benchmark::AddCustomContext("relMSE", "mean over pixels and channels of (x - y)^2 / (y^2 + 0.01)");
+  report("device: %s / %s, driver %s, %s, %u compute units\n", dev.platform.c_str(), dev.name.c_str(),
+         dev.driver.c_str(), dev.version.c_str(), dev.compute_units);
+
+  std::vector<std::unique_ptr<Bench>> benches;
+  for (const std::string& path : opt.scenes) {
+    if (!bench::fs::exists(path)) {
+      report("skipped %s: not found\n", path.c_str());
+      continue;
+    }
+    auto b = std::make_unique<Bench>();
+    b->path = path;
+    b->name = bench::scene_name(path);
+    try {
+      b->scene = psf::load_scene(path);
+    } catch (const std::exception& e) {
+      report("skipped %s: %s\n", path.c_str(), e.what());
+      continue;
+    }
+    if (!has_light(b->scene)) {
+      report("skipped %s: no light psf can render (%zu loader warnings%s)\n", path.c_str(), b->scene.warnings.size(),
+             b->name == "living-room" ? "; its envmap is not supported yet" : "");
+      continue;
+    }
+    b->max_spp = opt.max_spp > 0 ? opt.max_spp : (b->name == "living-room" ? 64 : 1024);
+    b->renderer = std::make_unique<psf::Renderer>(rt, b->scene);
+    // The reference.
+    bench::fs::path tungsten = bench::fs::path(path).parent_path() / "TungstenRender.exr";
+    if (bench::fs::exists(tungsten)) {
+      b->reference = psf::read_exr(tungsten.string());
+      b->reference_source = tungsten.string() + " (Tungsten)";
+    } else {
+      std::string ref = cache + "/" + b->name + "_ref_" + std::to_string(opt.ref_spp) + "spp_" +
+                        std::to_string(b->scene.width) + "x" + std::to_string(b->scene.height) + ".exr";
+      if (bench::fs::exists(ref) && !opt.ref_refresh) {
+        b->reference = psf::read_exr(ref);
+        b->reference_source = ref + " (cached)";
+      } else {
+        report("%s: rendering the reference, %d spp plain path tracing...\n", b->name.c_str(), opt.ref_spp);
+        psf::RenderResult r = b->renderer->render(options(*b, kMethods[0], opt.ref_spp, 0x5eed1234u));
+        rt.finish();
+        psf::write_exr(ref, r.image, {{"psf:spp", std::to_string(opt.ref_spp)}, {"psf:seed", "0x5eed1234"}});
+        b->reference = std::move(r.image);
+        b->reference_source = ref + " (rendered in " + std::to_string(r.seconds) + " s)";
+      }
+    }
+    if (b->reference.width != b->scene.width || b->reference.height != b->scene.height) {
+      report("skipped %s: the reference is %dx%d, the film %dx%d\n", path.c_str(), b->reference.width,
+             b->reference.height, b->scene.width, b->scene.height);
+      continue;
+    }
+    report("%s: %dx%d, max depth %d, %zu loader warnings; reference %s; curve up to %d spp\n", b->name.c_str(),
+           b->scene.width, b->scene.height, b->scene.max_depth, b->scene.warnings.size(),
+           b->reference_source.c_str(), b->max_spp);
+    benchmark::AddCustomContext("reference_" + b->name, b->reference_source);
+    // Warm-up: first launches of every kernel.
+    for (const Method& m : kMethods) b->renderer->render(options(*b, m, 1));
+    rt.finish();
+    benches.push_back(std::move(b));
+  }
+
+  for (auto& bp : benches) {
+    Bench* b = bp.get();
+    for (const Method& m : kMethods)
+      for (int spp = 1; spp <= b->max_spp; spp *= 2) {
+        std::string bname = "quality/" + b->name + "/" + m.name + "/spp:" + std::to_string(spp);
+        benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, m, spp, bname](benchmark::State& state) {
+          Point p;
+          for (auto _ : state) {
+            p = render(rt, *b, m, spp, repeats_for(spp));
+            state.SetIterationTime(p.seconds);
+          }
+          state.counters["spp"] = spp;
+          state.counters["seconds"] = p.seconds;
+          state.counters["relMSE"] = p.relmse;
+          report("%s: %.3f s, relMSE %.5g\n", bname.c_str(), p.seconds, p.relmse);
+          b->points[m.name][spp] = std::move(p);
+        })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
+      }
+
+    for (int n : opt.equal) {
+      if (n > b->max_spp) continue;
+      std::string bname = "equal_time/" + b->name + "/spp:" + std::to_string(n);
+      benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, &opt, n, bname](benchmark::State& state) {
+        auto& pts = b->points;
+        if (!pts["pt"].count(n)) pts["pt"][n] = render(rt, *b, kMethods[0], n, repeats_for(n));
+        const Point& pt = pts["pt"][n];
+        std::map<std::string, Point> best;
+        for (auto _ : state) {
+          for (const Method& m : kMethods) {
+            if (!m.filter) continue;
+            auto& mp = pts[m.name];
+            if (!mp.count(n)) mp[n] = render(rt, *b, m, n, repeats_for(n));
+            // s: the largest spp count whose wall time stays within 1.1x pt's (at
+            // least 1 spp), from the time per spp at N, then refined by measuring.
+            double per_spp = mp[n].seconds / n;
+            int s = std::max(1, int(std::lround(pt.seconds / per_spp)));
+            std::set<int> visited;
+            for (int tries = 0; tries < 5 && visited.insert(s).second; ++tries) {
+              if (!mp.count(s)) mp[s] = render(rt, *b, m, s, repeats_for(s));
+              double ratio = mp[s].seconds / pt.seconds;
+              if (ratio > 1.1) s = std::min(s - 1, int(std::lround(s / ratio)));
+              else if (ratio < 0.9) s = std::max(s + 1, int(std::lround(s / ratio)));
+              else break;
+              if (s < 1) break;
+            }
+            // Among every render of this method so far (the curve's included).
+            int chosen = 0;
+            for (const auto& [spp, q] : mp)
+              if (q.seconds <= 1.1 * pt.seconds) chosen = std::max(chosen, spp);
+            if (chosen == 0) chosen = mp.begin()->first;  // even 1 spp takes longer than pt
+            best[m.name] = mp[chosen];
+          }
+          state.SetIterationTime(pt.seconds);
+        }
+        state.counters["pt_spp"] = n;
+        state.counters["pt_seconds"] = pt.seconds;
+        state.counters["pt_relMSE"] = pt.relmse;
+        std::string line;
+        char buf[256];
+        for (const Method& m : kMethods) {
+          if (!m.filter) continue;
+          const Point& q = best[m.name];
+          std::string k = m.name;
+          double gain = q.relmse > 0 ? pt.relmse / q.relmse : 0;
+          state.counters[k + "_spp"] = q.spp;
+          state.counters[k + "_seconds"] = q.seconds;
+          state.counters[k + "_relMSE"] = q.relmse;
+          state.counters[k + "_gain"] = gain;
+          std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s relMSE %.5g (%.2fx lower)", m.name, q.spp, q.seconds,
+                        q.relmse, gain);
+          line += buf;
+        }
+        report("%s: pt %d spp %.3f s relMSE %.5g%s\n", bname.c_str(), n, pt.seconds, pt.relmse, line.c_str());
+        double g1 = state.counters["psf_gain"], g2 = state.counters["psf2_gain"];
+        if (n == 4)
+          report("%s: goal >= 10x lower relMSE at 4 spp: psf %s, psf2 %s\n", bname.c_str(), g1 >= 10 ? "met" : "NOT met",
+                 g2 >= 10 ? "met" : "NOT met");
+        if (n == 1024)
+          report("%s: goal never worse at 1024 spp: psf %s, psf2 %s\n", bname.c_str(), g1 >= 1 ? "met" : "NOT met",
+                 g2 >= 1 ? "met" : "NOT met");
+        if (std::find(opt.crops.begin(), opt.crops.end(), n) != opt.crops.end()) {
+          std::string png = opt.images + "/quality_" + b->name + "_" + std::to_string(n) + "spp.png";
+          write_side_by_side(png, {&pt.image, &best["psf"].image, &best["psf2"].image, &b->reference});
+          report("%s: wrote %s (pt %d spp | psf %d spp | psf2 %d spp | reference)\n", bname.c_str(), png.c_str(), n,
+                 best["psf"].spp, best["psf2"].spp);
+        }
+      })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
+    }
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

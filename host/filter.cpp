@@ -1,0 +1,98 @@
+#include "filter.h"
+
+#include <algorithm>
+
+namespace psf {
+
+namespace {
+constexpr size_t kLocal = Runtime::kDefaultLocal;
+constexpr uint32_t kRadixBits = 4;
+}  // namespace
+
+uint32_t filter_key_bits(uint32_t count) {
+  uint32_t bits = 1;
+  while (bits < 30 && (uint64_t(1) << bits) < 2 * uint64_t(std::max(count, 1u))) ++bits;
+  return bits;
+}
+
+// Each pass swaps the buffer handles, so `keys`/`values` name the result.
+void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
+                uint32_t n, uint32_t bits) {
+  if (n <= 1 || bits == 0) return;
+  // Chunks of at least 256 pairs per work-item; at most 1024 work-items.
+  const uint32_t items = std::max(1u, std::min(1024u, (n + 255) / 256));
+  const uint32_t chunk = (n + items - 1) / items;
+  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * 16 * items);
+  uint32_t passes = (bits + kRadixBits - 1) / kRadixBits;
+  for (uint32_t pass = 0; pass < passes; ++pass) {
+    uint32_t shift = pass * kRadixBits;
+    rt.launch("radix_count", items, kLocal, keys, n, shift, items, chunk, counts);
+    rt.launch("radix_scan", 1, 1, counts, 16 * items);
+    rt.launch("radix_scatter", items, kLocal, keys, values, n, shift, items, chunk, counts, tmp_keys, tmp_values);
+    std::swap(keys, tmp_keys);
+    std::swap(values, tmp_values);
+  }
+}
+
+size_t PathSpaceFilter::bytes_per_tuple() {
+  // tuples (unsorted, and sorted as 3 float4 + x, y, z), keys and indices (2x each),
+  // values (2x), counts, ranges (2 uints for each of up to 4 cells per tuple).
+  return 2 * sizeof(FilterTuple) + 3 * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 4 * sizeof(float) +
+         sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
+}
+
+PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity) : rt_(rt), capacity_(capacity) {
+  size_t n = std::max(capacity, 1u);
+  size_t cells = size_t(1) << filter_key_bits(capacity);
+  tuples_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(FilterTuple));
+  sorted_position_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  // Padded: filter.cl reads eight candidates at a time past a cell's end.
+  sorted_x_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
+  sorted_y_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
+  sorted_z_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
+  sorted_normal_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  sorted_albedo_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  tmp_keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  tmp_indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  values_a_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  values_b_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  sorted_counts_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  ranges_ = rt.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint2));
+  max_count_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+}
+
+uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const cl::Buffer& vertices,
+                              const cl::Buffer& values, const cl::Buffer& filtered, const cl::Buffer& counts) {
+  FilterParams p = params;
+  const uint32_t n = p.count;
+  if (n == 0) return 0;
+  if (n > capacity_) throw std::invalid_argument("PathSpaceFilter: batch larger than its capacity");
+  p.key_bits = filter_key_bits(n);
+  const uint32_t cells = 1u << p.key_bits;
+
+  // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
+  // since paths without a vertex have the key 2^key_bits.
+  rt_.launch("cell_keys", n, kLocal, p, vertices, tuples_, keys_, indices_);
+  radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
+  rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
+  rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_);
+  rt_.launch("gather_tuples", n, kLocal, n, indices_, tuples_, values, sorted_position_, sorted_x_, sorted_y_,
+             sorted_z_, sorted_normal_, sorted_albedo_, values_a_);
+
+  // Averaging, each iteration over the previous one's result (Fig. 2 of the paper).
+  uint32_t zero = 0;
+  rt_.write(max_count_, &zero, sizeof(zero));
+  for (int it = 0; it < std::max(iterations, 1); ++it) {
+    rt_.launch("filter", n, kLocal, p, sorted_position_, sorted_x_, sorted_y_, sorted_z_, sorted_normal_,
+               sorted_albedo_, values_a_, ranges_, values_b_, sorted_counts_, max_count_);
+    std::swap(values_a_, values_b_);
+  }
+  rt_.launch("scatter_values", n, kLocal, n, indices_, values_a_, sorted_counts_, filtered, counts);
+  uint32_t max_count = 0;
+  rt_.read(max_count_, &max_count, sizeof(max_count));
+  return max_count;
+}
+
+}  // namespace psf

@@ -1,0 +1,60 @@
+// Path space filtering stage, host side (Keller, Dahm, Binder, "Path Space
+// Filtering", MCQMC 2014): cell keys -> radix sort -> cell ranges -> filter,
+// over the tuples of one batch; kernels in kernels/{tuples,cell_keys,sort,
+// cell_ranges,filter}.cl.
+#pragma once
+#include <cstdint>
+
+#include "cl/runtime.h"
+#include "psf_shared.h"
+
+namespace psf {
+
+struct FilterOptions {
+  bool enabled = true;            // --filter psf (true) or off
+  float alpha = 0.25f;            // r(n) = r0 / n^alpha (--alpha)
+  float r0 = 0.0f;                // global r0 (--r0); <= 0: per vertex from the footprint
+  float footprint_pixels = 3.0f;  // r0_i covers this many pixels across (--footprint-pixels)
+  int iterations = 1;             // averaging passes, each over the previous result (--iterations)
+  float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
+  float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)
+  bool cells27 = false;           // cells of size r searched 3x3x3 instead of 2r searched 2x2x2
+};
+
+// Bits of the cell keys for `count` tuples: a table of at least 2 * count cells.
+uint32_t filter_key_bits(uint32_t count);
+
+// Sorts `n` (key, value) pairs by the low `bits` bits of the keys, stably, using
+// `tmp_keys`/`tmp_values` of the same size; the handles are swapped as it goes,
+// so afterwards `keys` and `values` name the buffers holding the sorted pairs.
+void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
+                uint32_t n, uint32_t bits);
+
+class PathSpaceFilter {
+ public:
+  // Buffers for batches of up to `capacity` tuples.
+  PathSpaceFilter(Runtime& rt, uint32_t capacity);
+
+  // Filters `params.count` tuples: `vertices` (PathVertex, path order) and their
+  // values c (float4, path order) into `filtered` (c-bar, path order) and `counts`
+  // (tuples averaged, path order), `iterations` times. Returns the largest count.
+  uint32_t run(const FilterParams& params, int iterations, const cl::Buffer& vertices, const cl::Buffer& values,
+               const cl::Buffer& filtered, const cl::Buffer& counts);
+
+  // The stages' intermediate results of the last run, for tests.
+  const cl::Buffer& sorted_keys() const { return keys_; }
+  const cl::Buffer& sorted_indices() const { return indices_; }
+  const cl::Buffer& cell_ranges() const { return ranges_; }  // cl_uint2 (first, end) per key
+
+  // Bytes of device memory per tuple of capacity (for batch sizing).
+  static size_t bytes_per_tuple();
+
+ private:
+  Runtime& rt_;
+  uint32_t capacity_;
+  cl::Buffer tuples_, sorted_position_, sorted_x_, sorted_y_, sorted_z_, sorted_normal_, sorted_albedo_;
+  cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
+  cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_;
+};
+
+}  // namespace psf

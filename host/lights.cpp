@@ -1,0 +1,186 @@
+#include "lights.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace psf {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+float lum(const glm::vec3& c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+
+psf_float4 f4(const glm::vec3& v, float w = 0.0f) { return {{v.x, v.y, v.z, w}}; }
+
+// Radius of the bounding sphere of the scene's vertices (1 when there are none).
+float scene_radius(const Scene& scene) {
+  if (scene.positions.empty()) return 1.0f;
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (const glm::vec3& p : scene.positions) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  float r = 0.5f * glm::length(hi - lo);
+  return std::isfinite(r) && r > 0.0f ? r : 1.0f;
+}
+
+bool is_environment(const LightDesc& l) { return l.type == LightType::Constant || l.type == LightType::Envmap; }
+
+}  // namespace
+
+EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height) {
+  EnvDistribution d;
+  const size_t w = size_t(width), h = size_t(height);
+  d.marginal.assign(h + 1, 0.0f);
+  d.conditional.assign(h * (w + 1), 0.0f);
+  std::vector<double> row_sum(h, 0.0), f(w);
+  double total = 0.0;
+  for (size_t y = 0; y < h; ++y) {
+    double sin_theta = std::sin((double(y) + 0.5) / double(h) * kPi);
+    double run = 0.0;
+    for (size_t x = 0; x < w; ++x) {
+      const float* t = &rgb[(y * w + x) * 3];
+      f[x] = std::max(0.0, double(lum(glm::vec3(t[0], t[1], t[2])))) * sin_theta;
+      run += f[x];
+    }
+    float* cdf = &d.conditional[y * (w + 1)];
+    double acc = 0.0;
+    for (size_t x = 0; x < w; ++x) {
+      acc += f[x];
+      // A zero row gets a uniform cdf; it is never chosen by the marginal.
+      cdf[x + 1] = run > 0.0 ? float(acc / run) : float(double(x + 1) / double(w));
+    }
+    cdf[w] = 1.0f;
+    row_sum[y] = run;
+    total += run;
+  }
+  double acc = 0.0;
+  for (size_t y = 0; y < h; ++y) {
+    acc += row_sum[y];
+    d.marginal[y + 1] = total > 0.0 ? float(acc / total) : float(double(y + 1) / double(h));
+  }
+  d.marginal[h] = 1.0f;
+  d.integral = total / double(w * h);
+  return d;
+}
+
+LightTable build_light_table(const Scene& scene) {
+  LightTable t;
+  std::vector<double> power;
+
+  // Emissive triangles (area lights): every triangle of an emissive material.
+  for (size_t i = 0; i < scene.triangles.size(); ++i) {
+    const Material& m = scene.materials[scene.tri_material[i]];
+    glm::vec3 le(m.emission.s[0], m.emission.s[1], m.emission.s[2]);
+    if (lum(le) <= 0.0f) continue;
+    const auto& tri = scene.triangles[i];
+    glm::vec3 a = scene.positions[tri[0]], b = scene.positions[tri[1]], c = scene.positions[tri[2]];
+    float area = 0.5f * glm::length(glm::cross(b - a, c - a));
+    if (!(area > 0.0f) || !std::isfinite(area)) continue;
+    Emitter e{};
+    e.v0 = f4(a, area);
+    e.e1 = f4(b - a);
+    e.e2 = f4(c - a);
+    e.radiance = f4(le);
+    e.prim = uint32_t(i);
+    e.two_sided = m.two_sided;
+    e.type = PSF_EMITTER_TRIANGLE;
+    t.emitters.push_back(e);
+    power.push_back(kPi * double(area) * lum(le) * (m.two_sided ? 2.0 : 1.0));
+  }
+
+  const double radius = scene_radius(scene);
+  const double disk = kPi * radius * radius;
+  const LightDesc* env = nullptr;
+  for (const LightDesc& l : scene.lights) {
+    if (is_environment(l)) {
+      if (!env) env = &l;
+      continue;
+    }
+    Emitter e{};
+    double phi = 0.0;
+    e.radiance = f4(l.color);
+    if (l.type == LightType::Point) {
+      e.type = PSF_EMITTER_POINT;
+      e.v0 = f4(l.position);
+      phi = 4.0 * kPi * lum(l.color);
+    } else if (l.type == LightType::Spot) {
+      e.type = PSF_EMITTER_SPOT;
+      e.v0 = f4(l.position);
+      float cutoff = std::clamp(l.cutoff_angle, 0.0f, float(kPi));
+      float beam = std::clamp(l.beam_width, 0.0f, cutoff);
+      e.e1 = f4(glm::normalize(l.direction), std::cos(cutoff));
+      e.e2 = {{cutoff, cutoff > beam ? 1.0f / (cutoff - beam) : 0.0f, 0.0f, std::cos(beam)}};
+      phi = 2.0 * kPi * lum(l.color) * (1.0 - 0.5 * (std::cos(cutoff) + std::cos(beam)));
+    } else {
+      e.type = PSF_EMITTER_DIRECTIONAL;
+      e.e1 = f4(glm::normalize(l.direction));
+      phi = disk * lum(l.color);
+    }
+    if (!(phi > 0.0) || !std::isfinite(phi)) continue;
+    t.emitters.push_back(e);
+    power.push_back(phi);
+  }
+
+  // The environment: its data buffer and, if it emits, a table entry.
+  t.env_data.assign(1, 0.0f);
+  if (env) {
+    Environment& v = t.env;
+    v.present = 1;
+    glm::mat3 r = env->to_world;  // columns: the map's axes in world space; rows of its inverse
+    v.to_map0 = f4(r[0]);
+    v.to_map1 = f4(r[1]);
+    v.to_map2 = f4(r[2]);
+    v.scale = f4(env->color);
+    double integral = 0.0;  // of the luminance over the sphere
+    if (env->type == LightType::Constant) {
+      integral = 4.0 * kPi * lum(env->color);
+    } else {
+      const size_t n = size_t(env->width) * size_t(env->height);
+      if (env->width < 1 || env->height < 1 || env->texels.size() != 3 * n)
+        throw std::invalid_argument(env->source + ": environment map texels do not match its size");
+      v.width = uint32_t(env->width);
+      v.height = uint32_t(env->height);
+      std::vector<float> scaled(env->texels);
+      for (size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) scaled[3 * i + k] *= env->color[k];
+      EnvDistribution d = build_env_distribution(scaled, env->width, env->height);
+      // Solid angle of the (u, v) square: 2 pi^2 sin(theta); sum of f du dv times 2 pi^2.
+      integral = 2.0 * kPi * kPi * d.integral;
+      t.env_data = env->texels;
+      t.env_data.insert(t.env_data.end(), d.marginal.begin(), d.marginal.end());
+      t.env_data.insert(t.env_data.end(), d.conditional.begin(), d.conditional.end());
+    }
+    double phi = disk * integral;
+    if (phi > 0.0 && std::isfinite(phi)) {
+      Emitter e{};
+      e.type = PSF_EMITTER_ENVIRONMENT;
+      t.emitters.push_back(e);
+      power.push_back(phi);
+    }
+  }
+
+  // Selection by power: probabilities, cdf, and the per-triangle pdf for MIS.
+  double total = 0.0;
+  for (double p : power) total += p;
+  t.cdf.resize(t.emitters.size());
+  t.tri_light_pdf.assign(scene.triangles.size(), 0.0f);
+  double run = 0.0;
+  for (size_t i = 0; i < t.emitters.size(); ++i) {
+    float pmf = float(power[i] / total);
+    Emitter& e = t.emitters[i];
+    e.radiance.s[3] = pmf;
+    run += power[i];
+    t.cdf[i] = float(run / total);
+    if (e.type == PSF_EMITTER_TRIANGLE) t.tri_light_pdf[e.prim] = pmf / e.v0.s[3];
+    if (e.type == PSF_EMITTER_ENVIRONMENT) t.env.scale.s[3] = pmf;
+  }
+  if (!t.cdf.empty()) t.cdf.back() = 1.0f;
+  return t;
+}
+
+}  // namespace psf

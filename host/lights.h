@@ -1,0 +1,45 @@
+// Lights, host side: the next-event estimation table that kernels/emitter.cl
+// samples, built from a scene's emissive triangles and its LightDescs (point,
+// spot, directional, the environment).
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "psf_shared.h"
+#include "scene/scene.h"
+
+namespace psf {
+
+struct LightTable {
+  std::vector<Emitter> emitters;    // one entry per emissive triangle, delta light and the environment
+  std::vector<float> cdf;           // selection cdf over `emitters` (last entry 1), by power
+  std::vector<float> tri_light_pdf; // per scene triangle: selection probability / area if emissive, else 0
+  Environment env{};                // the environment (env.present 0: none)
+  std::vector<float> env_data;      // its texels and cdfs (layout in psf_shared.h); one 0 when none
+};
+
+// Builds the table. Each light is chosen in proportion to its power Phi
+// (luminance of the RGB values):
+//   triangle:    pi A L (twice that if two-sided)
+//   point:       4 pi I;  spot: 2 pi I (1 - (cos(cutoff) + cos(beam width)) / 2)
+//   directional: pi R^2 E;  environment: pi R^2 times the integral of L over the sphere,
+// with R the radius of the scene's bounding sphere (1 for an empty scene). The
+// first environment (Constant or Envmap) of scene.lights is the environment; the
+// loaders warn about further ones. Throws std::invalid_argument for an envmap
+// whose texel count does not match its size.
+LightTable build_light_table(const Scene& scene);
+
+// The environment's 2D piecewise-constant distribution over its texels:
+// f(x, y) = luminance(texel) * sin(theta_y), theta_y at the row's centre.
+// marginal: height + 1 entries from 0 to 1; conditional: height rows of width + 1.
+// A row whose sum is zero gets a uniform conditional cdf (it is never chosen).
+struct EnvDistribution {
+  std::vector<float> marginal;
+  std::vector<float> conditional;
+  double integral = 0.0;  // sum of f times the texel's (du, dv) area: the mean of f over [0,1]^2
+};
+EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height);
+
+}  // namespace psf

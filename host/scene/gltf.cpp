@@ -1,0 +1,468 @@
+// glTF 2.0 scenes (.gltf, .glb) through tinygltf (Debian's libtinygltf, a shared
+// library, so neither its JSON parser nor stb_image is compiled here).
+//
+// tinygltf parses the JSON, loads the buffers and decodes the images (stb_image);
+// everything read from the
+// buffers goes through read_accessor, which checks the accessor, buffer view and
+// buffer indices and that every element lies inside its buffer. Locations in
+// messages are JSON paths ("meshes[2].primitives[0]", "accessors[5][17]"), as
+// tinygltf keeps no line numbers.
+//
+// Conventions (glTF 2.0 specification): right-handed, +y up, metres; a node's
+// transform is its matrix, else T * R * S; cameras look along their local -z with
+// +y up; KHR_lights_punctual lights shine along local -z. Light intensities are
+// taken as they are (candela for point and spot, lux for directional) as
+// radiometric W/sr and W/m^2.
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/gtc/type_ptr.hpp>
+#include <set>
+
+#include "scene/formats.h"
+#include "scene/materials.h"
+
+namespace psf::detail {
+namespace {
+
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+class GltfLoader {
+ public:
+  explicit GltfLoader(const std::string& path) : path_(path) {}
+
+  Scene load() {
+    tinygltf::TinyGLTF loader;
+    std::string err, warn;
+    bool binary = lower(std::filesystem::path(path_).extension().string()) == ".glb";
+    bool ok = binary ? loader.LoadBinaryFromFile(&model_, &err, &warn, path_)
+                     : loader.LoadASCIIFromFile(&model_, &err, &warn, path_);
+    if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
+    for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
+
+    static const std::set<std::string> supported = {"KHR_lights_punctual", "KHR_materials_emissive_strength"};
+    for (const std::string& e : model_.extensionsUsed)
+      if (!supported.count(e)) warn_once("extension " + e + " is not supported; ignored");
+    if (!model_.animations.empty()) warn_once("animations are not supported; using the rest pose");
+    if (!model_.skins.empty()) warn_once("skins are not supported; meshes are placed by their nodes only");
+
+    scene_.width = 512;
+    scene_.height = 512;
+    materials_.assign(model_.materials.size(), uint32_t(-1));
+
+    std::vector<int> roots;
+    if (!model_.scenes.empty()) {
+      int s = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+      if (size_t(s) >= model_.scenes.size()) fail("scene", "defaultScene " + std::to_string(s) + " does not exist");
+      roots = model_.scenes[size_t(s)].nodes;
+    } else {
+      // No scenes: every node that is nobody's child is a root.
+      std::vector<bool> child(model_.nodes.size(), false);
+      for (const auto& n : model_.nodes)
+        for (int c : n.children)
+          if (c >= 0 && size_t(c) < child.size()) child[size_t(c)] = true;
+      for (size_t i = 0; i < child.size(); ++i)
+        if (!child[i]) roots.push_back(int(i));
+    }
+    std::vector<int> stack;
+    for (int r : roots) visit(r, glm::mat4(1.0f), stack, "scene.nodes");
+
+    if (!has_camera_) scene_.camera = camera_framing(scene_.positions);
+    return std::move(scene_);
+  }
+
+ private:
+  static std::string trim(std::string s) {
+    while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.pop_back();
+    return s;
+  }
+
+  static std::vector<std::string> split_lines(const std::string& s) {
+    std::vector<std::string> out;
+    size_t pos = 0;
+    while (pos < s.size()) {
+      size_t eol = s.find('\n', pos);
+      if (eol == std::string::npos) eol = s.size();
+      std::string line = trim(s.substr(pos, eol - pos));
+      if (!line.empty()) out.push_back(line);
+      pos = eol + 1;
+    }
+    return out;
+  }
+
+  [[noreturn]] void fail(const std::string& where, const std::string& message) const {
+    throw SceneError(path_, 0, where + ": " + message);
+  }
+
+  void warn_once(const std::string& message) {
+    std::string w = path_ + ": " + message;
+    if (std::find(scene_.warnings.begin(), scene_.warnings.end(), w) == scene_.warnings.end())
+      scene_.warnings.push_back(w);
+  }
+
+  // --- nodes ------------------------------------------------------------------
+
+  glm::mat4 local_transform(const tinygltf::Node& n, const std::string& where) const {
+    if (n.matrix.size() == 16) {
+      glm::mat4 m;
+      for (int i = 0; i < 16; ++i) glm::value_ptr(m)[i] = float(n.matrix[size_t(i)]);  // column-major, as glTF
+      return m;
+    }
+    if (!n.matrix.empty()) fail(where, "matrix must have 16 numbers");
+    glm::mat4 t(1.0f), r(1.0f), s(1.0f);
+    if (n.translation.size() == 3)
+      t = glm::translate(glm::mat4(1.0f), glm::vec3(n.translation[0], n.translation[1], n.translation[2]));
+    if (n.rotation.size() == 4)  // glTF quaternions are (x, y, z, w)
+      r = glm::mat4_cast(glm::normalize(glm::quat(float(n.rotation[3]), float(n.rotation[0]), float(n.rotation[1]),
+                                                  float(n.rotation[2]))));
+    if (n.scale.size() == 3) s = glm::scale(glm::mat4(1.0f), glm::vec3(n.scale[0], n.scale[1], n.scale[2]));
+    return t * r * s;
+  }
+
+  void visit(int index, const glm::mat4& parent, std::vector<int>& stack, const std::string& from) {
+    std::string where = "nodes[" + std::to_string(index) + "]";
+    if (index < 0 || size_t(index) >= model_.nodes.size()) fail(from, "node index " + std::to_string(index) + " out of range");
+    if (std::find(stack.begin(), stack.end(), index) != stack.end()) fail(where, "the node hierarchy has a cycle");
+    const tinygltf::Node& node = model_.nodes[size_t(index)];
+    glm::mat4 m = parent * local_transform(node, where);
+    for (int k = 0; k < 16; ++k)
+      if (!std::isfinite(glm::value_ptr(m)[k])) fail(where, "the transform is not finite");
+    if (node.mesh >= 0) add_mesh(node.mesh, m, where);
+    if (node.camera >= 0) add_camera(node.camera, m, where);
+    auto ext = node.extensions.find("KHR_lights_punctual");
+    if (ext != node.extensions.end() && ext->second.Has("light"))
+      add_light(ext->second.Get("light").GetNumberAsInt(), m, where);
+    stack.push_back(index);
+    for (int c : node.children) visit(c, m, stack, where + ".children");
+    stack.pop_back();
+  }
+
+  // --- buffers ------------------------------------------------------------------
+
+  // The elements of accessor `index` as doubles, `components` per element
+  // (normalised integers mapped to [0,1] / [-1,1] when the accessor says so).
+  std::vector<double> read_accessor(int index, int type, const std::string& from, bool allow_int, bool allow_float) {
+    std::string where = "accessors[" + std::to_string(index) + "]";
+    if (index < 0 || size_t(index) >= model_.accessors.size())
+      fail(from, "accessor index " + std::to_string(index) + " out of range");
+    const tinygltf::Accessor& a = model_.accessors[size_t(index)];
+    if (a.sparse.isSparse) fail(where, "sparse accessors are not supported");
+    if (a.type != type) fail(where, "unexpected accessor type for " + from);
+    const int ct = a.componentType;
+    bool is_float = ct == TINYGLTF_COMPONENT_TYPE_FLOAT;
+    bool is_int = ct == TINYGLTF_COMPONENT_TYPE_BYTE || ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                  ct == TINYGLTF_COMPONENT_TYPE_SHORT || ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+                  ct == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    if (!(is_float && allow_float) && !(is_int && (allow_int || a.normalized)))
+      fail(where, "component type " + std::to_string(ct) + " is not supported for " + from);
+    const size_t components = size_t(tinygltf::GetNumComponentsInType(uint32_t(type)));
+    const size_t csize = size_t(tinygltf::GetComponentSizeInBytes(uint32_t(ct)));
+    std::vector<double> out(a.count * components, 0.0);
+    if (a.bufferView < 0) return out;  // no buffer view: all zeros (glTF 2.0, 3.6.2.3)
+    if (size_t(a.bufferView) >= model_.bufferViews.size())
+      fail(where, "bufferView " + std::to_string(a.bufferView) + " out of range");
+    const tinygltf::BufferView& view = model_.bufferViews[size_t(a.bufferView)];
+    if (view.buffer < 0 || size_t(view.buffer) >= model_.buffers.size())
+      fail("bufferViews[" + std::to_string(a.bufferView) + "]", "buffer " + std::to_string(view.buffer) + " out of range");
+    const std::vector<unsigned char>& buf = model_.buffers[size_t(view.buffer)].data;
+    int stride = a.ByteStride(view);
+    if (stride <= 0) fail(where, "invalid byte stride");
+    const size_t element = components * csize;
+    if (a.count > 0) {
+      // The last byte read must lie inside both the view and the buffer.
+      size_t last = a.byteOffset + size_t(stride) * (a.count - 1) + element;
+      if (view.byteOffset > buf.size() || view.byteLength > buf.size() - view.byteOffset || last > view.byteLength)
+        fail(where, std::to_string(a.count) + " elements do not fit in bufferView " + std::to_string(a.bufferView) +
+                        " (" + std::to_string(view.byteLength) + " bytes) or its buffer (" +
+                        std::to_string(buf.size()) + " bytes)");
+    }
+    const unsigned char* base = buf.data() + view.byteOffset + a.byteOffset;
+    for (size_t i = 0; i < a.count; ++i) {
+      const unsigned char* p = base + size_t(stride) * i;
+      for (size_t c = 0; c < components; ++c) {
+        const unsigned char* q = p + c * csize;
+        double v = 0.0;
+        switch (ct) {
+          case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); v = f; break; }
+          case TINYGLTF_COMPONENT_TYPE_BYTE: { int8_t x; std::memcpy(&x, q, 1); v = a.normalized ? std::max(x / 127.0, -1.0) : x; break; }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: { uint8_t x; std::memcpy(&x, q, 1); v = a.normalized ? x / 255.0 : x; break; }
+          case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t x; std::memcpy(&x, q, 2); v = a.normalized ? std::max(x / 32767.0, -1.0) : x; break; }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t x; std::memcpy(&x, q, 2); v = a.normalized ? x / 65535.0 : x; break; }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t x; std::memcpy(&x, q, 4); v = x; break; }
+          default: break;
+        }
+        out[i * components + c] = v;
+      }
+    }
+    return out;
+  }
+
+  // --- meshes and materials -------------------------------------------------------
+
+  void add_mesh(int index, const glm::mat4& to_world, const std::string& from) {
+    if (size_t(index) >= model_.meshes.size()) fail(from, "mesh index " + std::to_string(index) + " out of range");
+    const tinygltf::Mesh& mesh = model_.meshes[size_t(index)];
+    for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
+      const tinygltf::Primitive& prim = mesh.primitives[pi];
+      std::string where = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(pi) + "]";
+      int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+      if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        warn_once(where + ": primitive mode " + std::to_string(mode) + " (points or lines) is not supported; skipped");
+        continue;
+      }
+      if (!prim.targets.empty()) warn_once(where + ": morph targets are not supported; using the base shape");
+      auto pos_attr = prim.attributes.find("POSITION");
+      if (pos_attr == prim.attributes.end()) fail(where, "the primitive has no POSITION attribute");
+      std::vector<double> p = read_accessor(pos_attr->second, TINYGLTF_TYPE_VEC3, where + ".POSITION", false, true);
+      TriMesh tm;
+      const size_t nv = p.size() / 3;
+      tm.positions.resize(nv);
+      for (size_t i = 0; i < nv; ++i) {
+        tm.positions[i] = glm::vec3(float(p[3 * i]), float(p[3 * i + 1]), float(p[3 * i + 2]));
+        if (!std::isfinite(tm.positions[i].x) || !std::isfinite(tm.positions[i].y) || !std::isfinite(tm.positions[i].z))
+          fail("accessors[" + std::to_string(pos_attr->second) + "][" + std::to_string(i) + "]",
+               "vertex position is not finite");
+      }
+      std::vector<uint32_t> idx;
+      if (prim.indices >= 0) {
+        std::vector<double> raw = read_accessor(prim.indices, TINYGLTF_TYPE_SCALAR, where + ".indices", true, false);
+        idx.resize(raw.size());
+        for (size_t i = 0; i < raw.size(); ++i) {
+          if (!(raw[i] >= 0.0 && raw[i] < double(nv)))
+            fail("accessors[" + std::to_string(prim.indices) + "][" + std::to_string(i) + "]",
+                 "index " + std::to_string(int64_t(raw[i])) + " out of range (" + std::to_string(nv) + " vertices)");
+          idx[i] = uint32_t(raw[i]);
+        }
+      } else {
+        idx.resize(nv);
+        for (size_t i = 0; i < nv; ++i) idx[i] = uint32_t(i);
+      }
+      if (mode == TINYGLTF_MODE_TRIANGLES) {
+        for (size_t i = 0; i + 2 < idx.size(); i += 3) tm.triangles.push_back({idx[i], idx[i + 1], idx[i + 2]});
+      } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+        for (size_t i = 0; i + 2 < idx.size(); ++i)
+          tm.triangles.push_back(i % 2 == 0 ? glm::uvec3(idx[i], idx[i + 1], idx[i + 2])
+                                            : glm::uvec3(idx[i + 1], idx[i], idx[i + 2]));
+      } else {
+        for (size_t i = 1; i + 1 < idx.size(); ++i) tm.triangles.push_back({idx[0], idx[i], idx[i + 1]});
+      }
+      // Shading normals and texture coordinates (glTF's uv origin is the image's
+      // top-left, as Mitsuba's). Without normals, glTF asks for flat shading.
+      auto normal_attr = prim.attributes.find("NORMAL");
+      if (normal_attr != prim.attributes.end()) {
+        std::vector<double> n = read_accessor(normal_attr->second, TINYGLTF_TYPE_VEC3, where + ".NORMAL", false, true);
+        if (n.size() != p.size()) fail(where, "NORMAL and POSITION have different counts");
+        tm.normals.resize(nv);
+        for (size_t i = 0; i < nv; ++i) {
+          glm::vec3 v(float(n[3 * i]), float(n[3 * i + 1]), float(n[3 * i + 2]));
+          tm.normals[i] = std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) ? v : glm::vec3(0.0f);
+        }
+      }
+      auto uv_attr = prim.attributes.find("TEXCOORD_0");
+      if (uv_attr != prim.attributes.end()) {
+        std::vector<double> t = read_accessor(uv_attr->second, TINYGLTF_TYPE_VEC2, where + ".TEXCOORD_0", false, true);
+        if (t.size() != 2 * nv) fail(where, "TEXCOORD_0 and POSITION have different counts");
+        tm.uvs.resize(nv);
+        for (size_t i = 0; i < nv; ++i) tm.uvs[i] = glm::vec2(float(t[2 * i]), float(t[2 * i + 1]));
+      }
+      for (const auto& a : prim.attributes)
+        if (a.first != "POSITION" && a.first != "NORMAL" && a.first != "TEXCOORD_0") ignored_attributes_.insert(a.first);
+      if (!ignored_attributes_.empty()) {
+        std::string list;
+        for (const std::string& a : ignored_attributes_) list += (list.empty() ? "" : ", ") + a;
+        attribute_warning_ = "vertex attributes " + list + " are not used";
+      }
+      // A transform with negative determinant mirrors the mesh: reverse the
+      // winding so the front stays counter-clockwise (the normals transform by
+      // the inverse transpose and need no flip).
+      if (glm::determinant(glm::mat3(to_world)) < 0.0f)
+        for (glm::uvec3& t : tm.triangles) std::swap(t.y, t.z);
+      append_mesh(scene_, tm, to_world, material(prim.material, where), false, path_, 0);
+    }
+    if (!attribute_warning_.empty()) warn_once(attribute_warning_);
+  }
+
+  uint32_t material(int index, const std::string& from) {
+    if (index < 0) {
+      if (default_material_ == uint32_t(-1)) {
+        Material m{};
+        m.albedo = {{0.5f, 0.5f, 0.5f, 0}};
+        m.type = PSF_MATERIAL_DIFFUSE;
+        m.two_sided = 1;
+        default_material_ = push_material(m, "default");
+      }
+      return default_material_;
+    }
+    if (size_t(index) >= model_.materials.size()) fail(from, "material index " + std::to_string(index) + " out of range");
+    if (materials_[size_t(index)] != uint32_t(-1)) return materials_[size_t(index)];
+    const tinygltf::Material& g = model_.materials[size_t(index)];
+    std::string where = "materials[" + std::to_string(index) + "]" + (g.name.empty() ? "" : " '" + g.name + "'");
+    const auto& pbr = g.pbrMetallicRoughness;
+    glm::vec3 base(1.0f);
+    if (pbr.baseColorFactor.size() >= 3)
+      base = glm::vec3(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2]));
+    glm::vec3 emission(0.0f);
+    if (g.emissiveFactor.size() == 3)
+      emission = glm::vec3(float(g.emissiveFactor[0]), float(g.emissiveFactor[1]), float(g.emissiveFactor[2]));
+    auto strength = g.extensions.find("KHR_materials_emissive_strength");
+    if (strength != g.extensions.end() && strength->second.Has("emissiveStrength"))
+      emission *= float(strength->second.Get("emissiveStrength").GetNumberAsDouble());
+    std::vector<std::string> left_out;
+    uint32_t texture = PSF_NO_TEXTURE;
+    if (pbr.baseColorTexture.index >= 0) {
+      texture = base_color_texture(pbr.baseColorTexture.index, base, where);
+      if (texture == PSF_NO_TEXTURE) left_out.push_back("baseColorTexture (not decoded; using baseColorFactor)");
+      if (pbr.baseColorTexture.texCoord != 0) left_out.push_back("baseColorTexture.texCoord != 0 (using TEXCOORD_0)");
+    }
+    if (pbr.metallicFactor > 0.0 || pbr.metallicRoughnessTexture.index >= 0)
+      left_out.push_back("metallic-roughness (shaded as diffuse)");
+    if (g.normalTexture.index >= 0) left_out.push_back("normalTexture");
+    if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
+    if (g.alphaMode != "OPAQUE") left_out.push_back("alphaMode " + g.alphaMode);
+    for (const auto& e : g.extensions)
+      if (e.first != "KHR_materials_emissive_strength") left_out.push_back(e.first);
+    if (!left_out.empty()) {
+      std::string list;
+      for (const std::string& s : left_out) list += (list.empty() ? "" : ", ") + s;
+      warn_once(where + ": not supported: " + list);
+    }
+    Material m{};
+    if (texture != PSF_NO_TEXTURE) {
+      m.tex_color = texture;
+      base = textures_.mean(texture);  // the texture already holds the factor
+    }
+    glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
+    m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+    m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
+    m.type = PSF_MATERIAL_DIFFUSE;
+    m.two_sided = g.doubleSided ? 1u : 0u;
+    return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
+  }
+
+  // The base colour texture `index` times the factor, as linear RGB (the image
+  // is sRGB-encoded, glTF 2.0 Sec. 3.9.2), or PSF_NO_TEXTURE with a warning.
+  uint32_t base_color_texture(int index, const glm::vec3& factor, const std::string& where) {
+    if (size_t(index) >= model_.textures.size()) fail(where, "texture index " + std::to_string(index) + " out of range");
+    const tinygltf::Texture& tex = model_.textures[size_t(index)];
+    if (tex.source < 0 || size_t(tex.source) >= model_.images.size())
+      fail("textures[" + std::to_string(index) + "]", "image index " + std::to_string(tex.source) + " out of range");
+    const tinygltf::Image& img = model_.images[size_t(tex.source)];
+    const size_t n = size_t(std::max(img.width, 0)) * size_t(std::max(img.height, 0));
+    const int c = img.component, bytes = img.bits == 16 ? 2 : 1;
+    if (n == 0 || c < 1 || c > 4 || (img.bits != 8 && img.bits != 16) || img.image.size() < n * size_t(c * bytes))
+      return PSF_NO_TEXTURE;
+    std::vector<float> rgba(n * 4, 1.0f);
+    for (size_t i = 0; i < n; ++i)
+      for (int k = 0; k < c; ++k) {
+        size_t at = (i * size_t(c) + size_t(k)) * size_t(bytes);
+        float v = bytes == 2 ? float(img.image[at] | (img.image[at + 1] << 8)) / 65535.0f : float(img.image[at]) / 255.0f;
+        bool alpha = k == 3 || (c == 2 && k == 1);
+        if (!alpha) v = srgb_to_linear(v);
+        if (c <= 2 && k == 0) rgba[i * 4 + 1] = rgba[i * 4 + 2] = v;  // grey (+ alpha)
+        rgba[i * 4 + (c <= 2 && k == 1 ? 3 : size_t(k))] = v;
+      }
+    for (size_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) rgba[i * 4 + size_t(k)] *= factor[k];
+    TextureDesc desc;
+    desc.path = "gltf:" + path_ + ":images[" + std::to_string(tex.source) + "]";
+    if (tex.sampler >= 0 && size_t(tex.sampler) < model_.samplers.size()) {
+      const tinygltf::Sampler& smp = model_.samplers[size_t(tex.sampler)];
+      desc.bilinear = smp.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST;
+      if (smp.wrapS == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE) desc.wrap = PSF_TEX_CLAMP;
+      if (smp.wrapS == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT) desc.wrap = PSF_TEX_MIRROR;
+      if (smp.wrapS != smp.wrapT) warn_once("samplers[" + std::to_string(tex.sampler) + "]: wrapT differs from wrapS; using wrapS");
+    }
+    return textures_.pixels(desc, img.width, img.height, rgba);
+  }
+
+  uint32_t push_material(const Material& m, const std::string& name) {
+    scene_.materials.push_back(m);
+    scene_.material_names.push_back(name);
+    return uint32_t(scene_.materials.size() - 1);
+  }
+
+  // --- cameras and lights -----------------------------------------------------------
+
+  void add_camera(int index, const glm::mat4& m, const std::string& from) {
+    if (size_t(index) >= model_.cameras.size()) fail(from, "camera index " + std::to_string(index) + " out of range");
+    const tinygltf::Camera& c = model_.cameras[size_t(index)];
+    std::string where = "cameras[" + std::to_string(index) + "]";
+    if (c.type != "perspective") {
+      warn_once(where + ": camera type '" + c.type + "' is not supported; ignored");
+      return;
+    }
+    if (has_camera_) {
+      warn_once(where + ": only the first camera is used");
+      return;
+    }
+    if (!(c.perspective.yfov > 0.0 && c.perspective.yfov < 3.14159)) fail(where, "yfov must lie in (0, pi)");
+    has_camera_ = true;
+    CameraDesc& cam = scene_.camera;
+    cam.origin = glm::vec3(m * glm::vec4(0, 0, 0, 1));
+    cam.target = glm::vec3(m * glm::vec4(0, 0, -1, 1));
+    glm::vec3 up = glm::mat3(m) * glm::vec3(0, 1, 0);
+    if (glm::length(glm::cross(cam.target - cam.origin, up)) <= 0.0f) fail(where, "the camera's node transform is degenerate");
+    cam.up = glm::normalize(up);
+    cam.fov_degrees = float(glm::degrees(c.perspective.yfov));
+    cam.fov_axis = "y";
+    // A mirroring transform flips the image left-right.
+    cam.mirrored = glm::determinant(glm::mat3(m)) < 0.0f;
+    if (c.perspective.aspectRatio > 0.0) {
+      scene_.height = 512;
+      scene_.width = std::max(1, int(std::lround(512.0 * c.perspective.aspectRatio)));
+    }
+  }
+
+  void add_light(int index, const glm::mat4& m, const std::string& from) {
+    std::string where = "KHR_lights_punctual.lights[" + std::to_string(index) + "]";
+    if (index < 0 || size_t(index) >= model_.lights.size()) fail(from, "light index " + std::to_string(index) + " out of range");
+    const tinygltf::Light& g = model_.lights[size_t(index)];
+    LightDesc l;
+    glm::vec3 color(1.0f);
+    if (g.color.size() == 3) color = glm::vec3(float(g.color[0]), float(g.color[1]), float(g.color[2]));
+    l.color = glm::max(color * float(g.intensity), glm::vec3(0.0f));
+    l.position = glm::vec3(m * glm::vec4(0, 0, 0, 1));
+    glm::vec3 dir = glm::mat3(m) * glm::vec3(0, 0, -1);
+    if (!(glm::length(dir) > 0.0f)) fail(from, "the light's node transform is degenerate");
+    l.direction = glm::normalize(dir);
+    l.source = path_ + ": " + where;
+    if (g.type == "point") {
+      l.type = LightType::Point;
+    } else if (g.type == "spot") {
+      l.type = LightType::Spot;
+      l.cutoff_angle = float(g.spot.outerConeAngle);
+      l.beam_width = float(std::min(g.spot.innerConeAngle, g.spot.outerConeAngle));
+    } else if (g.type == "directional") {
+      l.type = LightType::Directional;
+    } else {
+      warn_once(where + ": light type '" + g.type + "' is not supported; ignored");
+      return;
+    }
+    scene_.lights.push_back(l);
+  }
+
+  std::string path_;
+  tinygltf::Model model_;
+  Scene scene_;
+  TextureStore textures_{scene_};              // base colour textures, into scene_
+  std::vector<uint32_t> materials_;            // glTF material -> scene material, -1 until used
+  uint32_t default_material_ = uint32_t(-1);  // for primitives without a material
+  bool has_camera_ = false;
+  std::set<std::string> ignored_attributes_;   // vertex attributes other than POSITION
+  std::string attribute_warning_;
+};
+
+}  // namespace
+
+Scene load_gltf_scene(const std::string& path) { return GltfLoader(path).load(); }
+
+}  // namespace psf::detail

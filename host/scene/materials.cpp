@@ -1,0 +1,233 @@
+// Named IORs, plastic constants (Fresnel averages, roughplastic's transmittance
+// table) and the per-triangle shading attributes; textures are in textures.cpp.
+#include "scene/materials.h"
+
+#include <cmath>
+#include <sstream>
+#include <utility>
+
+namespace psf {
+
+std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
+  std::vector<TriAttrib> out(scene.triangles.size());
+  const bool has_normals = scene.normals.size() == scene.positions.size();
+  const bool has_uvs = scene.uvs.size() == scene.positions.size();
+  for (size_t i = 0; i < scene.triangles.size(); ++i) {
+    const glm::uvec3& t = scene.triangles[i];
+    TriAttrib& a = out[i];
+    if (has_normals) {
+      glm::vec3 n[3] = {scene.normals[t.x], scene.normals[t.y], scene.normals[t.z]};
+      bool ok = true;
+      for (const glm::vec3& v : n) ok = ok && glm::dot(v, v) > 0.0f && std::isfinite(v.x + v.y + v.z);
+      if (ok) {
+        a.n0 = {{n[0].x, n[0].y, n[0].z, 0}};
+        a.n1 = {{n[1].x, n[1].y, n[1].z, 0}};
+        a.n2 = {{n[2].x, n[2].y, n[2].z, 0}};
+        a.flags |= PSF_TRI_NORMALS;
+      }
+    }
+    glm::vec2 uv[3] = {{0, 0}, {1, 0}, {0, 1}};  // barycentric (b1, b2), Mitsuba's uv without texcoords
+    if (has_uvs) {
+      glm::vec2 given[3] = {scene.uvs[t.x], scene.uvs[t.y], scene.uvs[t.z]};
+      bool ok = true;
+      for (const glm::vec2& v : given) ok = ok && std::isfinite(v.x) && std::isfinite(v.y);
+      if (ok) std::copy(given, given + 3, uv);
+    }
+    a.uv01 = {{uv[0].x, uv[0].y, uv[1].x, uv[1].y}};
+    a.u2 = uv[2].x;
+    a.v2 = uv[2].y;
+  }
+  return out;
+}
+
+std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes) {
+  std::vector<Material> out = scene.materials;
+  for (Material& m : out) m.flags &= ~PSF_MATFLAG_NORMALS;
+  for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i)
+    if ((attributes[i].flags & PSF_TRI_NORMALS) && scene.tri_material[i] < out.size())
+      out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;
+  return out;
+}
+
+std::vector<bool> masked_triangles(const Scene& scene) {
+  std::vector<bool> out(scene.triangles.size(), false);
+  for (size_t i = 0; i < scene.tri_material.size() && i < out.size(); ++i) {
+    uint32_t m = scene.tri_material[i];
+    out[i] = m < scene.materials.size() && (scene.materials[m].flags & PSF_MATFLAG_MASKED);
+  }
+  return out;
+}
+
+}  // namespace psf
+
+namespace psf::detail {
+
+std::optional<float> ior_by_name(const std::string& name) {
+  // Mitsuba's table of named indices of refraction (ior.h), at 589 nm.
+  static const std::map<std::string, float> table = {
+      {"vacuum", 1.0f},          {"helium", 1.000036f},      {"hydrogen", 1.000132f},
+      {"air", 1.000277f},        {"carbon dioxide", 1.00045f}, {"water", 1.3330f},
+      {"acetone", 1.36f},        {"ethanol", 1.361f},        {"carbon tetrachloride", 1.461f},
+      {"glycerol", 1.4729f},     {"benzene", 1.501f},        {"silicone oil", 1.52045f},
+      {"bromine", 1.661f},       {"water ice", 1.31f},       {"fused quartz", 1.458f},
+      {"pyrex", 1.470f},         {"acrylic glass", 1.49f},   {"polypropylene", 1.49f},
+      {"bk7", 1.5046f},          {"sodium chloride", 1.544f}, {"amber", 1.55f},
+      {"pet", 1.5750f},          {"diamond", 2.419f}};
+  std::string key;
+  for (char c : name) key += char(std::tolower(static_cast<unsigned char>(c)));
+  auto it = table.find(key);
+  if (it == table.end()) return std::nullopt;
+  return it->second;
+}
+
+bool conductor_by_name(const std::string& name, glm::vec3& eta, glm::vec3& k) {
+  struct Ior {
+    glm::vec3 eta, k;
+  };
+  // Mitsuba's conductor presets (data/ior/*.spd) in linear sRGB.
+  static const std::map<std::string, Ior> table = {
+      {"a-C", {{2.9440999183f, 2.2271502925f, 1.9681668794f}, {0.8874329109f, 0.7993216383f, 0.8152862927f}}},
+      {"Ag", {{0.1552646489f, 0.1167232965f, 0.1383806959f}, {4.8283433224f, 3.1222459278f, 2.1469504455f}}},
+      {"Al", {{1.6574599595f, 0.8803689579f, 0.5212287346f}, {9.2238691996f, 6.2695232477f, 4.8370012281f}}},
+      {"AlAs", {{3.6051023902f, 3.2329365777f, 2.2175611545f}, {0.0006670247f, -0.0004999400f, 0.0074261204f}}},
+      {"AlSb", {{-0.0485225705f, 4.1427547893f, 4.6697691348f}, {-0.0363741915f, 0.0937665154f, 1.3007390124f}}},
+      {"Au", {{0.1431189557f, 0.3749570432f, 1.4424785571f}, {3.9831604247f, 2.3857207478f, 1.6032152899f}}},
+      {"Be", {{4.1850592788f, 3.1850604423f, 2.7840913457f}, {3.8354398268f, 3.0101260162f, 2.8690088743f}}},
+      {"Cr", {{4.3696828663f, 2.9167024892f, 1.6547005413f}, {5.2064337956f, 4.2313645277f, 3.7549467933f}}},
+      {"CsI", {{2.1449030413f, 1.7023164587f, 1.6624194173f}, {0.0f, 0.0f, 0.0f}}},
+      {"Cu", {{0.2004376970f, 0.9240334304f, 1.1022119527f}, {3.9129485033f, 2.4528477015f, 2.1421879552f}}},
+      {"Cu2O", {{3.5492833755f, 2.9520622449f, 2.7369202137f}, {0.1132179294f, 0.1946659670f, 0.6001681264f}}},
+      {"CuO", {{3.2453822204f, 2.4496293965f, 2.1974114493f}, {0.5202739621f, 0.5707372756f, 0.7172250613f}}},
+      {"d-C", {{2.7112524747f, 2.3185812849f, 2.2288565009f}, {0.0f, 0.0f, 0.0f}}},
+      {"Hg", {{2.3989314904f, 1.4400254917f, 0.9095512090f}, {6.3276269444f, 4.3719414152f, 3.4217899270f}}},
+      {"HgTe", {{4.7795267752f, 3.2309984581f, 2.6600252401f}, {1.6319827058f, 1.5808189339f, 1.7295753852f}}},
+      {"Ir", {{3.0864098394f, 2.0821938440f, 1.6178866805f}, {5.5921510077f, 4.0671757150f, 3.2672611269f}}},
+      {"K", {{0.0640493070f, 0.0464100621f, 0.0381842017f}, {2.1042155920f, 1.3489364357f, 0.9132113889f}}},
+      {"Li", {{0.2657871942f, 0.1956102432f, 0.2209198538f}, {3.5401743407f, 2.3111306542f, 1.6685930000f}}},
+      {"MgO", {{2.0895885542f, 1.6507224525f, 1.5948759692f}, {0.0f, 0.0f, 0.0f}}},
+      {"Mo", {{4.4837010280f, 3.5254578255f, 2.7760769438f}, {4.1111307988f, 3.4208716252f, 3.1506031404f}}},
+      {"Na_palik", {{0.0602665320f, 0.0561412435f, 0.0619909494f}, {3.1792906496f, 2.1124800781f, 1.5790940266f}}},
+      {"Nb", {{3.4201353595f, 2.7901921379f, 2.3955856658f}, {3.4413817900f, 2.7376437930f, 2.5799132708f}}},
+      {"Ni_palik", {{2.3672753521f, 1.6633583302f, 1.4670554172f}, {4.4988329911f, 3.0501643957f, 2.3454274399f}}},
+      {"Rh", {{2.5857954933f, 1.8601866068f, 1.5544279524f}, {6.7822927110f, 4.7029501026f, 3.9760892461f}}},
+      {"Se-e", {{5.7242724833f, 4.1653992967f, 4.0816099264f}, {0.8713747439f, 1.1052845009f, 1.5647788766f}}},
+      {"Se", {{4.0592611085f, 2.8426947380f, 2.8207582835f}, {0.7543791750f, 0.6385150558f, 0.5215872029f}}},
+      {"SiC", {{3.1723450205f, 2.5259677964f, 2.4793623897f}, {0.0000007284f, -0.0000006859f, 0.0000100150f}}},
+      {"SnTe", {{4.5251865890f, 1.9811525984f, 1.2816819226f}, {0.0f, 0.0f, 0.0f}}},
+      {"Ta", {{2.0625846607f, 2.3930915569f, 2.6280684948f}, {2.4080467973f, 1.7413705864f, 1.9470377016f}}},
+      {"Te-e", {{7.5090397678f, 4.2964603080f, 2.3698732430f}, {5.5842076830f, 4.9476231084f, 3.9975145063f}}},
+      {"Te", {{7.3908396088f, 4.4821028985f, 2.6370708478f}, {3.2561412892f, 3.5273908133f, 3.2921683116f}}},
+      {"ThF4", {{1.8307187117f, 1.4422274283f, 1.3876488528f}, {0.0f, 0.0f, 0.0f}}},
+      {"TiC", {{3.7004673762f, 2.8374356509f, 2.5823030278f}, {3.2656905818f, 2.3515586388f, 2.1727857800f}}},
+      {"TiN", {{1.6484691607f, 1.1504482522f, 1.3797795097f}, {3.3684596226f, 1.9434888540f, 1.1020123347f}}},
+      {"TiO2-e", {{3.1065574823f, 2.5131551146f, 2.5823844157f}, {0.0000289537f, -0.0000251484f, 0.0001775555f}}},
+      {"TiO2", {{3.4566203131f, 2.8017076558f, 2.9051485020f}, {0.0001026662f, -0.0000897534f, 0.0006356902f}}},
+      {"VC", {{3.6575665991f, 2.7527298065f, 2.5326814570f}, {3.0683516659f, 2.1986687713f, 1.9631816252f}}},
+      {"VN", {{2.8656011588f, 2.1191817791f, 1.9400767149f}, {3.0323264950f, 2.0561075580f, 1.6162930914f}}},
+      {"V", {{4.2775126218f, 3.5131538236f, 2.7611257461f}, {3.4911844504f, 2.8893580874f, 3.1116965117f}}},
+      {"W", {{4.3707029924f, 3.3002972445f, 2.9982666528f}, {3.5006778591f, 2.6048652781f, 2.2731930614f}}},
+  };
+  auto it = table.find(name);
+  if (it == table.end() && (name == "Na" || name == "Ni")) it = table.find(name + "_palik");
+  if (it == table.end()) return false;
+  eta = it->second.eta;
+  k = it->second.k;
+  return true;
+}
+
+double fresnel_dielectric(double cos_i, double eta) {
+  double s2 = 1.0 - cos_i * cos_i;
+  double ct2 = 1.0 - s2 / (eta * eta);
+  if (ct2 <= 0.0) return 1.0;
+  double ct = std::sqrt(ct2);
+  double rs = (cos_i - eta * ct) / (cos_i + eta * ct);
+  double rp = (eta * cos_i - ct) / (eta * cos_i + ct);
+  return 0.5 * (rs * rs + rp * rp);
+}
+
+double fresnel_diffuse_reflectance(double eta) {
+  // Midpoint rule in mu^2 (d(mu^2) = 2 mu dmu): smooth except at the critical
+  // angle, where 4096 cells leave an error below 1e-5.
+  const int n = 4096;
+  double sum = 0.0;
+  for (int i = 0; i < n; ++i) {
+    double mu2 = (i + 0.5) / n;
+    sum += fresnel_dielectric(std::sqrt(mu2), eta);
+  }
+  return sum / n;
+}
+
+namespace {
+
+// Smith's G1 for an isotropic distribution, as kernels/bsdf.cl (mf_G1).
+double smith_g1(const glm::dvec3& v, const glm::dvec3& m, double alpha, bool beckmann) {
+  if (glm::dot(v, m) * v.z <= 0.0) return 0.0;
+  double xy = alpha * alpha * (v.x * v.x + v.y * v.y);
+  if (xy == 0.0) return 1.0;
+  double t2 = xy / (v.z * v.z);
+  if (beckmann) {
+    double a = 1.0 / std::sqrt(t2);
+    return a >= 1.6 ? 1.0 : (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a);
+  }
+  return 2.0 / (1.0 + std::sqrt(1.0 + t2));
+}
+
+}  // namespace
+
+double rough_reflectance(double mu, double alpha, double eta, bool beckmann) {
+  // R(wo) = int f(wo, wi) cos_i dwi = E[F(wo.m) G1(wo) G1(wi) (wo.m) / (cos_o cos_m)]
+  // for m drawn from D(m) cos(theta_m) (dwi = 4 (wo.m) dwm), on a midpoint grid
+  // of the inversion method's unit square.
+  const glm::dvec3 wo(std::sqrt(std::max(0.0, 1.0 - mu * mu)), 0.0, mu);
+  const int n_theta = 192, n_phi = 96;
+  const double pi = 3.14159265358979323846;
+  double sum = 0.0;
+  for (int i = 0; i < n_theta; ++i) {
+    double u = (i + 0.5) / n_theta;
+    double tan2 = beckmann ? -alpha * alpha * std::log(1.0 - u) : alpha * alpha * u / (1.0 - u);
+    double ct = 1.0 / std::sqrt(1.0 + tan2), st = std::sqrt(std::max(0.0, 1.0 - ct * ct));
+    for (int j = 0; j < n_phi; ++j) {
+      double phi = 2.0 * pi * (j + 0.5) / n_phi;
+      glm::dvec3 m(st * std::cos(phi), st * std::sin(phi), ct);
+      double om = glm::dot(wo, m);
+      if (om <= 0.0) continue;
+      glm::dvec3 wi = 2.0 * om * m - wo;
+      if (wi.z <= 0.0) continue;
+      double g = smith_g1(wo, m, alpha, beckmann) * smith_g1(wi, m, alpha, beckmann);
+      sum += fresnel_dielectric(om, eta) * g * om / (mu * ct);
+    }
+  }
+  return sum / (double(n_theta) * n_phi);
+}
+
+void finish_plastic(Material& m, float diffuse_mean, float specular_mean, TextureStore& store) {
+  const double eta = m.eta.s[0];
+  m.eta.s[1] = float(1.0 / (eta * eta));
+  m.albedo.s[3] = diffuse_mean + specular_mean > 0.0f ? specular_mean / (diffuse_mean + specular_mean) : 0.0f;
+  if (m.type == PSF_MATERIAL_PLASTIC) {
+    m.eta.s[2] = float(fresnel_diffuse_reflectance(1.0 / eta));
+    m.eta.s[3] = float(fresnel_diffuse_reflectance(eta));
+    return;
+  }
+  // roughplastic (Mitsuba 3): T(mu_i) = 1 - R(mu_i, eta) at mu_i = i / (N - 1)
+  // (at least 1e-6), internal reflectance 2 mean_i(R(mu_i, 1 / eta) mu_i).
+  const bool beckmann = (m.flags & PSF_MATFLAG_BECKMANN) != 0;
+  const double alpha = m.alpha_u;
+  std::ostringstream key;
+  key.precision(9);
+  key << "roughplastic " << (beckmann ? "beckmann " : "ggx ") << alpha << " " << eta;
+  std::vector<float> table(PSF_ROUGH_TABLE_RES);
+  double internal = 0.0, external = 0.0;
+  for (int i = 0; i < PSF_ROUGH_TABLE_RES; ++i) {
+    double mu = std::max(1e-6, double(i) / (PSF_ROUGH_TABLE_RES - 1));
+    double r = rough_reflectance(mu, alpha, eta, beckmann);
+    table[i] = float(1.0 - r);
+    internal += rough_reflectance(mu, alpha, 1.0 / eta, beckmann) * mu;
+    external += r * mu;
+  }
+  m.eta.s[2] = float(2.0 * internal / PSF_ROUGH_TABLE_RES);
+  m.eta.s[3] = float(2.0 * external / PSF_ROUGH_TABLE_RES);
+  m.tex_table = store.table(key.str(), table);
+}
+
+}  // namespace psf::detail

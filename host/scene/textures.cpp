@@ -1,0 +1,220 @@
+// Bitmap textures: file lookup ignoring case, decoding (stb_image for JPG, PNG,
+// BMP, TGA, HDR; OpenEXR for EXR), conversion to linear RGBA halfs in the
+// scene's texel buffer (psf_shared.h TextureInfo, kernels/texture.cl).
+#include <stb_image.h>
+
+#include <Imath/half.h>
+#include <ImfArray.h>
+#include <ImfRgbaFile.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+#include <stdexcept>
+
+#include "scene/loaders.h"
+#include "scene/materials.h"
+
+namespace fs = std::filesystem;
+
+namespace psf::detail {
+
+namespace {
+
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// Decoded image: linear RGBA floats, rows from the top.
+struct Pixels {
+  int width = 0, height = 0;
+  bool has_alpha = false;
+  std::vector<float> rgba;
+};
+
+Pixels load_exr(const std::string& path) {
+  Pixels p;
+  try {
+    Imf::RgbaInputFile file(path.c_str());
+    Imath::Box2i dw = file.dataWindow();
+    p.width = dw.max.x - dw.min.x + 1;
+    p.height = dw.max.y - dw.min.y + 1;
+    p.has_alpha = (file.channels() & Imf::WRITE_A) != 0;
+    Imf::Array2D<Imf::Rgba> px(p.height, p.width);
+    file.setFrameBuffer(&px[0][0] - dw.min.x - dw.min.y * p.width, 1, size_t(p.width));
+    file.readPixels(dw.min.y, dw.max.y);
+    p.rgba.resize(size_t(p.width) * p.height * 4);
+    for (int y = 0; y < p.height; ++y)
+      for (int x = 0; x < p.width; ++x) {
+        const Imf::Rgba& c = px[y][x];
+        float* o = &p.rgba[(size_t(y) * p.width + x) * 4];
+        o[0] = c.r;
+        o[1] = c.g;
+        o[2] = c.b;
+        o[3] = p.has_alpha ? float(c.a) : 1.0f;
+      }
+  } catch (const std::exception& e) {
+    throw std::runtime_error(std::string("cannot read EXR image: ") + e.what());
+  }
+  return p;
+}
+
+Pixels load_stb(const std::string& path, bool raw) {
+  Pixels p;
+  int comp = 0;
+  bool hdr = stbi_is_hdr(path.c_str());
+  bool wide = !hdr && stbi_is_16_bit(path.c_str());
+  void* data = hdr ? static_cast<void*>(stbi_loadf(path.c_str(), &p.width, &p.height, &comp, 0))
+               : wide ? static_cast<void*>(stbi_load_16(path.c_str(), &p.width, &p.height, &comp, 0))
+                      : static_cast<void*>(stbi_load(path.c_str(), &p.width, &p.height, &comp, 0));
+  if (!data) throw std::runtime_error(std::string("cannot decode image: ") + stbi_failure_reason());
+  p.has_alpha = comp == 2 || comp == 4;
+  const size_t n = size_t(p.width) * p.height;
+  p.rgba.resize(n * 4);
+  // sRGB decoding of 8-bit values through a table.
+  float lut[256];
+  for (int i = 0; i < 256; ++i) lut[i] = raw ? float(i) / 255.0f : srgb_to_linear(float(i) / 255.0f);
+  for (size_t i = 0; i < n; ++i) {
+    float v[4] = {0, 0, 0, 1};
+    for (int c = 0; c < comp; ++c) {
+      size_t at = i * comp + c;
+      bool alpha = p.has_alpha && c == comp - 1;
+      float x;
+      if (hdr) {
+        x = static_cast<const float*>(data)[at];
+      } else if (wide) {
+        float e = static_cast<const uint16_t*>(data)[at] / 65535.0f;
+        x = raw || alpha ? e : srgb_to_linear(e);
+      } else {
+        uint8_t b = static_cast<const uint8_t*>(data)[at];
+        x = alpha ? b / 255.0f : lut[b];
+      }
+      v[c] = x;
+    }
+    float* o = &p.rgba[i * 4];
+    if (comp <= 2) {  // grey (and alpha)
+      o[0] = o[1] = o[2] = v[0];
+      o[3] = comp == 2 ? v[1] : 1.0f;
+    } else {
+      o[0] = v[0];
+      o[1] = v[1];
+      o[2] = v[2];
+      o[3] = comp == 4 ? v[3] : 1.0f;
+    }
+  }
+  stbi_image_free(data);
+  return p;
+}
+
+float luminance(const float* c) { return 0.212671f * c[0] + 0.715160f * c[1] + 0.072169f * c[2]; }
+
+}  // namespace
+
+std::optional<std::string> find_file_nocase(const std::string& path) {
+  std::error_code ec;
+  if (fs::is_regular_file(path, ec)) return path;
+  fs::path p(path);
+  fs::path resolved = p.root_path();
+  for (const fs::path& part : p.relative_path()) {
+    fs::path next = resolved / part;
+    if (resolved.empty()) next = part;
+    if (!fs::exists(next, ec)) {
+      std::string want = lower(part.string());
+      bool found = false;
+      fs::path dir = resolved.empty() ? fs::path(".") : resolved;
+      for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+        if (lower(e.path().filename().string()) == want) {
+          next = resolved.empty() ? e.path().filename() : resolved / e.path().filename();
+          found = true;
+          break;
+        }
+      }
+      if (!found) return std::nullopt;
+    }
+    resolved = next;
+  }
+  if (!fs::is_regular_file(resolved, ec)) return std::nullopt;
+  return resolved.string();
+}
+
+uint32_t TextureStore::append(const TextureDesc& d, int width, int height, const std::vector<float>& rgba) {
+  if (scene_.textures.empty()) {  // the placeholder, PSF_NO_TEXTURE
+    TextureInfo t{};
+    t.uv_u = {{1, 0, 0, 0}};
+    t.uv_v = {{0, 1, 0, 0}};
+    t.offset = uint32_t(scene_.texels.size() / 4);
+    t.width = t.height = 1;
+    scene_.textures.push_back(t);
+    scene_.texels.insert(scene_.texels.end(), 4, Imath::half(1.0f).bits());
+  }
+  const size_t n = size_t(width) * height;
+  if (scene_.texels.size() / 4 + n > size_t(UINT32_MAX)) throw std::runtime_error("texture memory exceeds 2^32 texels");
+  TextureInfo t{};
+  t.uv_u = {{d.uv_u.x, d.uv_u.y, d.uv_u.z, 0}};
+  t.uv_v = {{d.uv_v.x, d.uv_v.y, d.uv_v.z, 0}};
+  t.offset = uint32_t(scene_.texels.size() / 4);
+  t.width = uint32_t(width);
+  t.height = uint32_t(height);
+  t.flags = (d.bilinear ? PSF_TEX_BILINEAR : 0u) | d.wrap;
+  scene_.texels.reserve(scene_.texels.size() + n * 4);
+  glm::dvec3 sum(0.0);
+  for (size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 4; ++c) scene_.texels.push_back(Imath::half(rgba[i * 4 + c]).bits());
+    sum += glm::dvec3(rgba[i * 4], rgba[i * 4 + 1], rgba[i * 4 + 2]);
+  }
+  uint32_t index = uint32_t(scene_.textures.size());
+  scene_.textures.push_back(t);
+  means_[index] = n ? glm::vec3(sum / double(n)) : glm::vec3(0.0f);
+  return index;
+}
+
+uint32_t TextureStore::image(const TextureDesc& d) {
+  std::ostringstream key;
+  key.precision(9);
+  key << d.path << '|' << int(d.use) << '|' << d.bilinear << '|' << d.wrap << '|' << d.raw << '|' << d.uv_u.x << ','
+      << d.uv_u.y << ',' << d.uv_u.z << ',' << d.uv_v.x << ',' << d.uv_v.y << ',' << d.uv_v.z;
+  auto it = cache_.find(key.str());
+  if (it != cache_.end()) return it->second;
+  std::string ext = lower(fs::path(d.path).extension().string());
+  Pixels p = ext == ".exr" ? load_exr(d.path) : load_stb(d.path, d.raw);
+  if (p.width <= 0 || p.height <= 0) throw std::runtime_error("the image is empty");
+  if (d.use != TextureUse::Color) {
+    for (size_t i = 0; i < p.rgba.size(); i += 4) {
+      float* c = &p.rgba[i];
+      float v = d.use == TextureUse::Opacity && p.has_alpha ? c[3] : luminance(c);
+      c[0] = c[1] = c[2] = v;
+      c[3] = 1.0f;
+    }
+  }
+  uint32_t index = append(d, p.width, p.height, p.rgba);
+  cache_.emplace(key.str(), index);
+  return index;
+}
+
+uint32_t TextureStore::pixels(const TextureDesc& d, int width, int height, const std::vector<float>& rgba) {
+  if (width <= 0 || height <= 0 || rgba.size() != size_t(width) * height * 4)
+    throw std::invalid_argument("TextureStore::pixels: wrong size");
+  return append(d, width, height, rgba);
+}
+
+uint32_t TextureStore::table(const std::string& key, const std::vector<float>& values) {
+  auto it = cache_.find("table|" + key);
+  if (it != cache_.end()) return it->second;
+  std::vector<float> rgba(values.size() * 4, 1.0f);
+  for (size_t i = 0; i < values.size(); ++i) rgba[i * 4] = values[i];
+  TextureDesc d;
+  d.wrap = PSF_TEX_CLAMP;
+  uint32_t index = append(d, int(values.size()), 1, rgba);
+  cache_.emplace("table|" + key, index);
+  return index;
+}
+
+glm::vec3 TextureStore::mean(uint32_t index) const {
+  auto it = means_.find(index);
+  return it == means_.end() ? glm::vec3(1.0f) : it->second;
+}
+
+}  // namespace psf::detail

@@ -1,0 +1,35 @@
+// Host scheduler: sizes batches of 2^m paths from the device's memory limits.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace psf {
+
+// "256M", "2G", "512k", "1048576" (bytes; K/M/G/T are powers of 1024, an optional
+// trailing B or iB is accepted). Throws std::invalid_argument on anything else.
+uint64_t parse_bytes(const std::string& text);
+
+// Human-readable bytes: "1.50 GiB".
+std::string format_bytes(uint64_t bytes);
+
+// One kind of device buffer the batch needs.
+struct BufferNeed {
+  const char* name;    // for messages
+  double bytes_per_path;  // bytes per path of the batch (may be fractional for tables)
+};
+
+struct BatchPlan {
+  int log2 = 0;             // m: the batch holds 2^m paths
+  uint64_t bytes = 0;       // device memory of all batch buffers at that size
+  uint64_t largest = 0;     // the largest single buffer
+};
+
+// The largest m <= max_log2 such that the buffers of 2^m paths together fit in
+// min(global_mem, budget) less `fixed` bytes (scene, image), and no single buffer
+// exceeds max_alloc. budget 0: none. Throws std::runtime_error when not even
+// m = min_log2 fits, naming the limit.
+BatchPlan plan_batch(const std::vector<BufferNeed>& needs, uint64_t fixed, uint64_t global_mem, uint64_t max_alloc,
+                     uint64_t budget, int max_log2, int min_log2 = 6);
+
+}  // namespace psf

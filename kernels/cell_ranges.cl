@@ -1,0 +1,21 @@
+/* cell_ranges.cl: where each cell's tuples lie in sorted order.
+ *
+ * Reads: the sorted keys. Writes: ranges[key] = (first, one past the last) for
+ * every key present, start and end side by side so a lookup touches one cache
+ * line; clear_ranges empties the table first ((0, 0)). Keys of paths without a
+ * vertex (>= 2^key_bits) get no range. */
+
+__kernel void clear_ranges(uint size, __global uint2* ranges) {
+  uint k = get_global_id(0);
+  if (k >= size) return;
+  ranges[k] = (uint2)(0u, 0u);
+}
+
+__kernel void cell_ranges(uint n, uint key_bits, __global const uint* keys, __global uint2* ranges) {
+  uint i = get_global_id(0);
+  if (i >= n) return;
+  uint k = keys[i];
+  if (k >= (1u << key_bits)) return;
+  if (i == 0u || keys[i - 1u] != k) ranges[k].x = i;
+  if (i + 1u == n || keys[i + 1u] != k) ranges[k].y = i + 1u;
+}

@@ -1,0 +1,79 @@
+/* surface.cl: the shading point of a hit, between ray casting and the BSDF.
+ *
+ * Reads: the hit triangle's TriAttrib (shading normals, uv), the texture table
+ * and texels (texture.cl). Writes into the Material: its colour term from its
+ * texture (albedo for diffuse and plastics, specular for the other types).
+ *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels) -> the shading Frame
+ * The shading normal is the barycentric interpolation of the vertex normals
+ * (Phong 1975), else the face normal ng; the geometric normal stays with the
+ * caller for side tests and ray offsets. Bump mapping perturbs it as Mitsuba's
+ * bumpmap (Blinn 1978): dp/du' = dp/du + n (dh/du - <n, dp/du>), likewise for
+ * v, n' = normalize(dp/du' x dp/dv') turned to the side of n, where h is the
+ * scaled height texture and dp/du, dp/dv come from the triangle's uv. The
+ * tangent follows dp/du where it matters (bump maps, anisotropic roughness).
+ * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided). */
+
+inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
+                                   float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
+                                   __global const half* texels) {
+  float b0 = 1.0f - b1 - b2;
+  float3 ns = ng;
+  if ((m->flags & PSF_MATFLAG_NORMALS) && (a->flags & PSF_TRI_NORMALS)) {
+    float3 n = b0 * a->n0.xyz + b1 * a->n1.xyz + b2 * a->n2.xyz;
+    float len = length(n);
+    if (len > 0.0f) ns = n / len;
+  }
+  bool bump = m->tex_bump != PSF_NO_TEXTURE;
+  Frame f;
+  if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v) {
+    float4 uv01 = a->uv01;
+    float2 uv0 = uv01.xy, uv1 = uv01.zw, uv2 = (float2)(a->u2, a->v2);
+    float2 uv = b0 * uv0 + b1 * uv1 + b2 * uv2;
+    if (m->tex_color != PSF_NO_TEXTURE) {
+      float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
+      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m)) m->albedo.xyz = c;
+      else m->specular.xyz = c;
+    }
+    /* dp/du and dp/dv of the triangle's uv parametrisation. */
+    float2 d1 = uv1 - uv0, d2 = uv2 - uv0;
+    float det = d1.x * d2.y - d1.y * d2.x;
+    float3 e1 = p1 - p0, e2 = p2 - p0;
+    float3 dpdu, dpdv;
+    if (det != 0.0f) {
+      float inv = 1.0f / det;
+      dpdu = (d2.y * e1 - d1.y * e2) * inv;
+      dpdv = (d1.x * e2 - d2.x * e1) * inv;
+    } else {
+      Frame c = frame_from_normal(ns);
+      dpdu = c.s;
+      dpdv = c.t;
+    }
+    if (bump) {
+      float2 g = texture_eval_grad(textures, texels, m->tex_bump, uv) * m->bump_scale;
+      float3 du = dpdu + ns * (g.x - dot(ns, dpdu));
+      float3 dv = dpdv + ns * (g.y - dot(ns, dpdv));
+      float3 nb = normalize(cross(du, dv));
+      if (dot(nb, ns) < 0.0f) nb = -nb;
+      if (isfinite(nb.x) && isfinite(nb.y) && isfinite(nb.z)) {
+        ns = nb;
+        dpdu = du;
+      }
+    }
+    f = frame_from_normal_tangent(ns, dpdu);
+  } else {
+    f = frame_from_normal(ns);
+  }
+  if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) f.n = -f.n;
+  return f;
+}
+
+/* The flat, untextured, isotropic case inline (no call), the rest in surface_frame_general. */
+inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0, float3 p1,
+                           float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
+                           __global const half* texels) {
+  if ((m->flags & PSF_MATFLAG_NORMALS) || m->tex_color != PSF_NO_TEXTURE || m->tex_bump != PSF_NO_TEXTURE ||
+      m->alpha_u != m->alpha_v)
+    return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels);
+  float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
+  return frame_from_normal(n);
+}

@@ -1,0 +1,1572 @@
+// BSDFs (kernels/bsdf.cl) and textures (kernels/texture.cl) through the test
+// kernels of kernels/bsdf_test.cl, against scalar references written here in
+// double precision from the papers (not from the kernels' code), and the
+// material loaders (Mitsuba XML, OBJ/MTL) and mask cut-outs end to end.
+//
+// Tolerances and statistics:
+// - eval against the reference: relative 2e-3 (float arithmetic; the kernels'
+//   Beckmann G1 is Walter's rational approximation, < 0.35 % error each of
+//   the two G1, so 8e-3 there; roughplastic's table is stored as halfs, +3e-3), directions kept
+//   off grazing angles (|cos| >= 0.05) where float cancellation dominates.
+// - sampling against the pdf: Pearson's chi-square over a 16 x 32 (cos theta,
+//   phi) binning of the sphere, bins with fewer than 5 expected samples pooled
+//   and failed and delta samples a bin of their own (as Mitsuba's test suite),
+//   expected counts from the kernel's pdf integrated on a 32 x 16 midpoint grid
+//   in (theta, phi) per bin (theta, not cos theta: lobes near the poles),
+//   100k samples per case; significance 1 % overall with Sidak's correction
+//   over the cases.
+// - white furnace (albedo 1): diffuse, smooth conductors, smooth and thin
+//   dielectrics, smooth plastic are lossless: the mean weight is 1 within
+//   4 standard errors + 2e-3 (plastic: + 5e-3 for the quadrature of its
+//   Fresnel averages); microfacet models lose energy by single scattering:
+//   their mean weight must match the reference's directional albedo (sphere
+//   quadrature) within 4 standard errors + 5e-3. At normal incidence a GGX
+//   conductor with F = 1 keeps 98.8 % (alpha 0.1), 68.6 % (0.5) and 30.7 %
+//   (1.0): microfacets steeper than 45 degrees reflect below the horizon; we
+//   assert at least 98.5 %, 66 % and 28 %.
+// - reciprocity: f(wo, wi) = f(wi, wo) within 1e-3 relative, and for rough
+//   dielectric transmission (radiance scaling) f(wi, wo) = (eta_i / eta_o)^2 f(wo, wi),
+//   eta_x the IOR on the side of x.
+// - textures: texels are halfs (relative rounding 4.9e-4): 2e-3 relative + 1e-4.
+#include <catch2/catch.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <Imath/half.h>
+#include <stb_image_write.h>
+
+#include "image.h"
+#include "render.h"
+#include "scene/materials.h"
+#include "scene/scene.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+using glm::dvec3;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// --- the materials under test, described for the references -----------------
+
+struct Params {
+  std::string label;
+  uint32_t type = PSF_MATERIAL_DIFFUSE;
+  dvec3 albedo{0.5};         // diffuse reflectance
+  dvec3 specular{1.0};       // specular reflectance
+  dvec3 transmittance{1.0};  // specular transmittance
+  dvec3 eta{1.5};            // conductors: per channel; others: x
+  dvec3 k{0.0};              // conductors
+  double au = 0.1, av = 0.1; // roughness
+  bool beckmann = false;
+  bool nonlinear = false;
+};
+
+bool transmissive(const Params& p) {
+  return p.type == PSF_MATERIAL_DIELECTRIC || p.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+         p.type == PSF_MATERIAL_THIN_DIELECTRIC;
+}
+
+psf_float4 f4(const dvec3& v, double w = 0.0) { return {{float(v.x), float(v.y), float(v.z), float(w)}}; }
+
+// The Material the loaders would make (finish_plastic for the plastics).
+Material to_material(const Params& p, psf::detail::TextureStore& store) {
+  Material m{};
+  m.type = p.type;
+  m.albedo = f4(p.albedo);
+  m.specular = f4(p.specular);
+  m.transmittance = f4(p.transmittance);
+  m.eta = f4(p.eta);
+  m.k = f4(p.k);
+  m.alpha_u = float(p.au);
+  m.alpha_v = float(p.av);
+  m.flags = (p.beckmann ? PSF_MATFLAG_BECKMANN : 0u) | (p.nonlinear ? PSF_MATFLAG_NONLINEAR : 0u);
+  if (p.type == PSF_MATERIAL_PLASTIC || p.type == PSF_MATERIAL_ROUGH_PLASTIC) {
+    m.eta = f4(dvec3(p.eta.x, 0, 0));
+    psf::detail::finish_plastic(m, float((p.albedo.x + p.albedo.y + p.albedo.z) / 3),
+                                float((p.specular.x + p.specular.y + p.specular.z) / 3), store);
+  }
+  return m;
+}
+
+// --- scalar references ----------------------------------------------------------
+
+// Fresnel's equations in their angle form, eta = IOR inside / outside, cos_i < 0 from inside.
+double ref_fresnel(double cos_i, double eta) {
+  double n = cos_i >= 0 ? eta : 1.0 / eta;  // transmitted over incident
+  double ci = std::min(1.0, std::abs(cos_i));
+  double ti = std::acos(ci);
+  double st = std::sin(ti) / n;
+  if (st >= 1.0) return 1.0;
+  double tt = std::asin(st);
+  if (ti < 1e-7) return (n - 1) * (n - 1) / ((n + 1) * (n + 1));
+  double a = std::sin(ti - tt) / std::sin(ti + tt), b = std::tan(ti - tt) / std::tan(ti + tt);
+  return 0.5 * (a * a + b * b);
+}
+
+// Conductor Fresnel with complex arithmetic (Born & Wolf).
+dvec3 ref_fresnel_conductor(double cos_i, const dvec3& eta, const dvec3& k) {
+  dvec3 r;
+  for (int c = 0; c < 3; ++c) {
+    std::complex<double> n(eta[c], k[c]);
+    double s2 = 1.0 - cos_i * cos_i;
+    std::complex<double> ct = std::sqrt(1.0 - s2 / (n * n));
+    std::complex<double> rs = (cos_i - n * ct) / (cos_i + n * ct);
+    std::complex<double> rp = (n * cos_i - ct) / (n * cos_i + ct);
+    r[c] = 0.5 * (std::norm(rs) + std::norm(rp));
+  }
+  return r;
+}
+
+// Walter et al. 2007 / Heitz 2014, in spherical coordinates.
+double ref_D(const dvec3& m, double ax, double ay, bool beckmann) {
+  if (m.z <= 0) return 0.0;
+  double c2 = m.z * m.z, s2 = std::max(0.0, 1.0 - c2), t2 = s2 / c2;
+  double cp2 = s2 > 0 ? m.x * m.x / s2 : 1.0, sp2 = s2 > 0 ? m.y * m.y / s2 : 0.0;
+  double e = t2 * (cp2 / (ax * ax) + sp2 / (ay * ay));
+  if (beckmann) return std::exp(-e) / (kPi * ax * ay * c2 * c2);
+  return 1.0 / (kPi * ax * ay * c2 * c2 * (1 + e) * (1 + e));
+}
+
+// Exact Smith G1 (Heitz 2014, Eq. 72 and 86) with the projected roughness.
+double ref_G1(const dvec3& v, const dvec3& m, double ax, double ay, bool beckmann) {
+  if (glm::dot(v, m) * v.z <= 0) return 0.0;
+  double s2 = 1.0 - v.z * v.z;
+  if (s2 <= 0) return 1.0;
+  double tan_t = std::sqrt(s2) / std::abs(v.z);
+  double alpha = std::sqrt((v.x * v.x * ax * ax + v.y * v.y * ay * ay) / s2);
+  double a = 1.0 / (alpha * tan_t);
+  double lambda = beckmann ? (std::erf(a) - 1) / 2 + std::exp(-a * a) / (2 * a * std::sqrt(kPi))
+                           : (-1 + std::sqrt(1 + 1 / (a * a))) / 2;
+  return 1.0 / (1.0 + lambda);
+}
+
+// Microfacet reflection F D G / (4 |cos_o cos_i|) without the Fresnel term's colour.
+double ref_microfacet_reflection(const dvec3& o, const dvec3& i, double ax, double ay, bool beckmann) {
+  dvec3 h = glm::normalize(o + i);
+  if (h.z < 0) h = -h;
+  return ref_D(h, ax, ay, beckmann) * ref_G1(o, h, ax, ay, beckmann) * ref_G1(i, h, ax, ay, beckmann) /
+         (4 * std::abs(o.z * i.z));
+}
+
+// Fresnel diffuse reflectance 2 int F(mu) mu dmu by Simpson's rule in theta.
+double ref_fdr(double eta) {
+  const int n = 20000;
+  double sum = 0;
+  for (int j = 0; j <= n; ++j) {
+    double t = 0.5 * kPi * j / n, w = (j == 0 || j == n) ? 1 : (j % 2 ? 4 : 2);
+    sum += w * ref_fresnel(std::cos(t), eta) * std::cos(t) * std::sin(t);
+  }
+  return 2 * sum * (0.5 * kPi / n) / 3;
+}
+
+// Directional albedo of the rough dielectric coating's reflection (no colour) by
+// quadrature over the hemisphere: Mitsuba 3's eval_reflectance.
+double ref_rough_albedo(double mu, double alpha, double eta, bool beckmann) {
+  dvec3 o(std::sqrt(std::max(0.0, 1 - mu * mu)), 0, mu);
+  const int nt = 360, np = 180;
+  double sum = 0;
+  for (int a = 0; a < nt; ++a) {
+    double t = 0.5 * kPi * (a + 0.5) / nt;
+    for (int b = 0; b < np; ++b) {  // phi in [0, pi], doubled by symmetry
+      double p = kPi * (b + 0.5) / np;
+      dvec3 i(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+      dvec3 h = glm::normalize(o + i);
+      double f = ref_fresnel(glm::dot(o, h), eta) * ref_microfacet_reflection(o, i, alpha, alpha, beckmann);
+      sum += f * i.z * std::sin(t);
+    }
+  }
+  return 2 * sum * (0.5 * kPi / nt) * (kPi / np);
+}
+
+// Roughplastic's tables as Mitsuba 3 defines them (64 nodes, lerp).
+struct RefRoughTables {
+  std::vector<double> t;  // external transmittance at mu_i = i / 63
+  double internal = 0;    // internal reflectance
+  double transmittance(double mu) const {
+    double x = std::clamp(mu, 0.0, 1.0) * 63;
+    int i = std::min(int(x), 62);
+    double w = x - i;
+    return (1 - w) * t[i] + w * t[i + 1];
+  }
+};
+
+const RefRoughTables& ref_rough_tables(double alpha, double eta, bool beckmann) {
+  static std::map<std::tuple<double, double, bool>, RefRoughTables> cache;
+  auto key = std::make_tuple(alpha, eta, beckmann);
+  auto it = cache.find(key);
+  if (it != cache.end()) return it->second;
+  RefRoughTables r;
+  double internal = 0;
+  for (int i = 0; i < 64; ++i) {
+    double mu = std::max(1e-6, i / 63.0);
+    r.t.push_back(1 - ref_rough_albedo(mu, alpha, eta, beckmann));
+    internal += ref_rough_albedo(mu, alpha, 1 / eta, beckmann) * mu;
+  }
+  r.internal = 2 * internal / 64;
+  return cache.emplace(key, r).first->second;
+}
+
+// The reference f(o, i) (without the cosine) of every non-delta lobe.
+dvec3 ref_eval(const Params& p, const dvec3& o, const dvec3& i) {
+  switch (p.type) {
+    case PSF_MATERIAL_DIFFUSE:
+      return o.z > 0 && i.z > 0 ? p.albedo / kPi : dvec3(0);
+    case PSF_MATERIAL_ROUGH_CONDUCTOR: {
+      if (o.z <= 0 || i.z <= 0) return dvec3(0);
+      dvec3 h = glm::normalize(o + i);
+      return p.specular * ref_fresnel_conductor(glm::dot(o, h), p.eta, p.k) *
+             ref_microfacet_reflection(o, i, p.au, p.av, p.beckmann);
+    }
+    case PSF_MATERIAL_PLASTIC:
+    case PSF_MATERIAL_ROUGH_PLASTIC: {
+      if (o.z <= 0 || i.z <= 0) return dvec3(0);
+      double eta = p.eta.x;
+      bool r = p.type == PSF_MATERIAL_ROUGH_PLASTIC;
+      double internal, to, ti;
+      dvec3 spec(0);
+      if (r) {
+        const RefRoughTables& t = ref_rough_tables(p.au, eta, p.beckmann);
+        internal = t.internal;
+        to = t.transmittance(o.z);
+        ti = t.transmittance(i.z);
+        dvec3 h = glm::normalize(o + i);
+        spec = p.specular * ref_fresnel(glm::dot(o, h), eta) * ref_microfacet_reflection(o, i, p.au, p.au, p.beckmann);
+      } else {
+        internal = ref_fdr(1 / eta);
+        to = 1 - ref_fresnel(o.z, eta);
+        ti = 1 - ref_fresnel(i.z, eta);
+      }
+      dvec3 base = p.nonlinear ? p.albedo / (dvec3(1) - p.albedo * internal) : p.albedo / (1 - internal);
+      return spec + base * (to * ti / (eta * eta * kPi));
+    }
+    case PSF_MATERIAL_ROUGH_DIELECTRIC: {
+      if (o.z == 0 || i.z == 0) return dvec3(0);
+      double eta_o = o.z > 0 ? 1 : p.eta.x, eta_i = i.z > 0 ? 1 : p.eta.x;  // IOR of each side
+      if (o.z * i.z > 0) {
+        dvec3 h = glm::normalize(o + i);
+        if (h.z < 0) h = -h;
+        return p.specular * ref_fresnel(glm::dot(o, h), p.eta.x) *
+               ref_microfacet_reflection(o, i, p.au, p.av, p.beckmann);
+      }
+      dvec3 h = -glm::normalize(eta_i * i + eta_o * o);  // Walter et al. Eq. 16
+      if (h.z < 0) h = -h;
+      double oh = glm::dot(o, h), ih = glm::dot(i, h);
+      double g = ref_G1(o, h, p.au, p.av, p.beckmann) * ref_G1(i, h, p.au, p.av, p.beckmann);
+      double F = ref_fresnel(oh, p.eta.x);
+      double denom = eta_o * oh + eta_i * ih;
+      // Walter et al. Eq. 21 (with the view side's eta_o^2: radiance).
+      return p.transmittance * (std::abs(oh * ih) / std::abs(o.z * i.z) * eta_o * eta_o * (1 - F) *
+                                ref_D(h, p.au, p.av, p.beckmann) * g / (denom * denom));
+    }
+    default:
+      return dvec3(0);
+  }
+}
+
+// Directional albedo int f(o, i) |cos_i| di of the reference over the sphere.
+dvec3 ref_albedo(const Params& p, const dvec3& o) {
+  const int nt = 800, np = 400;
+  dvec3 sum(0);
+  for (int a = 0; a < nt; ++a) {
+    double t = kPi * (a + 0.5) / nt;
+    for (int b = 0; b < np; ++b) {
+      double ph = 2 * kPi * (b + 0.5) / np;
+      dvec3 i(std::sin(t) * std::cos(ph), std::sin(t) * std::sin(ph), std::cos(t));
+      sum += ref_eval(p, o, i) * std::abs(i.z) * std::sin(t);
+    }
+  }
+  return sum * (kPi / nt) * (2 * kPi / np);
+}
+
+// --- the kernels --------------------------------------------------------------
+
+struct SampleOut {
+  dvec3 wi, weight;
+  double pdf;
+  uint32_t flags;
+};
+
+// Materials and their textures on the device, and the test kernels.
+class Rig {
+ public:
+  Rig() : store_(scene_) {}
+
+  uint32_t add(const Params& p) {
+    params_.push_back(p);
+    materials_.push_back(to_material(p, store_));
+    dirty_ = true;
+    return uint32_t(materials_.size() - 1);
+  }
+  const Params& params(uint32_t m) const { return params_[m]; }
+
+  std::vector<SampleOut> sample(const std::vector<uint32_t>& mat, const std::vector<dvec3>& wo,
+                                const std::vector<glm::vec3>& u) {
+    upload();
+    auto& rt = psf::test::runtime();
+    uint32_t n = uint32_t(mat.size());
+    std::vector<psf_float4> w(n), r(n);
+    for (uint32_t k = 0; k < n; ++k) {
+      w[k] = f4(wo[k]);
+      r[k] = {{u[k].x, u[k].y, u[k].z, 0}};
+    }
+    cl::Buffer bmat = rt.upload(mat), bwo = rt.upload(w), bu = rt.upload(r);
+    cl::Buffer out1 = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
+    cl::Buffer out2 = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
+    rt.launch("bsdf_test_sample", n, 64, materials_buf_, textures_buf_, texels_buf_, bmat, bwo, bu, out1, out2, n);
+    auto a = rt.download<psf_float4>(out1, n), b = rt.download<psf_float4>(out2, n);
+    std::vector<SampleOut> out(n);
+    for (uint32_t k = 0; k < n; ++k) {
+      out[k].wi = dvec3(a[k].s[0], a[k].s[1], a[k].s[2]);
+      out[k].pdf = a[k].s[3];
+      out[k].weight = dvec3(b[k].s[0], b[k].s[1], b[k].s[2]);
+      out[k].flags = uint32_t(b[k].s[3]);
+    }
+    return out;
+  }
+
+  // f (xyz) and pdf (w) of bsdf_eval.
+  std::vector<glm::dvec4> eval(const std::vector<uint32_t>& mat, const std::vector<dvec3>& wo,
+                               const std::vector<dvec3>& wi) {
+    upload();
+    auto& rt = psf::test::runtime();
+    uint32_t n = uint32_t(mat.size());
+    std::vector<psf_float4> a(n), b(n);
+    for (uint32_t k = 0; k < n; ++k) {
+      a[k] = f4(wo[k]);
+      b[k] = f4(wi[k]);
+    }
+    cl::Buffer bmat = rt.upload(mat), bwo = rt.upload(a), bwi = rt.upload(b);
+    cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
+    rt.launch("bsdf_test_eval", n, 64, materials_buf_, textures_buf_, texels_buf_, bmat, bwo, bwi, out, n);
+    auto o = rt.download<psf_float4>(out, n);
+    std::vector<glm::dvec4> res(n);
+    for (uint32_t k = 0; k < n; ++k) res[k] = glm::dvec4(o[k].s[0], o[k].s[1], o[k].s[2], o[k].s[3]);
+    return res;
+  }
+
+  // bsdf_albedo (xyz) and bsdf_is_diffuse (w) of every material.
+  std::vector<glm::dvec4> props() {
+    upload();
+    auto& rt = psf::test::runtime();
+    uint32_t n = uint32_t(materials_.size());
+    cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
+    rt.launch("bsdf_test_props", n, 64, materials_buf_, out, n);
+    auto o = rt.download<psf_float4>(out, n);
+    std::vector<glm::dvec4> res(n);
+    for (uint32_t k = 0; k < n; ++k) res[k] = glm::dvec4(o[k].s[0], o[k].s[1], o[k].s[2], o[k].s[3]);
+    return res;
+  }
+
+ private:
+  void upload() {
+    if (!dirty_) return;
+    auto& rt = psf::test::runtime();
+    if (scene_.textures.empty()) store_.table("placeholder", std::vector<float>(PSF_ROUGH_TABLE_RES, 1.0f));
+    materials_buf_ = rt.upload(materials_);
+    textures_buf_ = rt.upload(scene_.textures);
+    texels_buf_ = rt.upload(scene_.texels);
+    dirty_ = false;
+  }
+
+  psf::Scene scene_;
+  psf::detail::TextureStore store_;
+  std::vector<Params> params_;
+  std::vector<Material> materials_;
+  cl::Buffer materials_buf_, textures_buf_, texels_buf_;
+  bool dirty_ = true;
+};
+
+// The materials of the eval, reciprocity and chi-square tests.
+std::vector<Params> test_materials() {
+  std::vector<Params> v;
+  auto add = [&](Params p) { v.push_back(p); };
+  Params p;
+  p.label = "diffuse";
+  p.albedo = {0.7, 0.5, 0.3};
+  add(p);
+  p = {};
+  p.label = "roughconductor ggx 0.3 Cu";
+  p.type = PSF_MATERIAL_ROUGH_CONDUCTOR;
+  p.eta = {0.2004376970, 0.9240334304, 1.1022119527};
+  p.k = {3.9129485033, 2.4528477015, 2.1421879552};
+  p.au = p.av = 0.3;
+  add(p);
+  p.label = "roughconductor beckmann 0.3 Cu";
+  p.beckmann = true;
+  add(p);
+  p.label = "roughconductor ggx 0.15 x 0.5 (anisotropic) none";
+  p.beckmann = false;
+  p.eta = dvec3(0);
+  p.k = dvec3(1);
+  p.specular = {0.9, 0.8, 0.7};
+  p.au = 0.15;
+  p.av = 0.5;
+  add(p);
+  p.label = "roughconductor beckmann 0.5 x 0.2 (anisotropic) Al";
+  p.beckmann = true;
+  p.eta = {1.6574599595, 0.8803689579, 0.5212287346};
+  p.k = {9.2238691996, 6.2695232477, 4.8370012281};
+  p.specular = dvec3(1);
+  p.au = 0.5;
+  p.av = 0.2;
+  add(p);
+  p = {};
+  p.label = "plastic";
+  p.type = PSF_MATERIAL_PLASTIC;
+  p.albedo = {0.6, 0.3, 0.2};
+  p.eta = dvec3(1.49);
+  add(p);
+  p.label = "plastic nonlinear";
+  p.nonlinear = true;
+  p.specular = {0.8, 0.9, 1.0};
+  add(p);
+  p = {};
+  p.label = "roughplastic ggx 0.25 nonlinear";
+  p.type = PSF_MATERIAL_ROUGH_PLASTIC;
+  p.albedo = {0.2, 0.5, 0.7};
+  p.eta = dvec3(1.5);
+  p.au = p.av = 0.25;
+  p.nonlinear = true;
+  add(p);
+  p.label = "roughplastic beckmann 0.4";
+  p.beckmann = true;
+  p.nonlinear = false;
+  p.au = p.av = 0.4;
+  p.eta = dvec3(1.49);
+  add(p);
+  p = {};
+  p.label = "roughdielectric ggx 0.3";
+  p.type = PSF_MATERIAL_ROUGH_DIELECTRIC;
+  p.eta = dvec3(1.5);
+  p.au = p.av = 0.3;
+  p.specular = {0.9, 1.0, 1.0};
+  p.transmittance = {1.0, 0.8, 0.9};
+  add(p);
+  p.label = "roughdielectric beckmann 0.25 x 0.4 water";
+  p.beckmann = true;
+  p.eta = dvec3(1.333);
+  p.au = 0.25;
+  p.av = 0.4;
+  p.specular = p.transmittance = dvec3(1);
+  add(p);
+  return v;
+}
+
+dvec3 random_direction(std::mt19937& g, double min_abs_cos, bool upper_only) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (;;) {
+    double z = upper_only ? u(g) : 2 * u(g) - 1, ph = 2 * kPi * u(g);
+    if (std::abs(z) < min_abs_cos) continue;
+    double r = std::sqrt(std::max(0.0, 1 - z * z));
+    return {r * std::cos(ph), r * std::sin(ph), z};
+  }
+}
+
+double max3(const dvec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
+
+// Regularised upper incomplete gamma Q(a, x) (series / continued fraction).
+double gamma_q(double a, double x) {
+  if (x <= 0) return 1.0;
+  double gln = std::lgamma(a);
+  if (x < a + 1) {
+    double ap = a, sum = 1 / a, del = sum;
+    for (int n = 0; n < 100000; ++n) {
+      ap += 1;
+      del *= x / ap;
+      sum += del;
+      if (std::abs(del) < std::abs(sum) * 1e-15) break;
+    }
+    return 1 - sum * std::exp(-x + a * std::log(x) - gln);
+  }
+  double b = x + 1 - a, c = 1e300, d = 1 / b, h = d;
+  for (int i = 1; i < 100000; ++i) {
+    double an = -i * (i - a);
+    b += 2;
+    d = an * d + b;
+    if (std::abs(d) < 1e-300) d = 1e-300;
+    c = b + an / c;
+    if (std::abs(c) < 1e-300) c = 1e-300;
+    d = 1 / d;
+    double del = d * c;
+    h *= del;
+    if (std::abs(del - 1) < 1e-15) break;
+  }
+  return std::exp(-x + a * std::log(x) - gln) * h;
+}
+
+// Pearson's chi-square p-value; bins with expected < 5 are pooled.
+double chi2_pvalue(const std::vector<double>& observed, const std::vector<double>& expected, std::string& why) {
+  double chi2 = 0, pooled_o = 0, pooled_e = 0;
+  int cells = 0;
+  for (size_t i = 0; i < observed.size(); ++i) {
+    if (expected[i] <= 0 && observed[i] > 0) {
+      why = "samples in bin " + std::to_string(i) + " of zero probability";
+      return 0.0;
+    }
+    if (expected[i] < 5) {
+      pooled_o += observed[i];
+      pooled_e += expected[i];
+      continue;
+    }
+    chi2 += (observed[i] - expected[i]) * (observed[i] - expected[i]) / expected[i];
+    ++cells;
+  }
+  if (pooled_e > 0) {
+    chi2 += (pooled_o - pooled_e) * (pooled_o - pooled_e) / pooled_e;
+    ++cells;
+  } else if (pooled_o > 0) {
+    why = "samples in pooled bins of zero probability";
+    return 0.0;
+  }
+  why = "chi2 " + std::to_string(chi2) + " over " + std::to_string(cells - 1) + " degrees of freedom";
+  return gamma_q(0.5 * (cells - 1), 0.5 * chi2);
+}
+
+// A fresh temporary directory, removed at the end of the test.
+class TempDir {
+ public:
+  TempDir() {
+    static int counter = 0;
+    path_ = fs::temp_directory_path() / ("psf-bsdf-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  std::string write(const std::string& name, const std::string& text) const {
+    fs::path p = path_ / name;
+    fs::create_directories(p.parent_path());
+    std::ofstream(p, std::ios::binary) << text;
+    return p.string();
+  }
+  std::string path(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  fs::path path_;
+};
+
+size_t count_warnings(const psf::Scene& s, const std::string& text) {
+  return size_t(std::count_if(s.warnings.begin(), s.warnings.end(),
+                              [&](const std::string& w) { return w.find(text) != std::string::npos; }));
+}
+
+dvec3 xyz(const psf_float4& v) { return {v.s[0], v.s[1], v.s[2]}; }
+
+}  // namespace
+
+TEST_CASE("BSDF: evaluation matches the scalar references", "[bsdf]") {
+  Rig rig;
+  std::vector<Params> ps = test_materials();
+  for (const Params& p : ps) rig.add(p);
+  std::mt19937 g(7);
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> wo, wi;
+  for (uint32_t m = 0; m < ps.size(); ++m)
+    for (int q = 0; q < 3000; ++q) {
+      mat.push_back(m);
+      wo.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
+      wi.push_back(random_direction(g, 0.05, false));
+    }
+  auto got = rig.eval(mat, wo, wi);
+  std::vector<int> bad(ps.size(), 0), nonzero(ps.size(), 0);
+  for (size_t q = 0; q < mat.size(); ++q) {
+    const Params& p = ps[mat[q]];
+    dvec3 ref = ref_eval(p, wo[q], wi[q]);
+    double rtol = p.beckmann ? 8e-3 : 2e-3;
+    if (p.type == PSF_MATERIAL_ROUGH_PLASTIC) rtol += 3e-3;
+    double scale = std::max(max3(ref), 1e-6);
+    dvec3 f(got[q]);
+    bool ok = max3(glm::abs(f - ref)) <= rtol * scale + 1e-5;
+    if (max3(ref) > 0) ++nonzero[mat[q]];
+    if (!ok && bad[mat[q]]++ < 3) {
+      INFO(p.label << " wo " << wo[q].x << " " << wo[q].y << " " << wo[q].z << " wi " << wi[q].x << " " << wi[q].y
+                   << " " << wi[q].z << " f " << f.x << " " << f.y << " " << f.z << " ref " << ref.x << " " << ref.y
+                   << " " << ref.z);
+      CHECK(ok);
+    }
+  }
+  for (size_t m = 0; m < ps.size(); ++m) {
+    INFO(ps[m].label);
+    CHECK(bad[m] == 0);
+    CHECK(nonzero[m] > 500);  // the comparison is not vacuous
+  }
+}
+
+TEST_CASE("BSDF: sampling matches the pdf (chi-square) and weights are f cos / pdf", "[bsdf]") {
+  Rig rig;
+  std::vector<Params> ps = test_materials();
+  struct Case {
+    uint32_t mat;
+    dvec3 wo;
+  };
+  std::vector<Case> cases;
+  for (const Params& p : ps) {
+    uint32_t m = rig.add(p);
+    auto dir = [](double cos_t, double phi) {
+      double s = std::sqrt(1 - cos_t * cos_t);
+      return dvec3(s * std::cos(phi), s * std::sin(phi), cos_t);
+    };
+    cases.push_back({m, dir(0.9, 0.3)});
+    cases.push_back({m, dir(0.35, 2.0)});
+    if (transmissive(p)) cases.push_back({m, dir(-0.6, 4.0)});  // from inside
+  }
+  const double alpha_total = 0.01;
+  const double alpha_case = 1 - std::pow(1 - alpha_total, 1.0 / cases.size());  // Sidak
+  const int kN = 100000, kCos = 16, kPhi = 32, kSubT = 32, kSubP = 16;
+  std::mt19937 g(11);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  for (const Case& c : cases) {
+    const Params& p = rig.params(c.mat);
+    INFO(p.label << ", wo.z = " << c.wo.z);
+    std::vector<uint32_t> mat(kN, c.mat);
+    std::vector<dvec3> wo(kN, c.wo);
+    std::vector<glm::vec3> u(kN);
+    for (auto& r : u) r = {u01(g), u01(g), u01(g)};
+    auto s = rig.sample(mat, wo, u);
+
+    // Histogram of the non-delta samples; failed samples (zero weight) counted apart.
+    std::vector<double> observed(kCos * kPhi + 1, 0.0);
+    std::vector<dvec3> sampled;
+    std::vector<size_t> sampled_at;
+    size_t delta = 0;
+    for (size_t q = 0; q < s.size(); ++q) {
+      if (s[q].flags & 1u) {
+        ++delta;
+        continue;
+      }
+      if (!(s[q].pdf > 0) || max3(s[q].weight) <= 0) {
+        observed.back() += 1;
+        continue;
+      }
+      const dvec3& w = s[q].wi;
+      REQUIRE(std::abs(glm::length(w) - 1) < 1e-4);
+      int ci = std::clamp(int((w.z + 1) * 0.5 * kCos), 0, kCos - 1);
+      double ph = std::atan2(w.y, w.x);
+      if (ph < 0) ph += 2 * kPi;
+      int pi = std::clamp(int(ph / (2 * kPi) * kPhi), 0, kPhi - 1);
+      observed[ci * kPhi + pi] += 1;
+      if (sampled.size() < 4000) {
+        sampled.push_back(w);
+        sampled_at.push_back(q);
+      }
+    }
+    // Expected counts: the kernel's pdf integrated over each bin, midpoint rule
+    // in (theta, phi) with the solid angle sin(theta) dtheta dphi.
+    std::vector<uint32_t> emat;
+    std::vector<dvec3> ewo, ewi;
+    std::vector<double> weight;
+    for (int a = 0; a < kCos; ++a) {
+      double t0 = std::acos(-1 + 2.0 * (a + 1) / kCos), t1 = std::acos(-1 + 2.0 * a / kCos);
+      for (int b = 0; b < kPhi; ++b)
+        for (int i = 0; i < kSubT; ++i)
+          for (int j = 0; j < kSubP; ++j) {
+            double t = t0 + (t1 - t0) * (i + 0.5) / kSubT;
+            double ph = 2 * kPi * (b + (j + 0.5) / kSubP) / kPhi;
+            emat.push_back(c.mat);
+            ewo.push_back(c.wo);
+            ewi.push_back({std::sin(t) * std::cos(ph), std::sin(t) * std::sin(ph), std::cos(t)});
+            weight.push_back(std::sin(t) * (t1 - t0) / kSubT * (2 * kPi / kPhi) / kSubP);
+          }
+    }
+    auto pdfs = rig.eval(emat, ewo, ewi);
+    std::vector<double> expected(kCos * kPhi + 1, 0.0);
+    double total = 0;
+    for (size_t q = 0; q < pdfs.size(); ++q) {
+      size_t bin = q / (kSubT * kSubP);
+      expected[bin] += pdfs[q].w * weight[q] * kN;
+      total += pdfs[q].w * weight[q];
+    }
+    // The last bin: failed samples and delta lobes (plastic's coat), the pdf's missing mass.
+    observed.back() += double(delta);
+    expected.back() = std::max(0.0, 1.0 - total) * kN;
+    CHECK(total <= 1.0 + 2e-3);
+    std::string why;
+    double pv = chi2_pvalue(observed, expected, why);
+    INFO(why << ", p = " << pv << " (significance " << alpha_case << ")");
+    CHECK(pv > alpha_case);
+
+    // Weights of sampled directions: the reference f |cos| over the kernel's pdf.
+    std::vector<uint32_t> wmat(sampled.size(), c.mat);
+    std::vector<dvec3> wwo(sampled.size(), c.wo);
+    auto ev = rig.eval(wmat, wwo, sampled);
+    int wrong = 0;
+    for (size_t k = 0; k < sampled.size(); ++k) {
+      if (std::abs(sampled[k].z) < 0.05) continue;  // grazing: float cancellation in the reference comparison
+      const SampleOut& so = s[sampled_at[k]];
+      dvec3 want = ref_eval(p, c.wo, sampled[k]) * std::abs(sampled[k].z) / ev[k].w;
+      double tol = (p.beckmann ? 8e-3 : 4e-3) + (p.type == PSF_MATERIAL_ROUGH_PLASTIC ? 3e-3 : 0.0);
+      if (max3(glm::abs(so.weight - want)) > tol * std::max(1.0, max3(want))) ++wrong;
+      // The sample's pdf is the one bsdf_eval reports.
+      if (std::abs(so.pdf - ev[k].w) > 1e-3 * ev[k].w + 1e-6) ++wrong;
+    }
+    CHECK(wrong == 0);
+  }
+}
+
+TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
+  Rig rig;
+  const int kN = 200000;
+  std::mt19937 g(5);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  // Mean weight (times the radiance scaling's inverse for refraction, so that a
+  // lossless interface gives 1) and its standard error.
+  auto furnace = [&](uint32_t m, const dvec3& wo, double& mean, double& stderr_) {
+    std::vector<uint32_t> mat(kN, m);
+    std::vector<dvec3> w(kN, wo);
+    std::vector<glm::vec3> u(kN);
+    for (auto& r : u) r = {u01(g), u01(g), u01(g)};
+    auto s = rig.sample(mat, w, u);
+    const Params& p = rig.params(m);
+    double sum = 0, sum2 = 0;
+    for (const SampleOut& o : s) {
+      double x = o.weight.y;
+      if ((o.flags & 2u) && (p.type == PSF_MATERIAL_DIELECTRIC || p.type == PSF_MATERIAL_ROUGH_DIELECTRIC)) {
+        double eta_o = wo.z > 0 ? 1 : p.eta.x, eta_i = o.wi.z > 0 ? 1 : p.eta.x;
+        x *= (eta_i / eta_o) * (eta_i / eta_o);
+      }
+      sum += x;
+      sum2 += x * x;
+    }
+    mean = sum / kN;
+    stderr_ = std::sqrt(std::max(0.0, sum2 / kN - mean * mean) / kN);
+  };
+  const dvec3 normal(0, 0, 1), oblique(0.6, 0.0, 0.8), grazing(std::sqrt(1 - 0.15 * 0.15), 0, 0.15);
+
+  SECTION("lossless models give 1") {
+    Params p;
+    p.albedo = dvec3(1);
+    uint32_t diffuse = rig.add(p);
+    p = {};
+    p.type = PSF_MATERIAL_CONDUCTOR;
+    p.eta = dvec3(0);
+    p.k = dvec3(1);  // Mitsuba's material "none"
+    uint32_t mirror = rig.add(p);
+    p = {};
+    p.type = PSF_MATERIAL_DIELECTRIC;
+    p.eta = dvec3(1.5);
+    uint32_t glass = rig.add(p);
+    p.type = PSF_MATERIAL_THIN_DIELECTRIC;
+    uint32_t thin = rig.add(p);
+    p = {};
+    p.type = PSF_MATERIAL_PLASTIC;
+    p.albedo = dvec3(1);
+    p.eta = dvec3(1.5);
+    uint32_t plastic = rig.add(p);
+    for (const dvec3& wo : {normal, oblique, grazing}) {
+      INFO("wo.z = " << wo.z);
+      double mean, se;
+      for (uint32_t m : {diffuse, mirror, glass, thin}) {
+        furnace(m, wo, mean, se);
+        CHECK(mean == Approx(1.0).margin(4 * se + 2e-3));
+      }
+      furnace(glass, -wo, mean, se);  // from inside, total internal reflection included
+      CHECK(mean == Approx(1.0).margin(4 * se + 2e-3));
+      // eta^2 (1 - F_dr(1 / eta)) = 1 - F_dr(eta): the coat and the base conserve energy together.
+      furnace(plastic, wo, mean, se);
+      CHECK(mean == Approx(1.0).margin(4 * se + 5e-3));
+    }
+  }
+
+  SECTION("microfacet models lose what the reference loses") {
+    std::vector<uint32_t> ms;
+    for (double a : {0.1, 0.5, 1.0}) {
+      Params p;
+      p.type = PSF_MATERIAL_ROUGH_CONDUCTOR;
+      p.eta = dvec3(0);
+      p.k = dvec3(1);
+      p.au = p.av = a;
+      p.label = "ggx conductor " + std::to_string(a);
+      ms.push_back(rig.add(p));
+      p.beckmann = true;
+      p.label = "beckmann conductor " + std::to_string(a);
+      ms.push_back(rig.add(p));
+    }
+    Params p;
+    p.type = PSF_MATERIAL_ROUGH_PLASTIC;
+    p.albedo = dvec3(1);
+    p.eta = dvec3(1.5);
+    p.au = p.av = 0.3;
+    p.label = "roughplastic ggx 0.3";
+    ms.push_back(rig.add(p));
+    p = {};
+    p.type = PSF_MATERIAL_ROUGH_DIELECTRIC;
+    p.eta = dvec3(1.5);
+    p.au = p.av = 0.3;
+    p.label = "roughdielectric ggx 0.3";
+    ms.push_back(rig.add(p));
+    for (uint32_t m : ms) {
+      const Params& pm = rig.params(m);
+      for (const dvec3& wo : {normal, oblique}) {
+        INFO(pm.label << ", wo.z = " << wo.z);
+        double mean, se;
+        furnace(m, wo, mean, se);
+        dvec3 ref = ref_albedo(pm, wo);
+        double want = ref.y;
+        if (pm.type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
+          // Undo the radiance scaling of the reference's transmission, as furnace() does.
+          Params q = pm;
+          q.transmittance = dvec3(1.5 * 1.5);
+          want = ref_albedo(q, wo).y;
+        }
+        CHECK(mean == Approx(want).margin(4 * se + 5e-3));
+        CHECK(mean <= 1.0 + 4 * se);
+      }
+    }
+    // Stated bounds for GGX conductors at normal incidence.
+    double mean, se;
+    furnace(ms[0], normal, mean, se);
+    CHECK(mean >= 0.985);
+    furnace(ms[2], normal, mean, se);
+    CHECK(mean >= 0.66);
+    furnace(ms[4], normal, mean, se);
+    CHECK(mean >= 0.28);
+  }
+}
+
+TEST_CASE("BSDF: reciprocity", "[bsdf]") {
+  Rig rig;
+  std::vector<Params> ps = test_materials();
+  for (const Params& p : ps) rig.add(p);
+  std::mt19937 g(3);
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> a, b;
+  for (uint32_t m = 0; m < ps.size(); ++m)
+    for (int q = 0; q < 2000; ++q) {
+      mat.push_back(m);
+      a.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
+      b.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
+    }
+  auto fab = rig.eval(mat, a, b), fba = rig.eval(mat, b, a);
+  std::vector<int> bad(ps.size(), 0);
+  for (size_t q = 0; q < mat.size(); ++q) {
+    const Params& p = ps[mat[q]];
+    double scale = 1.0;
+    if (a[q].z * b[q].z < 0) {  // transmission: f(b, a) = (eta_b / eta_a)^2 f(a, b)
+      double eta_a = a[q].z > 0 ? 1 : p.eta.x, eta_b = b[q].z > 0 ? 1 : p.eta.x;
+      scale = (eta_b / eta_a) * (eta_b / eta_a);
+    }
+    dvec3 x = dvec3(fab[q]) * scale, y(fba[q]);
+    if (max3(glm::abs(x - y)) > 1e-3 * std::max(max3(x), max3(y)) + 1e-6) ++bad[mat[q]];
+  }
+  for (size_t m = 0; m < ps.size(); ++m) {
+    INFO(ps[m].label);
+    CHECK(bad[m] == 0);
+  }
+}
+
+TEST_CASE("BSDF: delta lobes (conductor, plastic coat, dielectric, thindielectric)", "[bsdf]") {
+  Rig rig;
+  Params p;
+  p.type = PSF_MATERIAL_CONDUCTOR;
+  p.eta = {0.1431189557, 0.3749570432, 1.4424785571};  // Au
+  p.k = {3.9831604247, 2.3857207478, 1.6032152899};
+  p.specular = {0.9, 0.95, 1.0};
+  uint32_t gold = rig.add(p);
+  p = {};
+  p.type = PSF_MATERIAL_DIELECTRIC;
+  p.eta = dvec3(1.5);
+  p.specular = {0.9, 0.9, 0.9};
+  p.transmittance = {0.8, 0.9, 1.0};
+  uint32_t glass = rig.add(p);
+  p.type = PSF_MATERIAL_THIN_DIELECTRIC;
+  uint32_t thin = rig.add(p);
+  p = {};
+  p.type = PSF_MATERIAL_PLASTIC;
+  p.albedo = {0.5, 0.5, 0.5};
+  p.specular = {0.7, 0.8, 0.9};
+  p.eta = dvec3(1.5);
+  uint32_t plastic = rig.add(p);
+
+  std::mt19937 g(13);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const int kN = 50000;
+  for (double cos_o : {0.95, 0.5, 0.1, -0.3, -0.9}) {
+    dvec3 wo(std::sqrt(1 - cos_o * cos_o) * std::cos(0.7), std::sqrt(1 - cos_o * cos_o) * std::sin(0.7), cos_o);
+    dvec3 mirror(-wo.x, -wo.y, wo.z);
+    INFO("wo.z = " << cos_o);
+    for (uint32_t m : {gold, glass, thin, plastic}) {
+      const Params& pm = rig.params(m);
+      INFO("type " << pm.type);
+      std::vector<uint32_t> mat(kN, m);
+      std::vector<dvec3> w(kN, wo);
+      std::vector<glm::vec3> u(kN);
+      for (auto& r : u) r = {u01(g), u01(g), u01(g)};
+      auto s = rig.sample(mat, w, u);
+      if ((m == gold || m == plastic) && cos_o < 0) {  // one-sided: nothing from below
+        for (const SampleOut& o : s) REQUIRE(max3(o.weight) == 0.0);
+        continue;
+      }
+      double eta = pm.eta.x, fr = ref_fresnel(cos_o, eta);
+      double r_expected = fr;
+      if (m == thin) {
+        double f = ref_fresnel(std::abs(cos_o), eta);
+        r_expected = f + (1 - f) * (1 - f) * f / (1 - f * f);
+      }
+      if (m == plastic) {
+        double ssw = max3(p.specular) > 0 ? (0.8 / (0.8 + 0.5)) : 0;  // means 0.8 and 0.5
+        r_expected = fr * ssw / (fr * ssw + (1 - fr) * (1 - ssw));
+      }
+      size_t reflected = 0;
+      for (const SampleOut& o : s) {
+        if (!(o.flags & 1u)) {
+          REQUIRE(m == plastic);  // only plastic has a non-delta lobe
+          continue;
+        }
+        REQUIRE(o.pdf == 0.0);
+        if (glm::length(o.wi - mirror) < 1e-5) {
+          ++reflected;
+          REQUIRE((o.flags & 2u) == 0u);
+          dvec3 want = m == gold ? pm.specular * ref_fresnel_conductor(cos_o, pm.eta, pm.k)
+                       : m == plastic ? pm.specular * fr / r_expected
+                                      : pm.specular;
+          REQUIRE(max3(glm::abs(o.weight - want)) < 2e-4 * std::max(1.0, max3(want)));
+        } else {
+          REQUIRE((o.flags & 2u) != 0u);
+          REQUIRE(m != gold);
+          if (m == thin) {
+            REQUIRE(glm::length(o.wi + wo) < 1e-5);
+            REQUIRE(max3(glm::abs(o.weight - pm.transmittance)) < 1e-5);
+          } else {
+            // Snell: eta_o sin_o = eta_i sin_i, opposite side, in the plane of wo and n.
+            double eta_o = cos_o > 0 ? 1 : eta, eta_i = cos_o > 0 ? eta : 1;
+            double sin_o = std::sqrt(1 - cos_o * cos_o), sin_i = std::sqrt(std::max(0.0, 1 - o.wi.z * o.wi.z));
+            REQUIRE(o.wi.z * cos_o < 0);
+            REQUIRE(eta_o * sin_o == Approx(eta_i * sin_i).margin(1e-5));
+            REQUIRE(std::abs(glm::dot(glm::cross(wo, dvec3(0, 0, 1)), o.wi)) < 1e-5);
+            dvec3 want = pm.transmittance * (eta_o / eta_i) * (eta_o / eta_i);
+            REQUIRE(max3(glm::abs(o.weight - want)) < 2e-4);
+          }
+        }
+      }
+      if (m == gold) {
+        CHECK(reflected == size_t(kN));
+        continue;
+      }
+      // The lobe is chosen with the probability of its share: binomial, 5 sigma.
+      double n_delta = double(kN);
+      double frac = reflected / n_delta, sigma = std::sqrt(r_expected * (1 - r_expected) / n_delta);
+      CHECK(frac == Approx(r_expected).margin(5 * sigma + 1e-6));
+    }
+  }
+  // Delta lobes evaluate to nothing: light sampling cannot hit them.
+  auto ev = rig.eval({gold, glass, thin}, {dvec3(0, 0, 1), dvec3(0, 0, 1), dvec3(0, 0, 1)},
+                     {dvec3(0, 0, 1), dvec3(0, 0, -1), dvec3(0, 0, -1)});
+  for (const auto& e : ev) CHECK(glm::length(e) == 0.0);
+}
+
+TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo", "[bsdf]") {
+  Rig rig;
+  std::vector<Params> ps = test_materials();
+  for (const Params& p : ps) rig.add(p);
+  // Reflective types are black seen from below.
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> wo, wi;
+  for (uint32_t m = 0; m < ps.size(); ++m) {
+    if (transmissive(ps[m])) continue;
+    mat.push_back(m);
+    wo.push_back(glm::normalize(dvec3(0.3, 0.1, -0.8)));
+    wi.push_back(glm::normalize(dvec3(-0.2, 0.4, 0.7)));
+    mat.push_back(m);
+    wo.push_back(glm::normalize(dvec3(0.3, 0.1, 0.8)));
+    wi.push_back(glm::normalize(dvec3(-0.2, 0.4, -0.7)));
+  }
+  for (const auto& e : rig.eval(mat, wo, wi)) CHECK(glm::length(e) == 0.0);
+
+  // bsdf_is_diffuse: diffuse; rough lobes above alpha 0.3; plastics whose base dominates.
+  Rig r2;
+  struct Want {
+    Params p;
+    bool diffuse;
+  };
+  std::vector<Want> wants;
+  Params p;
+  wants.push_back({p, true});
+  p.type = PSF_MATERIAL_CONDUCTOR;
+  p.eta = dvec3(0);
+  p.k = dvec3(1);
+  wants.push_back({p, false});
+  p.type = PSF_MATERIAL_ROUGH_CONDUCTOR;
+  p.au = p.av = 0.25;
+  wants.push_back({p, false});
+  p.au = p.av = 0.35;
+  wants.push_back({p, true});
+  p = {};
+  p.type = PSF_MATERIAL_DIELECTRIC;
+  wants.push_back({p, false});
+  p.type = PSF_MATERIAL_THIN_DIELECTRIC;
+  wants.push_back({p, false});
+  p.type = PSF_MATERIAL_ROUGH_DIELECTRIC;
+  p.au = p.av = 0.5;
+  wants.push_back({p, true});
+  p = {};
+  p.type = PSF_MATERIAL_PLASTIC;
+  p.albedo = dvec3(0.8);  // 0.8 (1 - 0.092) >= 4 * 0.092
+  wants.push_back({p, true});
+  p.albedo = dvec3(0.05);
+  wants.push_back({p, false});
+  p.type = PSF_MATERIAL_ROUGH_PLASTIC;
+  p.au = p.av = 0.1;
+  wants.push_back({p, false});
+  p.au = p.av = 0.5;
+  wants.push_back({p, true});
+  for (const Want& w : wants) r2.add(w.p);
+  auto props = r2.props();
+  for (size_t i = 0; i < wants.size(); ++i) {
+    INFO("material " << i << " type " << wants[i].p.type);
+    CHECK((props[i].w == 1.0) == wants[i].diffuse);
+  }
+  // bsdf_albedo: the diffuse reflectance, a conductor's normal-incidence colour.
+  CHECK(dvec3(props[0]).x == Approx(0.5));
+  CHECK(dvec3(props[1]).x == Approx(1.0).margin(1e-5));
+  CHECK(dvec3(props[7]).x == Approx(0.8));
+}
+
+TEST_CASE("Textures: lookups match a scalar bilinear reference", "[bsdf]") {
+  TempDir dir;
+  // A 5 x 3 RGBA image of known 8-bit values.
+  const int w = 5, h = 3;
+  std::vector<uint8_t> px(w * h * 4);
+  std::mt19937 g(17);
+  for (auto& v : px) v = uint8_t(g() % 256);
+  std::string file = dir.path("Tex.PNG");
+  REQUIRE(stbi_write_png(file.c_str(), w, h, 4, px.data(), w * 4));
+  auto decode = [&](int x, int y, int c) {
+    double e = px[(y * w + x) * 4 + c] / 255.0;
+    if (c == 3) return e;
+    return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4);
+  };
+
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  struct Variant {
+    bool bilinear;
+    uint32_t wrap;
+    glm::vec3 uv_u, uv_v;
+  };
+  std::vector<Variant> variants = {{true, 0, {1, 0, 0}, {0, 1, 0}},
+                                   {false, 0, {1, 0, 0}, {0, 1, 0}},
+                                   {true, PSF_TEX_CLAMP, {1, 0, 0}, {0, 1, 0}},
+                                   {true, PSF_TEX_MIRROR, {2, 0, 0.25f}, {0, 3, -0.1f}},
+                                   {false, PSF_TEX_MIRROR, {0.5f, 0.5f, 0}, {-0.5f, 0.5f, 0.5f}}};
+  std::vector<uint32_t> index;
+  // The lookup is case-insensitive: "tex.png" finds "Tex.PNG".
+  std::optional<std::string> found = psf::detail::find_file_nocase(dir.path("tex.png"));
+  REQUIRE(found);
+  CHECK(fs::path(*found).filename() == "Tex.PNG");
+  for (const Variant& v : variants) {
+    psf::detail::TextureDesc d;
+    d.path = *found;
+    d.bilinear = v.bilinear;
+    d.wrap = v.wrap;
+    d.uv_u = v.uv_u;
+    d.uv_v = v.uv_v;
+    index.push_back(store.image(d));
+  }
+  CHECK(index[0] != index[1]);
+
+  auto wrap = [](int i, int n, uint32_t mode) {
+    if (mode & PSF_TEX_CLAMP) return std::clamp(i, 0, n - 1);
+    if (mode & PSF_TEX_MIRROR) {
+      int p = ((i % (2 * n)) + 2 * n) % (2 * n);
+      return p < n ? p : 2 * n - 1 - p;
+    }
+    return ((i % n) + n) % n;
+  };
+  auto reference = [&](const Variant& v, double u, double vv, int c) {
+    double s = v.uv_u.x * u + v.uv_u.y * vv + v.uv_u.z, t = v.uv_v.x * u + v.uv_v.y * vv + v.uv_v.z;
+    double x = s * w, y = t * h;
+    if (!v.bilinear) return decode(wrap(int(std::floor(x)), w, v.wrap), wrap(int(std::floor(y)), h, v.wrap), c);
+    x -= 0.5;
+    y -= 0.5;
+    int x0 = int(std::floor(x)), y0 = int(std::floor(y));
+    double fx = x - x0, fy = y - y0;
+    auto at = [&](int xx, int yy) { return decode(wrap(xx, w, v.wrap), wrap(yy, h, v.wrap), c); };
+    return (1 - fy) * ((1 - fx) * at(x0, y0) + fx * at(x0 + 1, y0)) + fy * ((1 - fx) * at(x0, y0 + 1) + fx * at(x0 + 1, y0 + 1));
+  };
+
+  auto& rt = psf::test::runtime();
+  cl::Buffer textures = rt.upload(scene.textures), texels = rt.upload(scene.texels);
+  std::uniform_real_distribution<float> uv(-1.3f, 2.2f);
+  const uint32_t n = 3000;
+  std::vector<cl_float2> uvs(n);
+  for (auto& q : uvs) q = {{uv(g), uv(g)}};
+  // Keep away from texel-centre lines (where the gradient jumps) and texel edges (nearest).
+  for (size_t vi = 0; vi < variants.size(); ++vi) {
+    const Variant& v = variants[vi];
+    INFO("variant " << vi);
+    cl::Buffer buv = rt.upload(uvs);
+    cl::Buffer value = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+    cl::Buffer grad = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float2));
+    rt.launch("texture_test_eval", n, 64, textures, texels, index[vi], buv, value, grad, n);
+    auto got = rt.download<cl_float4>(value, n);
+    auto got_grad = rt.download<cl_float2>(grad, n);
+    int bad = 0, bad_grad = 0, tested_grad = 0;
+    for (uint32_t q = 0; q < n; ++q) {
+      double u = uvs[q].s[0], vv = uvs[q].s[1];
+      double s = v.uv_u.x * u + v.uv_u.y * vv + v.uv_u.z, t = v.uv_v.x * u + v.uv_v.y * vv + v.uv_v.z;
+      double fx = s * w - std::floor(s * w), fy = t * h - std::floor(t * h);
+      if (!v.bilinear && (fx < 1e-3 || fx > 1 - 1e-3 || fy < 1e-3 || fy > 1 - 1e-3)) continue;
+      for (int c = 0; c < 4; ++c) {
+        double want = reference(v, u, vv, c);
+        if (std::abs(got[q].s[c] - want) > 2e-3 * std::abs(want) + 1e-4) ++bad;
+      }
+      // The gradient of the x channel against central differences of the reference.
+      double gx = s * w - 0.5 - std::floor(s * w - 0.5), gy = t * h - 0.5 - std::floor(t * h - 0.5);
+      if (!v.bilinear || gx < 0.01 || gx > 0.99 || gy < 0.01 || gy > 0.99) continue;
+      const double e = 1e-5;
+      double du = (reference(v, u + e, vv, 0) - reference(v, u - e, vv, 0)) / (2 * e);
+      double dv = (reference(v, u, vv + e, 0) - reference(v, u, vv - e, 0)) / (2 * e);
+      ++tested_grad;
+      double scale = 2e-3 * 3 * w * (std::abs(v.uv_u.x) + std::abs(v.uv_u.y) + std::abs(v.uv_v.x) + std::abs(v.uv_v.y));
+      if (std::abs(got_grad[q].s[0] - du) > scale || std::abs(got_grad[q].s[1] - dv) > scale) ++bad_grad;
+    }
+    CHECK(bad == 0);
+    CHECK(bad_grad == 0);
+    if (v.bilinear) CHECK(tested_grad > 500);
+  }
+}
+
+TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosided", "[bsdf]") {
+  // The triangle (0,0,0), (1,0,0), (0,1,0) with uv = (x, y): dp/du = x, dp/dv = y, ng = z.
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  psf::detail::TextureDesc ramp;
+  ramp.wrap = PSF_TEX_CLAMP;
+  // Heights 0 and 0.5 at texel centres u = 1/4 and 3/4: dh/du = 1 between them (bilinear).
+  uint32_t height = store.pixels(ramp, 2, 1, {0, 0, 0, 1, 0.5f, 0.5f, 0.5f, 1});
+  uint32_t colour = store.pixels(ramp, 2, 1, {0.2f, 0.4f, 0.6f, 1, 0.2f, 0.4f, 0.6f, 1});
+  std::vector<Material> mats(6);
+  mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
+  mats[1] = mats[0];
+  mats[1].two_sided = 1;
+  mats[2] = mats[0];
+  mats[2].tex_bump = height;
+  mats[2].bump_scale = 0.3f;
+  mats[2].tex_color = colour;
+  mats[3].type = PSF_MATERIAL_ROUGH_CONDUCTOR;  // anisotropic: s follows dp/du
+  mats[3].alpha_u = 0.1f;
+  mats[3].alpha_v = 0.3f;
+  mats[3].tex_color = colour;  // a conductor's texture is its specular reflectance
+  mats[4] = mats[0];
+  mats[4].flags = PSF_MATFLAG_NORMALS;  // vertex normals
+  mats[5] = mats[4];
+  mats[5].flags = 0;  // vertex normals present but not flagged: not read
+  TriAttrib a{};
+  glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
+  a.n0 = {{n0.x, n0.y, n0.z, 0}};
+  a.n1 = {{n1.x, n1.y, n1.z, 0}};
+  a.n2 = {{n2.x, n2.y, n2.z, 0}};
+  a.uv01 = {{0, 0, 1, 0}};
+  a.u2 = 0;
+  a.v2 = 1;
+  a.flags = PSF_TRI_NORMALS;
+  auto& rt = psf::test::runtime();
+  cl::Buffer bm = rt.upload(mats), ba = rt.upload(std::vector<TriAttrib>{a});
+  cl::Buffer bt = rt.upload(scene.textures), bx = rt.upload(scene.texels);
+  struct Query {
+    uint32_t mat;
+    glm::vec2 bary;
+    glm::vec3 wo;
+  };
+  const glm::vec3 up(0.2f, 0.1f, 0.97f), down(0.2f, 0.1f, -0.97f);
+  std::vector<Query> q = {{0, {0.3f, 0.3f}, up}, {0, {0.3f, 0.3f}, down}, {1, {0.3f, 0.3f}, down},
+                          {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
+                          {5, {0.25f, 0.5f}, up}};
+  uint32_t n = uint32_t(q.size());
+  std::vector<uint32_t> mi;
+  std::vector<cl_float2> bary;
+  std::vector<cl_float4> wo;
+  for (const Query& x : q) {
+    mi.push_back(x.mat);
+    bary.push_back({{x.bary.x, x.bary.y}});
+    wo.push_back({{x.wo.x, x.wo.y, x.wo.z, 0}});
+  }
+  cl::Buffer bmi = rt.upload(mi), bb = rt.upload(bary), bw = rt.upload(wo);
+  cl::Buffer on = rt.buffer(CL_MEM_READ_WRITE, n * 16), os = rt.buffer(CL_MEM_READ_WRITE, n * 16);
+  cl::Buffer oa = rt.buffer(CL_MEM_READ_WRITE, n * 16), osp = rt.buffer(CL_MEM_READ_WRITE, n * 16);
+  cl_float4 p0 = {{0, 0, 0, 0}}, p1 = {{1, 0, 0, 0}}, p2 = {{0, 1, 0, 0}};
+  rt.launch("surface_test_frame", n, 64, bm, ba, bt, bx, bmi, p0, p1, p2, bb, bw, on, os, oa, osp, n);
+  auto N = rt.download<cl_float4>(on, n), S = rt.download<cl_float4>(os, n);
+  auto A = rt.download<cl_float4>(oa, n), SP = rt.download<cl_float4>(osp, n);
+  auto v3 = [](const cl_float4& v) { return glm::vec3(v.s[0], v.s[1], v.s[2]); };
+  auto near = [](const glm::vec3& x, const glm::vec3& y) { return glm::length(x - y) < 2e-3f; };
+  CHECK(near(v3(N[0]), {0, 0, 1}));
+  CHECK(near(v3(N[1]), {0, 0, 1}));   // one-sided: the BSDF sees wo below and scatters nothing
+  CHECK(near(v3(N[2]), {0, 0, -1}));  // two-sided: the frame turns towards wo
+  // Bump: dp/du' = (1,0,0) + n (0.3 * 1 - 0) = (1, 0, 0.3), dp/dv' = (0,1,0): n' = (-0.3, 0, 1) / |.|.
+  CHECK(near(v3(N[3]), glm::normalize(glm::vec3(-0.3f, 0, 1))));
+  CHECK(near(v3(A[3]), {0.2f, 0.4f, 0.6f}));
+  CHECK(near(v3(S[4]), {1, 0, 0}));
+  CHECK(near(v3(SP[4]), {0.2f, 0.4f, 0.6f}));
+  // Phong normal at barycentrics (b1, b2) = (0.25, 0.5).
+  glm::vec3 phong = glm::normalize(0.25f * n0 + 0.25f * n1 + 0.5f * n2);
+  CHECK(near(v3(N[5]), phong));
+  CHECK(near(v3(N[6]), {0, 0, 1}));
+}
+
+TEST_CASE("Textures: EXR and HDR images load linear, beyond 1", "[bsdf]") {
+  TempDir dir;
+  psf::Image img;
+  img.width = 3;
+  img.height = 2;
+  img.rgb = {0.0f, 0.5f, 1.0f, 2.0f, 4.0f, 8.0f, 0.25f, 0.125f, 16.0f, 3.0f, 0.0f, 1.5f, 0.75f, 0.5f, 0.25f, 10.0f, 20.0f, 30.0f};
+  psf::write_exr(dir.path("t.exr"), img);
+  REQUIRE(stbi_write_hdr(dir.path("t.hdr").c_str(), 3, 2, 3, img.rgb.data()));
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  for (const char* name : {"t.exr", "t.hdr"}) {
+    INFO(name);
+    psf::detail::TextureDesc d;
+    d.path = dir.path(name);
+    uint32_t i = store.image(d);
+    const TextureInfo& t = scene.textures[i];
+    REQUIRE(t.width == 3u);
+    REQUIRE(t.height == 2u);
+    for (size_t p = 0; p < 6; ++p)
+      for (int c = 0; c < 3; ++c) {
+        Imath::half hv;
+        hv.setBits(scene.texels[(t.offset + p) * 4 + c]);
+        float got = float(hv);
+        float want = img.rgb[p * 3 + c];
+        // halfs: 4.9e-4 relative; Radiance HDR: a shared 8-bit exponent, 1 % of the largest channel.
+        float tol = std::string(name) == "t.hdr" ? 0.01f * std::max({img.rgb[p * 3], img.rgb[p * 3 + 1], img.rgb[p * 3 + 2]})
+                                                : 1e-3f * want;
+        CHECK(got == Approx(want).margin(tol + 1e-6f));
+      }
+  }
+}
+
+TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]") {
+  TempDir dir;
+  const int w = 4, h = 2;
+  std::vector<uint8_t> px(w * h * 3, 200);
+  fs::create_directories(dir.path("textures"));
+  REQUIRE(stbi_write_png(dir.path("textures/Wood.JPG.png").c_str(), w, h, 3, px.data(), w * 3));
+  std::string xml = dir.write(
+      "scene.xml",
+      "<scene version=\"0.5.0\">\n"
+      "<bsdf type=\"roughconductor\" id=\"cu\"><string name=\"material\" value=\"Cu\"/>"
+      "<float name=\"alphaU\" value=\"0.2\"/><float name=\"alphaV\" value=\"0.4\"/></bsdf>\n"  // 2
+      "<bsdf type=\"conductor\" id=\"plain\"/>\n"                                                   // 3
+      "<bsdf type=\"twosided\" id=\"wood\"><bsdf type=\"roughplastic\"><float name=\"alpha\" value=\"0.1\"/>"
+      "<string name=\"distribution\" value=\"ggx\"/><float name=\"intIOR\" value=\"1.5\"/>"
+      "<boolean name=\"nonlinear\" value=\"true\"/><texture name=\"diffuseReflectance\" type=\"bitmap\">"
+      "<string name=\"filename\" value=\"textures/wood.jpg.PNG\"/><float name=\"uscale\" value=\"2\"/>"
+      "</texture></bsdf></bsdf>\n"                                                                  // 4
+      "<bsdf type=\"dielectric\" id=\"water\"><string name=\"intIOR\" value=\"water\"/></bsdf>\n"  // 5
+      "<bsdf type=\"thindielectric\" id=\"thin\"/>\n"                                                // 6
+      "<bsdf type=\"mask\" id=\"leaf\"><float name=\"opacity\" value=\"0.25\"/>"
+      "<bsdf type=\"diffuse\"><texture name=\"reflectance\" type=\"bitmap\">"
+      "<string name=\"filename\" value=\"missing.png\"/></texture></bsdf></bsdf>\n"                 // 7
+      "<bsdf type=\"bumpmap\" id=\"bumpy\"><texture type=\"scale\"><float name=\"scale\" value=\"0.5\"/>"
+      "<texture type=\"checkerboard\"/></texture><bsdf type=\"roughdielectric\">"
+      "<float name=\"alpha\" value=\"0.3\"/><float name=\"ior\" value=\"1\"/></bsdf></bsdf>\n"      // 8
+      "<bsdf type=\"plastic\" id=\"smooth\"><rgb name=\"diffuseReflectance\" value=\"0.2 0.3 0.4\"/></bsdf>\n"  // 9
+      "<shape type=\"rectangle\"><ref id=\"cu\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"plain\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"wood\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"water\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"thin\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"leaf\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"bumpy\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"smooth\"/></shape>\n"
+      "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  REQUIRE(s.materials.size() == 8);
+  for (const std::string& wmsg : s.warnings) INFO(wmsg);
+  const Material& cu = s.materials[0];
+  CHECK(cu.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  CHECK((cu.flags & PSF_MATFLAG_BECKMANN) != 0u);  // Mitsuba's default distribution
+  CHECK(cu.alpha_u == Approx(0.2f));
+  CHECK(cu.alpha_v == Approx(0.4f));
+  CHECK(cu.eta.s[0] == Approx(0.2004376970 / 1.000277));  // divided by ext_eta (air)
+  CHECK(cu.k.s[2] == Approx(2.1421879552 / 1.000277));
+  const Material& plain = s.materials[1];  // Mitsuba 0.5's default material is Cu
+  CHECK(plain.type == PSF_MATERIAL_CONDUCTOR);
+  CHECK(plain.eta.s[1] == Approx(0.9240334304 / 1.000277));
+  const Material& wood = s.materials[2];
+  CHECK(wood.type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(wood.two_sided == 1u);
+  CHECK((wood.flags & PSF_MATFLAG_NONLINEAR) != 0u);
+  CHECK((wood.flags & PSF_MATFLAG_BECKMANN) == 0u);
+  REQUIRE(wood.tex_color != PSF_NO_TEXTURE);  // found ignoring case
+  CHECK(s.textures[wood.tex_color].width == 4u);
+  CHECK(s.textures[wood.tex_color].uv_u.s[0] == Approx(2.0f));
+  CHECK(wood.tex_table != PSF_NO_TEXTURE);
+  CHECK(s.textures[wood.tex_table].width == unsigned(PSF_ROUGH_TABLE_RES));
+  CHECK(wood.eta.s[0] == Approx(1.5f / 1.000277f));
+  // Specular sampling weight s / (d + s) with d the texture's mean (sRGB 200 decoded).
+  const double d_mean = std::pow((200.0 / 255.0 + 0.055) / 1.055, 2.4);
+  CHECK(wood.albedo.s[3] == Approx(1.0 / (1.0 + d_mean)).epsilon(2e-3));
+  const Material& water = s.materials[3];
+  CHECK(water.type == PSF_MATERIAL_DIELECTRIC);
+  CHECK(water.eta.s[0] == Approx(1.333f / 1.000277f));
+  CHECK(s.materials[4].type == PSF_MATERIAL_THIN_DIELECTRIC);
+  CHECK(s.materials[4].eta.s[0] == Approx(1.5046f / 1.000277f));
+  const Material& leaf = s.materials[5];
+  CHECK((leaf.flags & PSF_MATFLAG_MASKED) != 0u);
+  CHECK(leaf.opacity == Approx(0.25f));
+  CHECK(leaf.tex_color == PSF_NO_TEXTURE);  // missing file: warning and the default 0.5
+  CHECK(leaf.albedo.s[0] == Approx(0.5f));
+  CHECK(count_warnings(s, "scene.xml:7: texture file 'missing.png' not found") == 1);
+  const Material& bumpy = s.materials[6];
+  CHECK(bumpy.type == PSF_MATERIAL_ROUGH_DIELECTRIC);
+  CHECK(bumpy.tex_bump != PSF_NO_TEXTURE);
+  CHECK(bumpy.bump_scale == Approx(0.5f));
+  CHECK(count_warnings(s, "scene.xml:8: property 'ior' of bsdf 'roughdielectric' is not supported") == 1);
+  const Material& smooth = s.materials[7];
+  CHECK(smooth.type == PSF_MATERIAL_PLASTIC);
+  CHECK(smooth.eta.s[2] == Approx(psf::detail::fresnel_diffuse_reflectance(1.000277 / 1.49)).epsilon(1e-4));
+  CHECK(s.warnings.size() == 3);  // the two above and: no <sensor>
+  // Mitsuba 3 names for the same parameters; the default conductor is a mirror.
+  std::string xml3 = dir.write("scene3.xml",
+                               "<scene version=\"3.0.0\">\n"
+                               "<shape type=\"rectangle\"><bsdf type=\"conductor\"/></shape>\n"
+                               "<shape type=\"rectangle\"><bsdf type=\"roughconductor\"><rgb name=\"eta\" value=\"2\"/>"
+                               "<float name=\"alpha_u\" value=\"0.3\"/><float name=\"alpha_v\" value=\"0.1\"/>"
+                               "<string name=\"distribution\" value=\"ggx\"/></bsdf></shape>\n"
+                               "<shape type=\"rectangle\"><bsdf type=\"conductor\"><string name=\"material\" "
+                               "value=\"Xx\"/></bsdf></shape>\n"
+                               "</scene>\n");
+  try {
+    psf::load_scene(xml3);
+    FAIL("an unknown conductor material is an error");
+  } catch (const psf::SceneError& e) {
+    CHECK(e.line() == 4);
+    CHECK(std::string(e.what()).find("unknown conductor material 'Xx'") != std::string::npos);
+  }
+  std::string ok3 = dir.write("ok3.xml",
+                              "<scene version=\"3.0.0\">\n"
+                              "<shape type=\"rectangle\"><bsdf type=\"conductor\"/></shape>\n"
+                              "<shape type=\"rectangle\"><bsdf type=\"roughconductor\"><rgb name=\"eta\" value=\"2\"/>"
+                              "<float name=\"alpha_u\" value=\"0.3\"/><float name=\"alpha_v\" value=\"0.1\"/>"
+                              "<string name=\"distribution\" value=\"ggx\"/></bsdf></shape>\n"
+                              "</scene>\n");
+  // A texture file that cannot be decoded is an error at its element (Mitsuba) or material (MTL).
+  dir.write("bad.png", "not an image");
+  std::string bad = dir.write("bad.xml",
+                              "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"diffuse\">\n"
+                              "<texture name=\"reflectance\" type=\"bitmap\"><string name=\"filename\" "
+                              "value=\"bad.png\"/></texture></bsdf></shape>\n</scene>\n");
+  try {
+    psf::load_scene(bad);
+    FAIL("an undecodable texture is an error");
+  } catch (const psf::SceneError& e) {
+    CHECK(e.file() == bad);
+    CHECK(e.line() == 3);
+  }
+  dir.write("bad.mtl", "newmtl a\nKd 1 1 1\n\nmap_Kd bad.png\nnewmtl b\n");
+  std::string bad_obj = dir.write("bad.obj", "mtllib bad.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n");
+  try {
+    psf::load_scene(bad_obj);
+    FAIL("an undecodable texture is an error");
+  } catch (const psf::SceneError& e) {
+    CHECK(e.file() == dir.path("bad.mtl"));
+    CHECK(e.line() == 1);
+  }
+  psf::Scene s3 = psf::load_scene(ok3);
+  REQUIRE(s3.materials.size() == 2);
+  CHECK(s3.materials[0].eta.s[0] == 0.0f);
+  CHECK(s3.materials[0].k.s[0] == Approx(1.0f / 1.000277f));
+  CHECK(s3.materials[1].eta.s[0] == Approx(2.0f / 1.000277f));
+  CHECK(s3.materials[1].k.s[0] == Approx(1.0f / 1.000277f));
+  CHECK(s3.materials[1].alpha_u == Approx(0.3f));
+  CHECK((s3.materials[1].flags & PSF_MATFLAG_BECKMANN) == 0u);
+}
+
+TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals and uvs", "[bsdf]") {
+  TempDir dir;
+  std::vector<uint8_t> px(2 * 2 * 4, 255);
+  px[3] = 0;  // one transparent texel
+  fs::create_directories(dir.path("Maps"));
+  REQUIRE(stbi_write_png(dir.path("Maps/Leaf.PNG").c_str(), 2, 2, 4, px.data(), 8));
+  dir.write("m.mtl",
+            "newmtl wall\nKd 0.5 0.4 0.3\nmap_Kd maps/leaf.png\n"
+            "newmtl gloss\nKd 0.2 0.2 0.2\nKs 0.5 0.5 0.5\nNs 98\nNi 1.4\n"
+            "newmtl metal\nKd 0 0 0\nKs 0.9 0.9 0.9\nNs 1000\n"
+            "newmtl glass\nKd 0 0 0\nNi 1.33\nTf 0.9 0.9 1\nillum 7\n"
+            "newmtl cutout\nKd 1 1 1\nmap_d MAPS/leaf.png\nmap_bump -bm 2 maps/LEAF.png\nd 0.9\n"
+            "newmtl lost\nKd 0.3 0.3 0.3\nmap_Kd nowhere.png\nmap_Ks spec.png\n");
+  std::string obj = dir.write("m.obj",
+                              "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                              "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nvn 0 0.6 0.8\n"
+                              "usemtl wall\nf 1/1/1 2/2/1 3/3/2\n"
+                              "usemtl gloss\nf 1/1/1 3/3/2 4/4/1\n"
+                              "usemtl metal\nf 1 2 3\nusemtl glass\nf 1 3 4\n"
+                              "usemtl cutout\nf 1/1 2/2 3/3\nusemtl lost\nf 1 2 4\n");
+  psf::Scene s = psf::load_scene(obj);
+  REQUIRE(s.materials.size() == 6);
+  auto mat = [&](const std::string& name) -> const Material& {
+    auto it = std::find(s.material_names.begin(), s.material_names.end(), name);
+    REQUIRE(it != s.material_names.end());
+    return s.materials[size_t(it - s.material_names.begin())];
+  };
+  CHECK(mat("wall").type == PSF_MATERIAL_DIFFUSE);
+  CHECK(mat("wall").tex_color != PSF_NO_TEXTURE);
+  const Material& gloss = mat("gloss");
+  CHECK(gloss.type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(gloss.alpha_u == Approx(std::sqrt(2.0 / 100.0)));
+  CHECK(gloss.eta.s[0] == Approx(1.4f));
+  CHECK(xyz(gloss.specular).x == Approx(0.5));
+  CHECK(mat("metal").type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  CHECK(mat("glass").type == PSF_MATERIAL_DIELECTRIC);
+  CHECK(mat("glass").eta.s[0] == Approx(1.33f));
+  CHECK(mat("glass").two_sided == 0u);
+  CHECK(mat("wall").two_sided == 1u);
+  const Material& cut = mat("cutout");
+  CHECK((cut.flags & PSF_MATFLAG_MASKED) != 0u);
+  CHECK(cut.opacity == Approx(0.9f));
+  CHECK(cut.tex_opacity != PSF_NO_TEXTURE);
+  CHECK(cut.tex_bump != PSF_NO_TEXTURE);
+  CHECK(cut.bump_scale > 0.0f);
+  CHECK(mat("lost").tex_color == PSF_NO_TEXTURE);
+  CHECK(count_warnings(s, "m.mtl:23: map_Kd 'nowhere.png' of material 'lost' not found") == 1);
+  CHECK(count_warnings(s, "m.mtl:23: material 'lost': map_Ks not supported") == 1);
+  // Vertices split per (v, vt, vn); normals as given, v flipped to Mitsuba's convention.
+  REQUIRE(s.normals.size() == s.positions.size());
+  REQUIRE(s.uvs.size() == s.positions.size());
+  glm::uvec3 t1 = s.triangles[1];
+  CHECK(s.normals[t1.y] == glm::vec3(0, 0.6f, 0.8f));
+  CHECK(s.uvs[t1.y] == glm::vec2(1, 0));  // vt 1 1
+  std::vector<TriAttrib> attrs = psf::triangle_attributes(s);
+  CHECK((attrs[1].flags & PSF_TRI_NORMALS) != 0u);
+  CHECK((attrs[2].flags & PSF_TRI_NORMALS) == 0u);  // no vn: the face normal
+  CHECK(attrs[2].uv01.s[2] == 1.0f);                 // no vt: barycentric uv
+  CHECK(attrs[2].v2 == 1.0f);
+
+  // In a Mitsuba scene: vn kept, or smooth normals computed, or none with face_normals.
+  std::string bare = dir.write("bare.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\n");
+  std::string xml = dir.write("s.xml",
+                              "<scene version=\"3.0.0\">\n"
+                              "<shape type=\"obj\"><string name=\"filename\" value=\"bare.obj\"/></shape>\n"
+                              "<shape type=\"obj\"><string name=\"filename\" value=\"bare.obj\"/>"
+                              "<boolean name=\"face_normals\" value=\"true\"/></shape>\n"
+                              "</scene>\n");
+  psf::Scene m = psf::load_scene(xml);
+  REQUIRE(m.normals.size() == m.positions.size());
+  CHECK(glm::length(m.normals[0] - glm::normalize(glm::vec3(0, -1, -1))) < 1e-5f);  // two faces at right angles
+  CHECK(m.normals[4] == glm::vec3(0.0f));  // the second shape: face normals
+  attrs = psf::triangle_attributes(m);
+  CHECK((attrs[0].flags & PSF_TRI_NORMALS) != 0u);
+  CHECK((attrs[2].flags & PSF_TRI_NORMALS) == 0u);
+}
+
+TEST_CASE("Materials: mask cut-outs are alpha-tested during ray traversal", "[bsdf]") {
+  // An emitting square (radiance 1) at z = 2 facing the camera behind a black
+  // diffuse square at z = 1 whose opacity is 0 on its left half and 1 on its
+  // right (a 2 x 1 texture, nearest): seen from the camera at the origin, the
+  // left half of the image is 1 and the right half 0.
+  auto square = [](psf::Scene& s, float z, uint32_t material, bool facing_camera) {
+    uint32_t b = uint32_t(s.positions.size());
+    s.positions.insert(s.positions.end(), {{-1, -1, z}, {1, -1, z}, {1, 1, z}, {-1, 1, z}});
+    s.uvs.insert(s.uvs.end(), {{1, 1}, {0, 1}, {0, 0}, {1, 0}});  // u = 0 at the image's left (x = +1)
+    if (facing_camera) {
+      s.triangles.push_back({b, b + 2, b + 1});
+      s.triangles.push_back({b, b + 3, b + 2});
+    } else {
+      s.triangles.push_back({b, b + 1, b + 2});
+      s.triangles.push_back({b, b + 2, b + 3});
+    }
+    s.tri_material.insert(s.tri_material.end(), 2, material);
+  };
+  auto make = [&](float opacity, bool textured) {
+    psf::Scene s;
+    psf::detail::TextureStore store(s);
+    Material light{};
+    light.emission = {{1, 1, 1, 0}};
+    Material mask{};
+    mask.albedo = {{0, 0, 0, 0}};
+    mask.flags = PSF_MATFLAG_MASKED;
+    mask.opacity = opacity;
+    if (textured) {
+      psf::detail::TextureDesc d;
+      d.bilinear = false;
+      mask.tex_opacity = store.pixels(d, 2, 1, {0, 0, 0, 1, 1, 1, 1, 1});
+    }
+    s.materials = {light, mask};
+    square(s, 2.0f, 0, true);
+    square(s, 1.0f, 1, true);
+    s.camera.origin = {0, 0, 0};
+    s.camera.target = {0, 0, 1};
+    s.camera.up = {0, 1, 0};
+    s.camera.fov_degrees = 40.0f;
+    s.width = s.height = 16;
+    return s;
+  };
+  auto& rt = psf::test::runtime();
+  psf::RenderOptions o;
+  o.spp = 16;
+  o.max_depth = 1;
+  o.filter.enabled = false;
+  {
+    psf::Scene s = make(1.0f, true);
+    psf::Renderer r(rt, s);
+    psf::Image img = r.render(o).image;
+    int wrong = 0;
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) {
+        float v = img.rgb[(y * 16 + x) * 3];
+        // The camera's right is -x: the image's left half looks at x > 0 (u < 1/2, opacity 0).
+        if (x < 7 && std::abs(v - 1.0f) > 1e-4f) ++wrong;
+        if (x > 8 && std::abs(v) > 1e-4f) ++wrong;
+      }
+    CHECK(wrong == 0);
+  }
+  {
+    // Constant opacity 0.3: 70 % of the rays pass, stochastically (16 x 16 x 64 rays, 5 sigma).
+    psf::Scene s = make(0.3f, false);
+    psf::Renderer r(rt, s);
+    o.spp = 64;
+    psf::Image img = r.render(o).image;
+    double mean = 0;
+    for (float v : img.rgb) mean += v;
+    mean /= img.rgb.size();
+    CHECK(mean == Approx(0.7).margin(5 * std::sqrt(0.21 / (16 * 16 * 64))));
+  }
+  {
+    // Shadow rays: a fully transparent mask between a light and a diffuse floor
+    // changes nothing (any-hit traversal skips it).
+    auto lit = [&](bool with_mask) {
+      psf::Scene s;
+      Material light{}, floor{}, mask{};
+      light.emission = {{5, 5, 5, 0}};
+      floor.albedo = {{0.5f, 0.5f, 0.5f, 0}};
+      mask.flags = PSF_MATFLAG_MASKED;
+      mask.opacity = 0.0f;
+      s.materials = {light, floor, mask};
+      square(s, 3.0f, 0, true);   // the light faces the floor
+      square(s, 1.0f, 1, false);  // the floor faces the light
+      if (with_mask) square(s, 2.0f, 2, true);
+      s.camera.origin = {0, 0, 2.5f};
+      s.camera.target = {0, 0, 1};
+      s.camera.up = {0, 1, 0};
+      s.camera.fov_degrees = 30.0f;
+      s.width = s.height = 8;
+      psf::Renderer r(rt, s);
+      psf::RenderOptions oo;
+      oo.spp = 16;
+      oo.max_depth = 2;
+      oo.filter.enabled = false;
+      double mean = 0;
+      for (float v : r.render(oo).image.rgb) mean += v;
+      return mean;
+    };
+    double without = lit(false);
+    CHECK(without > 0.0);
+    CHECK(lit(true) == Approx(without).epsilon(1e-5));
+  }
+}

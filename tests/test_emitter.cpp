@@ -1,0 +1,671 @@
+// Lights: the environment map's sampling against its distribution (scalar
+// references written here, separately from host/lights.cpp), delta lights,
+// selection by power, Mitsuba emitter parsing, and analytic scenes rendered
+// through the whole pipeline (psf::Renderer) under each kind of light.
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <stb_image_write.h>
+
+#include "image.h"
+#include "lights.h"
+#include "render.h"
+#include "scene/scene.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A fresh directory under the system's temporary directory, removed at the end of the test.
+class TempDir {
+ public:
+  TempDir() {
+    static int counter = 0;
+    path_ = fs::temp_directory_path() /
+            ("psf-emitter-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  std::string write(const std::string& name, const std::string& text) const {
+    fs::path p = path_ / name;
+    std::ofstream(p, std::ios::binary) << text;
+    return p.string();
+  }
+  std::string path(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  fs::path path_;
+};
+
+double lum(double r, double g, double b) { return 0.2126 * r + 0.7152 * g + 0.0722 * b; }
+
+// A 16x8 test map: a smooth gradient, a bright spot, and a black block of texels.
+psf::LightDesc test_envmap(int width = 16, int height = 8) {
+  psf::LightDesc l;
+  l.type = psf::LightType::Envmap;
+  l.width = width;
+  l.height = height;
+  l.texels.resize(size_t(width) * height * 3);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      float* t = &l.texels[(size_t(y) * width + x) * 3];
+      t[0] = 0.2f + 0.1f * float(x);
+      t[1] = 0.5f + 0.3f * float(y);
+      t[2] = 1.0f + 0.05f * float(x * y);
+      if (x == 11 && y == 2) t[0] = t[1] = t[2] = 40.0f;  // a sun
+      if (x >= 3 && x <= 5 && y >= 4 && y <= 5) t[0] = t[1] = t[2] = 0.0f;
+    }
+  return l;
+}
+
+// Rotation about +y by `degrees` (the living room's envmap is rotated by 90).
+glm::mat3 rotation_y(float degrees) {
+  float a = glm::radians(degrees), c = std::cos(a), s = std::sin(a);
+  return glm::mat3(glm::vec3(c, 0, -s), glm::vec3(0, 1, 0), glm::vec3(s, 0, c));  // columns
+}
+
+// Mitsuba's lat-long texel of a map-frame direction, written out here independently.
+void texel_of(const glm::dvec3& m, int width, int height, int& x, int& y) {
+  double u = std::atan2(m.x, -m.z) / (2 * kPi);
+  if (u < 0) u += 1;
+  double v = std::acos(std::clamp(m.y, -1.0, 1.0)) / kPi;
+  x = std::min(int(u * width), width - 1);
+  y = std::min(int(v * height), height - 1);
+}
+
+struct DeviceLights {
+  cl::Buffer emitters, cdf, env_data;
+  Environment env{};
+  uint32_t count = 0;
+};
+
+DeviceLights upload(psf::Runtime& rt, const psf::LightTable& t) {
+  DeviceLights d;
+  d.emitters = rt.upload(t.emitters);
+  d.cdf = rt.upload(t.cdf);
+  d.env_data = rt.upload(t.env_data);
+  d.env = t.env;
+  d.count = uint32_t(t.emitters.size());
+  return d;
+}
+
+struct Sample {
+  glm::vec3 wi;
+  float pdf;
+  glm::vec3 radiance;
+  float dist;
+  bool delta;
+};
+
+// Light samples from point p for the given uniform triples, through the device's emitter_sample.
+std::vector<Sample> sample_lights(psf::Runtime& rt, const DeviceLights& d, const glm::vec3& p,
+                                  const std::vector<cl_float4>& u) {
+  uint32_t n = uint32_t(u.size());
+  cl::Buffer ub = rt.upload(u);
+  cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, size_t(n) * 3 * sizeof(cl_float4));
+  cl_float4 pp = {{p.x, p.y, p.z, 0}};
+  rt.launch("light_sample_points", n, 64, n, d.emitters, d.cdf, d.count, d.env, d.env_data, pp, ub, out);
+  auto raw = rt.download<cl_float4>(out, size_t(n) * 3);
+  std::vector<Sample> s(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    const cl_float4 &a = raw[3 * i], &b = raw[3 * i + 1], &c = raw[3 * i + 2];
+    s[i] = {{a.s[0], a.s[1], a.s[2]}, a.s[3], {b.s[0], b.s[1], b.s[2]}, b.s[3], c.s[0] > 0.5f};
+  }
+  return s;
+}
+
+std::vector<cl_float4> uniform_triples(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(0.0f, 1.0f);
+  std::vector<cl_float4> u(n);
+  for (auto& v : u) v = {{U(rng), U(rng), U(rng), 0}};
+  return u;
+}
+
+// Environment radiance and env_pdf along world directions, through the device.
+std::vector<cl_float4> eval_env(psf::Runtime& rt, const DeviceLights& d, const std::vector<glm::vec3>& dirs) {
+  std::vector<cl_float4> in(dirs.size());
+  for (size_t i = 0; i < dirs.size(); ++i) in[i] = {{dirs[i].x, dirs[i].y, dirs[i].z, 0}};
+  cl::Buffer b = rt.upload(in);
+  cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, dirs.size() * sizeof(cl_float4));
+  rt.launch("env_eval_points", dirs.size(), 64, uint32_t(dirs.size()), d.env, d.env_data, b, out);
+  return rt.download<cl_float4>(out, dirs.size());
+}
+
+// --- scenes for the renders -----------------------------------------------------
+
+// Appends the quad corner, corner + a, corner + a + b, corner + b (front: a x b).
+void add_quad(psf::Scene& s, glm::vec3 corner, glm::vec3 a, glm::vec3 b, uint32_t material) {
+  uint32_t base = uint32_t(s.positions.size());
+  s.positions.insert(s.positions.end(), {corner, corner + a, corner + a + b, corner + b});
+  s.triangles.push_back({base, base + 1, base + 2});
+  s.triangles.push_back({base, base + 2, base + 3});
+  s.tri_material.insert(s.tri_material.end(), 2, material);
+}
+
+uint32_t add_material(psf::Scene& s, float albedo, bool two_sided = false) {
+  Material m{};
+  m.albedo = {{albedo, albedo, albedo, 0}};
+  m.type = PSF_MATERIAL_DIFFUSE;
+  m.two_sided = two_sided ? 1u : 0u;
+  s.materials.push_back(m);
+  s.material_names.push_back("diffuse");
+  return uint32_t(s.materials.size() - 1);
+}
+
+psf::RenderResult render(const psf::Scene& s, int spp, int max_depth = -1) {
+  psf::Renderer r(psf::test::runtime(), s);
+  psf::RenderOptions o;
+  o.spp = spp;
+  o.max_depth = max_depth;
+  o.filter.enabled = false;  // plain path tracing: the analytic answers are its expectations
+  return r.render(o);
+}
+
+glm::dvec3 pixel(const psf::Image& img, int x, int y) {
+  const float* p = &img.rgb[(size_t(y) * img.width + x) * 3];
+  return {p[0], p[1], p[2]};
+}
+
+// The point of the plane z = 0 seen through film position (x, y) in pixels
+// (kernels/camera.cl's pinhole); (x + 0.5, y + 0.5) is the centre of pixel (x, y).
+glm::dvec3 plane_point(const psf::Scene& s, double x, double y) {
+  Camera c = psf::make_camera(s.camera, s.width, s.height);
+  glm::dvec3 o(c.origin.s[0], c.origin.s[1], c.origin.s[2]);
+  glm::dvec3 f(c.forward.s[0], c.forward.s[1], c.forward.s[2]), r(c.right.s[0], c.right.s[1], c.right.s[2]),
+      d(c.down.s[0], c.down.s[1], c.down.s[2]);
+  double sx = x / s.width, sy = y / s.height;
+  glm::dvec3 dir = f + (2 * sx - 1) * r + (2 * sy - 1) * d;
+  return o + dir * (-o.z / dir.z);
+}
+
+// A diffuse plane z = 0 facing +z, seen from (0, 0, 4) straight down.
+psf::Scene plane_scene(float albedo, int size) {
+  psf::Scene s;
+  uint32_t m = add_material(s, albedo);
+  add_quad(s, {-20, -20, 0}, {40, 0, 0}, {0, 40, 0}, m);
+  s.camera.origin = {0, 0, 4};
+  s.camera.target = {0, 0, 0};
+  s.camera.up = {0, 1, 0};
+  s.camera.fov_degrees = 60;
+  s.width = s.height = size;
+  return s;
+}
+
+}  // namespace
+
+TEST_CASE("Emitter: envmap samples follow luminance x sin(theta) (chi-square)", "[emitter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene;
+  psf::LightDesc env = test_envmap();
+  env.to_world = rotation_y(90.0f);
+  env.color = glm::vec3(2.0f);
+  scene.lights.push_back(env);
+  psf::LightTable table = psf::build_light_table(scene);
+  REQUIRE(table.emitters.size() == 1);
+  REQUIRE(table.env.present == 1);
+  DeviceLights d = upload(rt, table);
+
+  // The scalar reference: P(texel) = L(texel) sin(theta at the row centre) / sum.
+  const int W = env.width, H = env.height;
+  std::vector<double> prob(size_t(W) * H);
+  double sum = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float* t = &env.texels[(size_t(y) * W + x) * 3];
+      prob[size_t(y) * W + x] = lum(t[0], t[1], t[2]) * std::sin((y + 0.5) * kPi / H);
+      sum += prob[size_t(y) * W + x];
+    }
+  for (double& p : prob) p /= sum;
+
+  const size_t n = size_t(1) << 18;
+  std::vector<Sample> samples = sample_lights(rt, d, {0, 0, 0}, uniform_triples(n, 7));
+  std::vector<double> count(prob.size(), 0.0);
+  glm::dmat3 to_map = glm::transpose(glm::dmat3(env.to_world));
+  double estimate = 0;  // of the integral of luminance over the sphere: mean of L / pdf
+  size_t bad_pdf = 0, bad_radiance = 0;
+  std::vector<glm::vec3> dirs;
+  for (const Sample& s : samples) {
+    REQUIRE(s.pdf > 0.0f);
+    CHECK_FALSE(s.delta);
+    CHECK(std::isinf(s.dist));
+    glm::dvec3 m = to_map * glm::dvec3(s.wi);
+    int x, y;
+    texel_of(m, W, H, x, y);
+    size_t t = size_t(y) * W + x;
+    count[t] += 1;
+    // Sample -> pdf: P(texel) W H / (2 pi^2 sin theta), theta of the sampled direction.
+    double sin_theta = std::sqrt(m.x * m.x + m.z * m.z);
+    double ref_pdf = prob[t] * W * H / (2 * kPi * kPi * sin_theta);
+    if (std::abs(s.pdf - ref_pdf) > 2e-3 * ref_pdf) ++bad_pdf;
+    const float* tex = &env.texels[t * 3];
+    if (std::abs(s.radiance.x - 2 * tex[0]) > 1e-4 * (1 + tex[0]) || std::abs(s.radiance.z - 2 * tex[2]) > 1e-4 * (1 + tex[2]))
+      ++bad_radiance;
+    estimate += lum(s.radiance.x, s.radiance.y, s.radiance.z) / s.pdf;
+    if (dirs.size() < 4096) dirs.push_back(s.wi);
+  }
+  CHECK(bad_pdf == 0);
+  CHECK(bad_radiance == 0);
+
+  // Chi-square over the texels with P > 0; black texels get no samples.
+  double chi2 = 0;
+  int dof = -1;
+  for (size_t t = 0; t < prob.size(); ++t) {
+    if (prob[t] == 0) {
+      CHECK(count[t] == 0);
+      continue;
+    }
+    double e = prob[t] * double(n);
+    chi2 += (count[t] - e) * (count[t] - e) / e;
+    ++dof;
+  }
+  // Mean dof, standard deviation sqrt(2 dof): 6 sigma is a false alarm rate below 1e-6.
+  INFO("chi2 " << chi2 << " with " << dof << " degrees of freedom");
+  CHECK(chi2 < dof + 6 * std::sqrt(2.0 * dof));
+
+  // The estimator of the integral of L over the sphere against the texel sum:
+  // sum of L times the texel's solid angle (2 pi / W) (cos theta_0 - cos theta_1).
+  double reference = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float* t = &env.texels[(size_t(y) * W + x) * 3];
+      reference += 2 * lum(t[0], t[1], t[2]) * (2 * kPi / W) * (std::cos(y * kPi / H) - std::cos((y + 1) * kPi / H));
+    }
+  CHECK(estimate / double(n) == Approx(reference).epsilon(0.01));
+
+  // env_pdf of the sampled directions is the pdf the sample carried.
+  std::vector<cl_float4> eval = eval_env(rt, d, dirs);
+  for (size_t i = 0; i < dirs.size(); ++i) REQUIRE(eval[i].s[3] == Approx(samples[i].pdf).epsilon(1e-3));
+}
+
+TEST_CASE("Emitter: envmap orientation follows Mitsuba's lat-long convention", "[emitter]") {
+  auto& rt = psf::test::runtime();
+  // Texel (x, y) holds x + 10 y + 1 in red: every texel is distinct.
+  psf::LightDesc env;
+  env.type = psf::LightType::Envmap;
+  env.width = 8;
+  env.height = 4;
+  env.texels.assign(8 * 4 * 3, 0.0f);
+  for (int y = 0; y < 4; ++y)
+    for (int x = 0; x < 8; ++x) env.texels[(size_t(y) * 8 + x) * 3] = float(x + 10 * y + 1);
+  auto red_of = [&](const glm::mat3& to_world, const glm::vec3& dir) {
+    psf::Scene s;
+    psf::LightDesc l = env;
+    l.to_world = to_world;
+    s.lights.push_back(l);
+    DeviceLights d = upload(rt, psf::build_light_table(s));
+    return eval_env(rt, d, {glm::normalize(dir)})[0].s[0];
+  };
+  // Mitsuba: u = atan2(d.x, -d.z) / 2 pi, v = acos(d.y) / pi. So -z is the map's
+  // left edge (u = 0), +x a quarter across, +z the middle, -x three quarters;
+  // +y the top row, -y the bottom row.
+  glm::mat3 id(1.0f);
+  CHECK(red_of(id, {0.05f, 0.3f, -1.0f}) == 1 + 0 + 10 * 1);   // u ~ 0.008, v ~ 0.41
+  CHECK(red_of(id, {1.0f, 0.3f, 0.05f}) == 1 + 2 + 10 * 1);    // u ~ 0.258
+  CHECK(red_of(id, {-0.05f, 0.3f, 1.0f}) == 1 + 4 + 10 * 1);   // u ~ 0.508
+  CHECK(red_of(id, {-1.0f, -0.3f, -0.05f}) == 1 + 6 + 10 * 2); // u ~ 0.758, v ~ 0.59
+  CHECK(red_of(id, {0.1f, 1.0f, 0.1f}) == Approx(1 + 10 * 0).margin(8));  // top row
+  CHECK(red_of(id, {0.1f, -1.0f, 0.1f}) >= 31);                            // bottom row
+  // to_world rotates the map: with the living room's rotation about +y by 90
+  // degrees, the map's +z (u = 0.5) lies along world +x.
+  glm::mat3 r = rotation_y(90.0f);
+  CHECK(glm::length(r * glm::vec3(0, 0, 1) - glm::vec3(1, 0, 0)) < 1e-6f);
+  CHECK(red_of(r, {1.0f, 0.3f, 0.05f}) == red_of(id, {-0.05f, 0.3f, 1.0f}));
+}
+
+TEST_CASE("Emitter: point, spot and directional samples", "[emitter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene s;
+  psf::LightDesc point;
+  point.type = psf::LightType::Point;
+  point.position = {1, 2, 3};
+  point.color = {2, 4, 6};
+  s.lights = {point};
+  {
+    DeviceLights d = upload(rt, psf::build_light_table(s));
+    Sample x = sample_lights(rt, d, {0, 0, 0}, {{{0.3f, 0.5f, 0.5f, 0}}})[0];
+    CHECK(x.delta);
+    CHECK(x.pdf == Approx(1.0f));
+    CHECK(x.dist == Approx(std::sqrt(14.0f)));
+    CHECK(glm::length(x.wi - glm::normalize(glm::vec3(1, 2, 3))) < 1e-6f);
+    CHECK(x.radiance.x == Approx(2.0f / 14.0f));
+    CHECK(x.radiance.z == Approx(6.0f / 14.0f));
+  }
+
+  // Spot at the origin along -z, cutoff 20, beam width 15 degrees: full intensity
+  // inside 15 degrees, (20 - angle) / 5 between, nothing beyond 20.
+  psf::LightDesc spot;
+  spot.type = psf::LightType::Spot;
+  spot.direction = {0, 0, -1};
+  spot.color = glm::vec3(5.0f);
+  spot.cutoff_angle = glm::radians(20.0f);
+  spot.beam_width = glm::radians(15.0f);
+  s.lights = {spot};
+  {
+    DeviceLights d = upload(rt, psf::build_light_table(s));
+    for (float deg : {0.0f, 10.0f, 17.0f, 19.0f, 25.0f}) {
+      float a = glm::radians(deg);
+      glm::vec3 p = 2.0f * glm::vec3(std::sin(a), 0, -std::cos(a));
+      Sample x = sample_lights(rt, d, p, {{{0.5f, 0.5f, 0.5f, 0}}})[0];
+      float falloff = deg <= 15 ? 1.0f : deg >= 20 ? 0.0f : (20 - deg) / 5;
+      INFO(deg << " degrees off the axis");
+      CHECK(x.radiance.x == Approx(5.0f * falloff / 4.0f).margin(1e-5));
+    }
+  }
+
+  psf::LightDesc sun;
+  sun.type = psf::LightType::Directional;
+  sun.direction = glm::normalize(glm::vec3(1, -2, 0));
+  sun.color = glm::vec3(3.0f);
+  s.lights = {sun};
+  {
+    DeviceLights d = upload(rt, psf::build_light_table(s));
+    Sample x = sample_lights(rt, d, {5, 5, 5}, {{{0.9f, 0.1f, 0.1f, 0}}})[0];
+    CHECK(x.delta);
+    CHECK(std::isinf(x.dist));
+    CHECK(glm::length(x.wi + sun.direction) < 1e-6f);
+    CHECK(x.radiance.y == Approx(3.0f));
+  }
+}
+
+TEST_CASE("Emitter: lights are chosen in proportion to their power", "[emitter]") {
+  // A unit-luminance point light (power 4 pi), a directional light of irradiance
+  // 1 over a scene of bounding radius R = sqrt(3) (power pi R^2 = 3 pi) and an
+  // emissive triangle of area 2 and radiance 1 (power pi A = 2 pi).
+  psf::Scene s;
+  Material lamp{};
+  lamp.emission = {{1, 1, 1, 0}};
+  s.materials.push_back(lamp);
+  s.positions = {{-1, -1, -1}, {1, -1, -1}, {1, 1, 1}};  // bounding box diagonal 2 sqrt(3)
+  s.triangles = {{0, 1, 2}};
+  s.tri_material = {0};
+  float area = 0.5f * glm::length(glm::cross(s.positions[1] - s.positions[0], s.positions[2] - s.positions[0]));
+  psf::LightDesc point, sun;
+  point.type = psf::LightType::Point;
+  sun.type = psf::LightType::Directional;
+  s.lights = {point, sun};
+  psf::LightTable t = psf::build_light_table(s);
+  REQUIRE(t.emitters.size() == 3);
+  double total = kPi * area + 4 * kPi + 3 * kPi;
+  CHECK(t.emitters[0].type == PSF_EMITTER_TRIANGLE);
+  CHECK(t.emitters[0].radiance.s[3] == Approx(kPi * area / total));
+  CHECK(t.emitters[1].radiance.s[3] == Approx(4 * kPi / total));
+  CHECK(t.emitters[2].radiance.s[3] == Approx(3 * kPi / total));
+  CHECK(t.cdf.back() == 1.0f);
+  CHECK(t.tri_light_pdf[0] == Approx(kPi * area / total / area));
+  CHECK(t.env.present == 0);
+}
+
+TEST_CASE("Emitter: Mitsuba 0.5 and 3 emitter parameters", "[emitter]") {
+  TempDir dir;
+  // A 4x2 Radiance HDR map and a 4x2 OpenEXR map.
+  std::vector<float> px(4 * 2 * 3);
+  for (size_t i = 0; i < px.size(); ++i) px[i] = 0.25f * float(i % 7 + 1);
+  REQUIRE(stbi_write_hdr(dir.path("sky.hdr").c_str(), 4, 2, 3, px.data()) != 0);
+  psf::Image exr;
+  exr.width = 4;
+  exr.height = 2;
+  exr.rgb = px;
+  psf::write_exr(dir.path("sky.exr"), exr);
+
+  auto load = [&](const std::string& version, const std::string& body) {
+    return psf::load_scene(dir.write("scene.xml", "<scene version=\"" + version + "\">\n" + body + "</scene>\n"));
+  };
+  SECTION("Mitsuba 0.5 camelCase") {
+    psf::Scene s = load("0.5.0",
+                        "<emitter type=\"point\"><point name=\"position\" x=\"1\" y=\"2\" z=\"3\"/>"
+                        "<spectrum name=\"intensity\" value=\"5\"/></emitter>\n"
+                        "<emitter type=\"spot\"><float name=\"cutoffAngle\" value=\"30\"/><float name=\"beamWidth\" value=\"10\"/>"
+                        "<rgb name=\"intensity\" value=\"1 2 3\"/><transform name=\"toWorld\">"
+                        "<lookat origin=\"0 5 0\" target=\"0 0 0\" up=\"0 0 1\"/></transform></emitter>\n"
+                        "<emitter type=\"directional\"><vector name=\"direction\" x=\"0\" y=\"-2\" z=\"0\"/>"
+                        "<rgb name=\"irradiance\" value=\"4\"/></emitter>\n"
+                        "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.hdr\"/><float name=\"scale\" value=\"3\"/>"
+                        "<transform name=\"toWorld\"><rotate y=\"1\" angle=\"90\"/></transform></emitter>\n");
+    REQUIRE(s.lights.size() == 4);
+    const psf::LightDesc &p = s.lights[0], &sp = s.lights[1], &d = s.lights[2], &e = s.lights[3];
+    CHECK(p.type == psf::LightType::Point);
+    CHECK(p.position == glm::vec3(1, 2, 3));
+    CHECK(p.color.x == Approx(5.0f));  // a uniform spectrum in Mitsuba 0.5 is the value itself
+    CHECK(sp.type == psf::LightType::Spot);
+    CHECK(glm::length(sp.position - glm::vec3(0, 5, 0)) < 1e-5f);
+    CHECK(glm::length(sp.direction - glm::vec3(0, -1, 0)) < 1e-5f);
+    CHECK(sp.cutoff_angle == Approx(glm::radians(30.0f)));
+    CHECK(sp.beam_width == Approx(glm::radians(10.0f)));
+    CHECK(sp.color == glm::vec3(1, 2, 3));
+    CHECK(d.type == psf::LightType::Directional);
+    CHECK(glm::length(d.direction - glm::vec3(0, -1, 0)) < 1e-6f);
+    CHECK(d.color == glm::vec3(4.0f));
+    CHECK(e.type == psf::LightType::Envmap);
+    CHECK(e.width == 4);
+    CHECK(e.height == 2);
+    CHECK(e.color == glm::vec3(3.0f));
+    CHECK(e.texels[5] == Approx(px[5]).epsilon(0.01));  // RGBE keeps 8 bits of mantissa
+    CHECK(glm::length(e.to_world * glm::vec3(0, 0, 1) - glm::vec3(1, 0, 0)) < 1e-5f);
+    CHECK(e.source.find("scene.xml:5") != std::string::npos);
+  }
+  SECTION("Mitsuba 3 snake_case, defaults and warnings") {
+    psf::Scene s = load("3.0.0",
+                        "<emitter type=\"spot\"><float name=\"cutoff_angle\" value=\"40\"/>"
+                        "<transform name=\"to_world\"><translate x=\"1\"/></transform></emitter>\n"
+                        "<emitter type=\"point\"><transform name=\"to_world\"><translate y=\"7\"/></transform>"
+                        "<float name=\"sampling_weight\" value=\"2\"/><float name=\"mystery\" value=\"1\"/></emitter>\n"
+                        "<emitter type=\"envmap\"><string name=\"filename\" value=\"sky.exr\"/></emitter>\n"
+                        "<emitter type=\"constant\"><rgb name=\"radiance\" value=\"1\"/></emitter>\n"
+                        "<emitter type=\"sunsky\"/>\n");
+    REQUIRE(s.lights.size() == 3);
+    CHECK(s.lights[0].beam_width == Approx(glm::radians(30.0f)));  // 3/4 of the cutoff angle
+    CHECK(s.lights[0].position == glm::vec3(1, 0, 0));
+    CHECK(glm::length(s.lights[0].direction - glm::vec3(0, 0, 1)) < 1e-6f);
+    CHECK(s.lights[1].position == glm::vec3(0, 7, 0));
+    CHECK(s.lights[2].type == psf::LightType::Envmap);
+    CHECK(s.lights[2].texels[4] == Approx(px[4]).epsilon(1e-3));  // written as float, read back as half
+    auto count = [&](const std::string& text) {
+      return std::count_if(s.warnings.begin(), s.warnings.end(),
+                           [&](const std::string& w) { return w.find(text) != std::string::npos; });
+    };
+    CHECK(count(":3: property 'mystery' of emitter 'point'") == 1);
+    CHECK(count("sampling_weight") == 0);
+    CHECK(count(":5: only one environment emitter") == 1);
+    CHECK(count(":6: emitter 'sunsky' is not supported") == 1);
+  }
+  SECTION("negative texels are set to 0 with a warning") {
+    psf::Image neg = exr;
+    neg.rgb[4] = -2.0f;
+    psf::write_exr(dir.path("neg.exr"), neg);
+    psf::Scene s = load("3.0.0", "<emitter type=\"envmap\"><string name=\"filename\" value=\"neg.exr\"/></emitter>\n");
+    REQUIRE(s.lights.size() == 1);
+    CHECK(s.lights[0].texels[4] == 0.0f);
+    CHECK(std::count_if(s.warnings.begin(), s.warnings.end(), [](const std::string& w) {
+            return w.find(":2: 1 negative values") != std::string::npos;
+          }) == 1);
+  }
+  SECTION("errors name the file and line") {
+    try {
+      load("3.0.0", "<emitter type=\"envmap\">\n<string name=\"filename\" value=\"gone.exr\"/></emitter>\n");
+      FAIL("no error");
+    } catch (const psf::SceneError& e) {
+      CHECK(e.line() == 3);
+      CHECK(std::string(e.what()).find("gone.exr") != std::string::npos);
+    }
+    CHECK_THROWS_AS(load("3.0.0", "<emitter type=\"point\"><rgb name=\"intensity\" value=\"-1\"/></emitter>\n"),
+                    psf::SceneError);
+    CHECK_THROWS_AS(load("3.0.0", "<emitter type=\"directional\"><vector name=\"direction\" value=\"0 0 0\"/></emitter>\n"),
+                    psf::SceneError);
+  }
+}
+
+TEST_CASE("Render: a diffuse quad under a constant environment shows albedo x L", "[emitter]") {
+  // Nothing occludes the quad's upper hemisphere: irradiance pi L, outgoing rho L.
+  psf::Scene s;
+  uint32_t m = add_material(s, 0.6f);
+  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, m);
+  s.camera.origin = {0, 0, 2};
+  s.camera.target = {0, 0, 0};
+  s.camera.fov_degrees = 30;  // sees [-0.54, 0.54]^2 of the quad
+  s.width = s.height = 16;
+  psf::LightDesc sky;
+  sky.type = psf::LightType::Constant;
+  sky.color = {1.0f, 0.5f, 0.25f};
+  s.lights = {sky};
+  psf::RenderResult r = render(s, 64);
+  CHECK(r.nonfinite == 0);
+  glm::dvec3 mean(0.0);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) mean += pixel(r.image, x, y) / 256.0;
+  // The estimate combines the environment sample and the escaped BSDF ray by
+  // MIS; 16384 paths leave about 0.5 % noise: allow 2 %.
+  CHECK(mean.x == Approx(0.6).epsilon(0.02));
+  CHECK(mean.y == Approx(0.3).epsilon(0.02));
+  CHECK(mean.z == Approx(0.15).epsilon(0.02));
+
+  // Camera rays that miss see the environment itself, exactly.
+  s.camera.fov_degrees = 120;
+  psf::RenderResult wide = render(s, 4);
+  glm::dvec3 corner = pixel(wide.image, 0, 0);
+  CHECK(corner.x == Approx(1.0).epsilon(1e-6));
+  CHECK(corner.z == Approx(0.25).epsilon(1e-6));
+}
+
+TEST_CASE("Render: a diffuse floor under an envmap matches the map's cosine-weighted integral", "[emitter]") {
+  // Floor y = 0 facing +y, seen from above; the map is not rotated, so the
+  // floor's normal is the map's +y and cos(theta) the map's cos(theta). Reference:
+  // L_o = rho / pi * sum over texels above the horizon of L (2 pi / W) (sin^2 theta_1 - sin^2 theta_0) / 2.
+  psf::Scene s;
+  uint32_t m = add_material(s, 0.5f);
+  add_quad(s, {-1, 0, -1}, {0, 0, 2}, {2, 0, 0}, m);
+  s.camera.origin = {0, 2, 0};
+  s.camera.target = {0, 0, 0};
+  s.camera.up = {0, 0, -1};
+  s.camera.fov_degrees = 30;
+  s.width = s.height = 16;
+  psf::LightDesc env = test_envmap();
+  s.lights = {env};
+  const int W = env.width, H = env.height;
+  glm::dvec3 integral(0.0);
+  for (int y = 0; y < H / 2; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float* t = &env.texels[(size_t(y) * W + x) * 3];
+      double s0 = std::sin(y * kPi / H), s1 = std::sin((y + 1) * kPi / H);
+      integral += glm::dvec3(t[0], t[1], t[2]) * (2 * kPi / W) * (s1 * s1 - s0 * s0) / 2.0;
+    }
+  glm::dvec3 expected = 0.5 / kPi * integral;
+  psf::RenderResult r = render(s, 256);
+  glm::dvec3 mean(0.0);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) mean += pixel(r.image, x, y) / 256.0;
+  // 65536 paths; the bright texel makes this the noisiest of the estimates: 2 %.
+  CHECK(mean.x == Approx(expected.x).epsilon(0.02));
+  CHECK(mean.y == Approx(expected.y).epsilon(0.02));
+  CHECK(mean.z == Approx(expected.z).epsilon(0.02));
+}
+
+TEST_CASE("Render: inside a closed emitting diffuse sphere the image is Le/(1-albedo)", "[emitter]") {
+  // Mitsuba's sphere with flip_normals: the emitter faces inwards.
+  TempDir dir;
+  std::string path = dir.write("sphere.xml",
+                               "<scene version=\"3.0.0\">\n"
+                               "<sensor type=\"perspective\"><float name=\"fov\" value=\"90\"/>"
+                               "<transform name=\"to_world\"><lookat origin=\"0.1 0 0\" target=\"1 0.2 0.1\" up=\"0 1 0\"/></transform>"
+                               "<film type=\"hdrfilm\"><integer name=\"width\" value=\"16\"/><integer name=\"height\" value=\"16\"/></film>"
+                               "</sensor>\n"
+                               "<shape type=\"sphere\"><float name=\"radius\" value=\"2\"/><boolean name=\"flip_normals\" value=\"true\"/>"
+                               "<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5\"/></bsdf>"
+                               "<emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>\n"
+                               "</scene>\n");
+  psf::Scene s = psf::load_scene(path);
+  psf::RenderResult r = render(s, 64);
+  double mean = 0;
+  for (float v : r.image.rgb) mean += v / double(r.image.rgb.size());
+  // A geometric series with ratio 1/2 over 16384 paths: about 0.3 % noise; allow 2 %.
+  CHECK(mean == Approx(2.0).epsilon(0.02));
+}
+
+TEST_CASE("Render: point and spot lights give I cos(theta) / r^2 x albedo / pi on a plane", "[emitter]") {
+  const float albedo = 0.5f, h = 1.0f;
+  psf::Scene s = plane_scene(albedo, 24);
+  psf::LightDesc point;
+  point.type = psf::LightType::Point;
+  point.position = {0, 0, h};
+  point.color = glm::vec3(3.0f);
+  s.lights = {point};
+  psf::RenderResult r = render(s, 16, 2);
+  // The light is a delta: every path adds the same NEE value, up to the pixel
+  // jitter; the pixel mean against its centre's value differs by the function's
+  // curvature over a pixel (below 0.5 %): allow 1 %.
+  for (int y = 0; y < s.height; ++y)
+    for (int x = 0; x < s.width; ++x) {
+      glm::dvec3 p = plane_point(s, x + 0.5, y + 0.5);
+      double r2 = p.x * p.x + p.y * p.y + h * h;
+      double expected = albedo / kPi * 3.0 * (h / std::sqrt(r2)) / r2;
+      INFO("pixel " << x << ", " << y);
+      REQUIRE(pixel(r.image, x, y).x == Approx(expected).epsilon(0.01));
+    }
+
+  // A spot pointing down, cutoff 30 and beam width 20 degrees, seen closer up.
+  s.camera.fov_degrees = 30;
+  s.width = s.height = 32;
+  psf::LightDesc spot = point;
+  spot.type = psf::LightType::Spot;
+  spot.direction = {0, 0, -1};
+  spot.cutoff_angle = glm::radians(30.0f);
+  spot.beam_width = glm::radians(20.0f);
+  s.lights = {spot};
+  psf::RenderResult rs = render(s, 16, 2);
+  int inside = 0, outside = 0;
+  for (int y = 0; y < s.height; ++y)
+    for (int x = 0; x < s.width; ++x) {
+      auto angle_at = [&](double fx, double fy) {
+        glm::dvec3 q = plane_point(s, x + fx, y + fy);
+        return glm::degrees(std::atan(std::sqrt(q.x * q.x + q.y * q.y) / h));
+      };
+      double angle = angle_at(0.5, 0.5);
+      // Pixels straddling the beam width or the cutoff average a kinked function: skipped.
+      double lo = 90, hi = 0;
+      for (double fx : {0.0, 1.0})
+        for (double fy : {0.0, 1.0}) lo = std::min(lo, angle_at(fx, fy)), hi = std::max(hi, angle_at(fx, fy));
+      if ((lo <= 20 && hi >= 20) || (lo <= 30 && hi >= 30)) continue;
+      // The pixel's mean (box filter) of falloff(angle) I cos / r^2 rho / pi, on a 16 x 16 grid.
+      double expected = 0;
+      for (int i = 0; i < 16; ++i)
+        for (int k = 0; k < 16; ++k) {
+          glm::dvec3 q = plane_point(s, x + (i + 0.5) / 16, y + (k + 0.5) / 16);
+          double q2 = q.x * q.x + q.y * q.y + h * h;
+          double a = angle_at((i + 0.5) / 16, (k + 0.5) / 16);
+          double falloff = a <= 20 ? 1.0 : a >= 30 ? 0.0 : (30 - a) / 10;
+          expected += albedo / kPi * 3.0 * falloff * (h / std::sqrt(q2)) / q2 / 256.0;
+        }
+      (expected > 0 ? inside : outside)++;
+      INFO("pixel " << x << ", " << y << " at " << angle << " degrees");
+      REQUIRE(pixel(rs.image, x, y).x == Approx(expected).epsilon(0.02).margin(1e-6));
+    }
+  CHECK(inside > 20);
+  CHECK(outside > 20);
+}
+
+TEST_CASE("Render: a directional light gives E cos(theta) x albedo / pi", "[emitter]") {
+  const float albedo = 0.7f;
+  psf::Scene s = plane_scene(albedo, 8);
+  psf::LightDesc sun;
+  sun.type = psf::LightType::Directional;
+  sun.direction = glm::normalize(glm::vec3(1, 0, -2));  // travelling down at cos(theta) = 2 / sqrt(5)
+  sun.color = glm::vec3(2.0f);
+  s.lights = {sun};
+  psf::RenderResult r = render(s, 4);
+  double expected = albedo / kPi * 2.0 * 2.0 / std::sqrt(5.0);
+  // Every path adds the same value: float rounding only.
+  for (int y = 0; y < s.height; ++y)
+    for (int x = 0; x < s.width; ++x) REQUIRE(pixel(r.image, x, y).x == Approx(expected).epsilon(1e-4));
+}

@@ -1,0 +1,346 @@
+// Path space filtering stages (kernels/{cell_keys,sort,cell_ranges,filter}.cl)
+// against scalar references: std::stable_sort, a plain scan for cell ranges, and
+// a brute-force all-pairs evaluation of Keller et al. 2016, Eq. 1-2.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+#include "filter.h"
+#include "render.h"
+#include "scene/scene.h"
+#include "support.h"
+
+namespace {
+
+struct Reference {
+  std::vector<uint32_t> counts;    // tuples averaged per tuple
+  std::vector<cl_float4> values;   // c-bar per tuple
+};
+
+// Brute force over all pairs, written from the definition: radius r_i =
+// (r0 > 0 ? r0 : d_i footprint) n_scale; the grid level ceil(log2 r_i) must
+// match; |x_j - x_i| < r_i; <n_i, n_j> >= cos; |albedo_i - albedo_j| <= tol;
+// equal visibility; finite c_j; the centre always counts.
+Reference brute_force(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, const FilterParams& p,
+                      int iterations) {
+  size_t n = v.size();
+  std::vector<float> r(n, 0.0f);
+  std::vector<int> level(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    if (v[i].albedo.s[3] == 0.0f) continue;
+    float r0 = p.r0 > 0.0f ? p.r0 : v[i].position.s[3] * p.footprint;
+    r[i] = r0 * p.n_scale;
+    level[i] = int(std::ceil(std::log2(double(std::max(r[i], 1e-30f)))));
+  }
+  Reference ref;
+  ref.values = c;
+  ref.counts.assign(n, 1);
+  for (int it = 0; it < iterations; ++it) {
+    std::vector<cl_float4> next = ref.values;
+    for (size_t i = 0; i < n; ++i) {
+      if (v[i].albedo.s[3] == 0.0f) continue;
+      double sum[3] = {0, 0, 0};
+      uint32_t count = 0;
+      for (size_t j = 0; j < n; ++j) {
+        bool use = j == i;
+        if (!use && v[j].albedo.s[3] != 0.0f && level[j] == level[i]) {
+          float d2 = 0, n_dot = 0, a2 = 0;
+          for (int k = 0; k < 3; ++k) {
+            float d = v[j].position.s[k] - v[i].position.s[k];
+            d2 = d2 + d * d;
+            n_dot = n_dot + v[j].normal.s[k] * v[i].normal.s[k];
+            float a = v[j].albedo.s[k] - v[i].albedo.s[k];
+            a2 = a2 + a * a;
+          }
+          bool finite = std::isfinite(ref.values[j].s[0]) && std::isfinite(ref.values[j].s[1]) &&
+                        std::isfinite(ref.values[j].s[2]);
+          use = d2 < r[i] * r[i] && n_dot >= p.normal_cos && a2 <= p.albedo_tol * p.albedo_tol &&
+                v[j].normal.s[3] == v[i].normal.s[3] && finite;
+        }
+        if (use) {
+          for (int k = 0; k < 3; ++k) sum[k] += ref.values[j].s[k];
+          ++count;
+        }
+      }
+      for (int k = 0; k < 3; ++k) next[i].s[k] = float(sum[k] / count);
+      ref.counts[i] = count;
+    }
+    ref.values = next;
+  }
+  return ref;
+}
+
+struct DeviceResult {
+  std::vector<uint32_t> counts;
+  std::vector<cl_float4> values;
+  uint32_t max_count = 0;
+};
+
+DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
+                        int iterations) {
+  auto& rt = psf::test::runtime();
+  uint32_t n = uint32_t(v.size());
+  psf::PathSpaceFilter filter(rt, n);
+  cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
+  cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(cl_float4));
+  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(uint32_t));
+  p.count = n;
+  DeviceResult d;
+  d.max_count = filter.run(p, iterations, vb, cb, out, counts);
+  d.values = rt.download<cl_float4>(out, n);
+  d.counts = rt.download<uint32_t>(counts, n);
+  return d;
+}
+
+// Tuples scattered over a few planes (so normals repeat), with some albedo and
+// visibility variety and a share of paths without a vertex.
+std::vector<PathVertex> random_tuples(size_t n, uint32_t seed, float extent) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<PathVertex> v(n);
+  const float normals[3][3] = {{0, 1, 0}, {1, 0, 0}, {0.6f, 0.8f, 0}};
+  for (auto& t : v) {
+    int plane = int(u(rng) * 3) % 3;
+    t.position = {{u(rng) * extent, u(rng) * extent, u(rng) * extent * 0.1f, 1.0f + 4.0f * u(rng)}};
+    t.normal = {{normals[plane][0], normals[plane][1], normals[plane][2], u(rng) < 0.8f ? 1.0f : 0.0f}};
+    float a = u(rng) < 0.7f ? 0.5f : 0.5f + 0.2f * u(rng);
+    t.albedo = {{a, a, 0.3f, u(rng) < 0.95f ? 1.0f : 0.0f}};
+    t.alpha = {{1, 1, 1, 0}};
+  }
+  return v;
+}
+
+std::vector<cl_float4> random_values(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 2.0f);
+  std::vector<cl_float4> c(n);
+  for (auto& x : c) x = {{u(rng), u(rng), u(rng), 0}};
+  return c;
+}
+
+FilterParams default_params() {
+  FilterParams p{};
+  p.r0 = 0.0f;
+  p.footprint = 0.02f;
+  p.n_scale = 1.0f;
+  p.normal_cos = 0.95f;
+  p.albedo_tol = 0.05f;
+  return p;
+}
+
+// Counts exactly; averages within float rounding: the device sums up to a few
+// hundred floats in another order than the double reference (relative 1e-5).
+void check_same(const Reference& ref, const DeviceResult& dev) {
+  REQUIRE(ref.counts.size() == dev.counts.size());
+  size_t count_mismatch = 0, value_mismatch = 0;
+  for (size_t i = 0; i < ref.counts.size(); ++i) {
+    if (ref.counts[i] != dev.counts[i]) ++count_mismatch;
+    for (int k = 0; k < 3; ++k)
+      if (std::fabs(ref.values[i].s[k] - dev.values[i].s[k]) > 1e-5f * std::max(1.0f, std::fabs(ref.values[i].s[k])))
+        ++value_mismatch;
+  }
+  CHECK(count_mismatch == 0);
+  CHECK(value_mismatch == 0);
+  uint32_t max_ref = ref.counts.empty() ? 0 : *std::max_element(ref.counts.begin(), ref.counts.end());
+  CHECK(dev.max_count == max_ref);
+}
+
+}  // namespace
+
+TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
+  auto& rt = psf::test::runtime();
+  std::mt19937 rng(5);
+  for (uint32_t n : {0u, 1u, 2u, 63u, 1000u, 65537u, 300001u}) {
+    for (uint32_t bits : {1u, 4u, 13u, 22u, 32u}) {
+      std::vector<uint32_t> keys(n), idx(n);
+      uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
+      for (auto& k : keys) k = uint32_t(rng() & mask);
+      std::iota(idx.begin(), idx.end(), 0u);
+      std::vector<std::pair<uint32_t, uint32_t>> ref(n);
+      for (uint32_t i = 0; i < n; ++i) ref[i] = {keys[i], i};
+      std::stable_sort(ref.begin(), ref.end(), [](auto& a, auto& b) { return a.first < b.first; });
+      cl::Buffer kb = rt.upload(keys, CL_MEM_READ_WRITE), vb = rt.upload(idx, CL_MEM_READ_WRITE);
+      cl::Buffer tk = rt.buffer(CL_MEM_READ_WRITE, n * 4), tv = rt.buffer(CL_MEM_READ_WRITE, n * 4);
+      psf::radix_sort(rt, kb, vb, tk, tv, n, bits);
+      auto sk = rt.download<uint32_t>(kb, n), sv = rt.download<uint32_t>(vb, n);
+      INFO("n " << n << " bits " << bits);
+      size_t wrong = 0;
+      for (uint32_t i = 0; i < n; ++i) wrong += sk[i] != ref[i].first || sv[i] != ref[i].second;
+      CHECK(wrong == 0);
+    }
+  }
+}
+
+TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]") {
+  auto& rt = psf::test::runtime();
+  std::vector<PathVertex> v = random_tuples(20001, 3, 1.0f);
+  FilterParams p = default_params();
+  p.footprint = 0.05f;
+  uint32_t n = uint32_t(v.size());
+  psf::PathSpaceFilter filter(rt, n);
+  cl::Buffer vb = rt.upload(v), cb = rt.upload(random_values(n, 4));
+  cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4)), counts = rt.buffer(CL_MEM_READ_WRITE, n * 4);
+  p.count = n;
+  filter.run(p, 1, vb, cb, out, counts);
+  uint32_t bits = psf::filter_key_bits(n), cells = 1u << bits;
+  auto keys = rt.download<uint32_t>(filter.sorted_keys(), n);
+  auto order = rt.download<uint32_t>(filter.sorted_indices(), n);
+  auto ranges = rt.download<cl_uint2>(filter.cell_ranges(), cells);
+  std::vector<uint32_t> start(cells), end(cells);
+  for (uint32_t k = 0; k < cells; ++k) {
+    start[k] = ranges[k].s[0];
+    end[k] = ranges[k].s[1];
+  }
+  CHECK(std::is_sorted(keys.begin(), keys.end()));
+  std::vector<uint32_t> perm = order;
+  std::sort(perm.begin(), perm.end());
+  for (uint32_t i = 0; i < n; ++i) REQUIRE(perm[i] == i);  // a permutation
+  // Plain scan: every key's first and one-past-last position; absent keys empty.
+  std::vector<uint32_t> ref_start(cells, 0), ref_end(cells, 0);
+  size_t invalid = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    if (keys[i] >= cells) {
+      ++invalid;
+      continue;
+    }
+    if (i == 0 || keys[i - 1] != keys[i]) ref_start[keys[i]] = i;
+    ref_end[keys[i]] = i + 1;
+  }
+  CHECK(start == ref_start);
+  CHECK(end == ref_end);
+  size_t expect_invalid = std::count_if(v.begin(), v.end(), [](auto& t) { return t.albedo.s[3] == 0.0f; });
+  CHECK(invalid == expect_invalid);
+}
+
+TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation", "[filter]") {
+  for (bool cells27 : {false, true}) {
+    SECTION(cells27 ? "27 cells of size r" : "8 cells of size 2r") {
+      FilterParams p = default_params();
+      p.cells27 = cells27;
+      for (auto [n, extent, footprint] : {std::tuple{3001, 1.0f, 0.02f}, std::tuple{777, 0.2f, 0.01f},
+                                          std::tuple{1, 1.0f, 0.02f}, std::tuple{64, 1.0f, 0.02f}}) {
+        INFO("n " << n << " extent " << extent);
+        auto v = random_tuples(n, 11 + n, extent);
+        auto c = random_values(n, 12 + n);
+        p.footprint = footprint;
+        check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
+      }
+    }
+  }
+}
+
+TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, iterations", "[filter]") {
+  FilterParams p = default_params();
+  SECTION("all points in one cell") {
+    auto v = random_tuples(500, 21, 0.01f);  // extent far below the 0.1..0.5 radii
+    for (auto& t : v) t.position.s[3] = 10.0f;
+    p.footprint = 0.01f;
+    check_same(brute_force(v, random_values(500, 22), p, 1), run_filter(v, random_values(500, 22), p, 1));
+  }
+  SECTION("sparse points: mostly empty cells, every vertex alone") {
+    auto v = random_tuples(300, 23, 100.0f);
+    p.footprint = 0.001f;
+    auto c = random_values(300, 24);
+    auto dev = run_filter(v, c, p, 1);
+    check_same(brute_force(v, c, p, 1), dev);
+    CHECK(dev.max_count == 1);
+  }
+  SECTION("a global r0 and a shrinking n_scale") {
+    auto v = random_tuples(2000, 25, 1.0f);
+    auto c = random_values(2000, 26);
+    p.r0 = 0.05f;
+    p.n_scale = std::pow(16.0f, -0.25f);
+    check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
+  }
+  SECTION("non-finite values never spread to neighbours") {
+    auto v = random_tuples(1500, 27, 0.5f);
+    auto c = random_values(1500, 28);
+    for (size_t i = 0; i < c.size(); i += 37) c[i].s[1] = std::nanf("");
+    for (size_t i = 5; i < c.size(); i += 41) c[i].s[0] = INFINITY;
+    auto dev = run_filter(v, c, p, 1);
+    auto ref = brute_force(v, c, p, 1);
+    for (size_t i = 0; i < c.size(); ++i) {
+      bool own_finite = std::isfinite(c[i].s[0]) && std::isfinite(c[i].s[1]) && std::isfinite(c[i].s[2]);
+      if (own_finite) {
+        INFO("tuple " << i);
+        REQUIRE(std::isfinite(dev.values[i].s[0] + dev.values[i].s[1] + dev.values[i].s[2]));
+        REQUIRE(dev.counts[i] == ref.counts[i]);
+      }
+    }
+  }
+  SECTION("two iterations average the averages") {
+    auto v = random_tuples(2500, 29, 1.0f);
+    auto c = random_values(2500, 30);
+    check_same(brute_force(v, c, p, 2), run_filter(v, c, p, 2));
+  }
+}
+
+TEST_CASE("Filter: Cornell box tuples equal the brute-force equation", "[filter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "48"}});
+  psf::Renderer renderer(rt, scene);
+  psf::RenderOptions o;
+  o.spp = 2;
+  o.keep_last_batch = true;
+  auto r = renderer.render(o);
+  const auto& b = r.last_batch;
+  REQUIRE(b.vertices.size() == 48u * 48u * 2u);
+  size_t with_vertex = std::count_if(b.vertices.begin(), b.vertices.end(), [](auto& t) { return t.albedo.s[3] != 0; });
+  CHECK(with_vertex > b.vertices.size() * 9 / 10);
+  auto dev = run_filter(b.vertices, b.values, b.params, 1);
+  check_same(brute_force(b.vertices, b.values, b.params, 1), dev);
+  CHECK(dev.max_count > 1);
+}
+
+TEST_CASE("Filter: the unfiltered image of a filtered run equals --filter off bit for bit", "[filter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "40"}});
+  psf::Renderer renderer(rt, scene);
+  psf::RenderOptions o;
+  o.spp = 6;
+  o.batch_log2 = 12;  // several batches, wrapping around the image
+  auto filtered = renderer.render(o);
+  o.filter.enabled = false;
+  auto off = renderer.render(o);
+  CHECK(filtered.unfiltered.rgb == off.image.rgb);
+  CHECK(filtered.image.rgb != off.image.rgb);
+  for (float n : off.neighbours) REQUIRE(n == 1.0f);
+}
+
+TEST_CASE("Filter: the filtered image approaches the unfiltered one as n grows", "[filter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "32"}});
+  psf::Renderer renderer(rt, scene);
+  // The mean absolute difference between the filtered and unfiltered images of
+  // the same paths: bias and the noise the filter removes, both shrinking with
+  // r(n) = r0 / n^(1/4). A large r0 makes the effect visible at small n.
+  auto difference = [&](int spp) {
+    psf::RenderOptions o;
+    o.spp = spp;
+    o.filter.footprint_pixels = 8.0f;
+    auto r = renderer.render(o);
+    double sum = 0;
+    for (size_t i = 0; i < r.image.rgb.size(); ++i) sum += std::fabs(r.image.rgb[i] - r.unfiltered.rgb[i]);
+    return sum / r.image.rgb.size();
+  };
+  double d4 = difference(4), d64 = difference(64), d1024 = difference(1024);
+  INFO("mean |filtered - unfiltered|: 4 spp " << d4 << ", 64 spp " << d64 << ", 1024 spp " << d1024);
+  CHECK(d64 < 0.7 * d4);
+  CHECK(d1024 < 0.7 * d64);
+}
+
+TEST_CASE("Filter: switches itself off when no vertex has a neighbour any more", "[filter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "24"}});
+  psf::Renderer renderer(rt, scene);
+  psf::RenderOptions o;
+  o.spp = 4;
+  o.batch_log2 = 10;
+  o.filter.r0 = 1e-6f;  // far below the distance between any two vertices
+  auto r = renderer.render(o);
+  CHECK(r.filter_off_after == 1024);
+  CHECK(r.image.rgb == r.unfiltered.rgb);
+}

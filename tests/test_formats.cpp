@@ -1,0 +1,581 @@
+// Mesh file formats: PLY (ASCII and binary of both byte orders, written here),
+// glTF 2.0 (.gltf with an embedded base64 buffer, and .glb) against hand-computed
+// expectations, their errors, and the default sky of bare mesh files.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <optional>
+
+#include <stb_image_write.h>
+
+#include "image.h"
+#include "scene/formats.h"
+#include "scene/scene.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+class TempDir {
+ public:
+  TempDir() {
+    static int counter = 0;
+    path_ = fs::temp_directory_path() /
+            ("psf-formats-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  std::string write(const std::string& name, const std::string& bytes) const {
+    fs::path p = path_ / name;
+    std::ofstream(p, std::ios::binary) << bytes;
+    return p.string();
+  }
+
+ private:
+  fs::path path_;
+};
+
+// The SceneError of loading `path`: its line and message.
+std::pair<int, std::string> error_of(const std::function<void()>& load) {
+  try {
+    load();
+  } catch (const psf::SceneError& e) {
+    return {e.line(), e.what()};
+  }
+  FAIL("no SceneError");
+  return {0, ""};
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+// --- PLY ------------------------------------------------------------------------
+
+// Five vertices with colour, quality, normal and uv; a quad and a pentagon; an extra element.
+const float kVerts[5][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0.5f, 2, 0}};
+const std::vector<std::vector<int>> kFaces = {{0, 1, 2, 3}, {0, 1, 2, 4, 3}};
+
+std::string ply_header(const std::string& format, const std::string& index_type = "int") {
+  return "ply\nformat " + format +
+         " 1.0\ncomment written by test_formats\nelement vertex 5\n"
+         "property float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty double quality\n"
+         "property float nx\nproperty float ny\nproperty float nz\nproperty float s\nproperty float t\n"
+         "element face 2\nproperty uchar flags\nproperty list uchar " +
+         index_type +
+         " vertex_indices\n"
+         "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n";
+}
+
+std::string ascii_ply() {
+  std::string s = ply_header("ascii");
+  for (int i = 0; i < 5; ++i)
+    s += std::to_string(kVerts[i][0]) + " " + std::to_string(kVerts[i][1]) + " " + std::to_string(kVerts[i][2]) +
+         " 200 0.5 0 0 1 " + std::to_string(0.25 * i) + " " + std::to_string(1 - 0.25 * i) + "\n";
+  for (const auto& f : kFaces) {
+    s += "7 " + std::to_string(f.size());
+    for (int i : f) s += " " + std::to_string(i);
+    s += "\n";
+  }
+  s += "0 1\n";
+  return s;
+}
+
+template <class T>
+void put(std::string& out, T v, bool big) {
+  char b[sizeof(T)];
+  std::memcpy(b, &v, sizeof(T));
+  if (big) std::reverse(b, b + sizeof(T));  // the test machine is little-endian (x86-64)
+  out.append(b, sizeof(T));
+}
+
+// `bad_index`: written in place of vertex index 4.
+std::string binary_ply(bool big, std::optional<int32_t> bad_index = std::nullopt) {
+  std::string s = ply_header(big ? "binary_big_endian" : "binary_little_endian");
+  for (int i = 0; i < 5; ++i) {
+    for (int k = 0; k < 3; ++k) put<float>(s, kVerts[i][k], big);
+    put<uint8_t>(s, 200, big);
+    put<double>(s, 0.5, big);
+    put<float>(s, 0, big);
+    put<float>(s, 0, big);
+    put<float>(s, 1, big);
+    put<float>(s, 0.25f * i, big);
+    put<float>(s, 1 - 0.25f * i, big);
+  }
+  for (const auto& f : kFaces) {
+    put<uint8_t>(s, 7, big);
+    put<uint8_t>(s, uint8_t(f.size()), big);
+    for (int i : f) put<int32_t>(s, bad_index && i == 4 ? *bad_index : i, big);
+  }
+  put<int32_t>(s, 0, big);
+  put<int32_t>(s, 1, big);
+  return s;
+}
+
+void check_test_mesh(const psf::detail::PlyMesh& m) {
+  REQUIRE(m.mesh.positions.size() == 5);
+  for (int i = 0; i < 5; ++i) CHECK(m.mesh.positions[i] == glm::vec3(kVerts[i][0], kVerts[i][1], kVerts[i][2]));
+  // Fans (0, k-1, k): the quad gives 2 triangles, the pentagon 3.
+  std::vector<glm::uvec3> expected = {{0, 1, 2}, {0, 2, 3}, {0, 1, 2}, {0, 2, 4}, {0, 4, 3}};
+  CHECK(m.mesh.triangles == expected);
+  REQUIRE(m.mesh.normals.size() == 5);
+  CHECK(m.mesh.normals[3] == glm::vec3(0, 0, 1));
+  REQUIRE(m.mesh.uvs.size() == 5);  // from s, t
+  CHECK(m.mesh.uvs[2].x == Approx(0.5f));
+  CHECK(m.mesh.uvs[2].y == Approx(0.5f));
+  auto ignored = [&](const std::string& n) { return std::count(m.ignored.begin(), m.ignored.end(), n) == 1; };
+  CHECK(ignored("vertex.red"));
+  CHECK(ignored("vertex.quality"));
+  CHECK(ignored("face.flags"));
+  CHECK(ignored("edge"));
+}
+
+// --- glTF -----------------------------------------------------------------------
+
+std::string base64(const std::string& bytes) {
+  static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    uint32_t n = uint32_t(uint8_t(bytes[i])) << 16;
+    if (i + 1 < bytes.size()) n |= uint32_t(uint8_t(bytes[i + 1])) << 8;
+    if (i + 2 < bytes.size()) n |= uint32_t(uint8_t(bytes[i + 2]));
+    out += table[(n >> 18) & 63];
+    out += table[(n >> 12) & 63];
+    out += i + 1 < bytes.size() ? table[(n >> 6) & 63] : '=';
+    out += i + 2 < bytes.size() ? table[n & 63] : '=';
+  }
+  return out;
+}
+
+// 176 bytes: a unit quad's 4 positions, its 6 uint16 indices, a triangle's 3
+// positions, the quad's 4 normals and 4 uvs.
+std::string gltf_buffer() {
+  std::string b;
+  for (float v : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 0.f, 0.f, 1.f, 0.f}) put<float>(b, v, false);
+  for (uint16_t i : {0, 1, 2, 0, 2, 3}) put<uint16_t>(b, i, false);
+  for (float v : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f}) put<float>(b, v, false);
+  for (int i = 0; i < 4; ++i)
+    for (float v : {0.f, 0.f, 1.f}) put<float>(b, v, false);
+  for (float v : {0.f, 1.f, 1.f, 1.f, 1.f, 0.f, 0.f, 0.f}) put<float>(b, v, false);
+  return b;
+}
+
+// The test scene's JSON; `buffer` is the "buffers" entry, `extra_index` replaces index accessor count.
+std::string gltf_json(const std::string& buffer, int index_count = 6, bool lights = true) {
+  std::string light_nodes = lights ? ",3,4,5" : "";
+  return R"({
+  "asset": {"version": "2.0"},
+  "extensionsUsed": ["KHR_lights_punctual", "KHR_materials_emissive_strength"],
+  "extensions": {"KHR_lights_punctual": {"lights": [
+    {"type": "point", "color": [1, 0.5, 0.5], "intensity": 10},
+    {"type": "spot", "intensity": 5, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+    {"type": "directional", "intensity": 2}]}},
+  "scene": 0,
+  "scenes": [{"nodes": [0, 1)" + light_nodes + R"(]}],
+  "nodes": [
+    {"mesh": 0, "translation": [0, 0, -5], "scale": [2, 2, 2]},
+    {"mesh": 1, "rotation": [0, 0, 0.70710678, 0.70710678], "children": [2]},
+    {"camera": 0, "translation": [0, 0, 10]},
+    {"translation": [1, 2, 3], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+    {"rotation": [-0.70710678, 0, 0, 0.70710678], "extensions": {"KHR_lights_punctual": {"light": 1}}},
+    {"extensions": {"KHR_lights_punctual": {"light": 2}}}],
+  "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 1.5, "znear": 0.1}}],
+  "meshes": [
+    {"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 3, "TEXCOORD_0": 4}, "indices": 1, "material": 0}]},
+    {"primitives": [{"attributes": {"POSITION": 2}, "material": 1}]}],
+  "materials": [
+    {"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.4, 0.6, 1], "metallicFactor": 0}, "doubleSided": true},
+    {"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
+     "emissiveFactor": [1, 0.5, 0.25], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4}}}],
+  "accessors": [
+    {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 4, "min": [0, 0, 0], "max": [1, 1, 0]},
+    {"bufferView": 1, "componentType": 5123, "type": "SCALAR", "count": )" +
+         std::to_string(index_count) + R"(},
+    {"bufferView": 2, "componentType": 5126, "type": "VEC3", "count": 3, "min": [0, 0, 0], "max": [1, 1, 0]},
+    {"bufferView": 3, "componentType": 5126, "type": "VEC3", "count": 4},
+    {"bufferView": 4, "componentType": 5126, "type": "VEC2", "count": 4}],
+  "bufferViews": [
+    {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+    {"buffer": 0, "byteOffset": 48, "byteLength": 12},
+    {"buffer": 0, "byteOffset": 60, "byteLength": 36},
+    {"buffer": 0, "byteOffset": 96, "byteLength": 48},
+    {"buffer": 0, "byteOffset": 144, "byteLength": 32}],
+  "buffers": [)" + buffer + R"(]
+})";
+}
+
+std::string glb(const std::string& json, const std::string& bin) {
+  std::string j = json, b = bin;
+  while (j.size() % 4) j += ' ';
+  while (b.size() % 4) b += '\0';
+  std::string out;
+  put<uint32_t>(out, 0x46546C67u, false);  // "glTF"
+  put<uint32_t>(out, 2u, false);
+  put<uint32_t>(out, uint32_t(12 + 8 + j.size() + 8 + b.size()), false);
+  put<uint32_t>(out, uint32_t(j.size()), false);
+  put<uint32_t>(out, 0x4E4F534Au, false);  // "JSON"
+  out += j;
+  put<uint32_t>(out, uint32_t(b.size()), false);
+  put<uint32_t>(out, 0x004E4942u, false);  // "BIN"
+  out += b;
+  return out;
+}
+
+void check_gltf_scene(const psf::Scene& s) {
+  INFO([&] {
+    std::string all;
+    for (const auto& w : s.warnings) all += w + "\n";
+    return all;
+  }());
+  CHECK(s.warnings.empty());
+  REQUIRE(s.triangles.size() == 3);
+  // Node 0: the quad scaled by 2 and moved to z = -5.
+  auto tri = [&](size_t t, int k) { return s.positions[s.triangles[t][k]]; };
+  CHECK(tri(0, 0) == glm::vec3(0, 0, -5));
+  CHECK(tri(0, 1) == glm::vec3(2, 0, -5));
+  CHECK(tri(0, 2) == glm::vec3(2, 2, -5));
+  CHECK(tri(1, 2) == glm::vec3(0, 2, -5));
+  // The quad's normals and uvs (the triangle has none: flat, and NaN uvs).
+  REQUIRE(s.normals.size() == s.positions.size());
+  REQUIRE(s.uvs.size() == s.positions.size());
+  CHECK(s.normals[s.triangles[0][0]] == glm::vec3(0, 0, 1));
+  CHECK(s.normals[s.triangles[2][0]] == glm::vec3(0, 0, 0));
+  CHECK(s.uvs[s.triangles[0][2]] == glm::vec2(1, 0));
+  CHECK(std::isnan(s.uvs[s.triangles[2][0]].x));
+  // Node 1: the triangle rotated by 90 degrees about +z: (1,0,0) -> (0,1,0), (0,1,0) -> (-1,0,0).
+  CHECK(glm::length(tri(2, 1) - glm::vec3(0, 1, 0)) < 1e-6f);
+  CHECK(glm::length(tri(2, 2) - glm::vec3(-1, 0, 0)) < 1e-6f);
+  REQUIRE(s.materials.size() == 2);
+  const Material& a = s.materials[s.tri_material[0]];
+  CHECK(a.albedo.s[0] == Approx(0.2f));
+  CHECK(a.albedo.s[2] == Approx(0.6f));
+  CHECK(a.two_sided == 1);
+  const Material& e = s.materials[s.tri_material[2]];
+  CHECK(e.emission.s[0] == Approx(4.0f));
+  CHECK(e.emission.s[1] == Approx(2.0f));
+  CHECK(e.two_sided == 0);
+  // The camera (node 2, a child of node 1): at (0, 0, 10) looking along -z, up = R (0, 1, 0) = (-1, 0, 0).
+  CHECK(glm::length(s.camera.origin - glm::vec3(0, 0, 10)) < 1e-5f);
+  CHECK(glm::length(s.camera.target - glm::vec3(0, 0, 9)) < 1e-5f);
+  CHECK(glm::length(s.camera.up - glm::vec3(-1, 0, 0)) < 1e-5f);
+  CHECK(s.camera.fov_degrees == Approx(glm::degrees(0.8f)));
+  CHECK(s.camera.fov_axis == "y");
+  CHECK(s.width == 768);
+  CHECK(s.height == 512);
+  REQUIRE(s.lights.size() == 3);
+  CHECK(s.lights[0].type == psf::LightType::Point);
+  CHECK(glm::length(s.lights[0].position - glm::vec3(1, 2, 3)) < 1e-6f);
+  CHECK(s.lights[0].color == glm::vec3(10, 5, 5));
+  CHECK(s.lights[1].type == psf::LightType::Spot);
+  CHECK(glm::length(s.lights[1].direction - glm::vec3(0, -1, 0)) < 1e-5f);
+  CHECK(s.lights[1].cutoff_angle == Approx(0.5f));
+  CHECK(s.lights[1].beam_width == Approx(0.2f));
+  CHECK(s.lights[1].color == glm::vec3(5.0f));
+  CHECK(s.lights[2].type == psf::LightType::Directional);
+  CHECK(glm::length(s.lights[2].direction - glm::vec3(0, 0, -1)) < 1e-6f);
+  CHECK(s.lights[2].color == glm::vec3(2.0f));
+}
+
+}  // namespace
+
+TEST_CASE("PLY: ASCII and binary of both byte orders read the same mesh", "[formats]") {
+  TempDir dir;
+  SECTION("ascii") { check_test_mesh(psf::detail::read_ply(dir.write("a.ply", ascii_ply()))); }
+  SECTION("binary little endian") { check_test_mesh(psf::detail::read_ply(dir.write("l.ply", binary_ply(false)))); }
+  SECTION("binary big endian") { check_test_mesh(psf::detail::read_ply(dir.write("b.ply", binary_ply(true)))); }
+  SECTION("CRLF header, sized type names, vertex_index, texture_u/v") {
+    std::string s =
+        "ply\r\nformat ascii 1.0\r\nelement vertex 3\r\nproperty float32 x\r\nproperty float32 y\r\n"
+        "property float32 z\r\nproperty float32 texture_u\r\nproperty float32 texture_v\r\nelement face 1\r\n"
+        "property list uint8 uint32 vertex_index\r\nend_header\r\n0 0 0 0 0\r\n1 0 0 1 0\r\n0 1 0 0 1\r\n3 0 1 2\r\n";
+    psf::detail::PlyMesh m = psf::detail::read_ply(dir.write("c.ply", s));
+    CHECK(m.mesh.triangles.size() == 1);
+    CHECK(m.mesh.uvs.size() == 3);
+    CHECK(m.mesh.normals.empty());
+    CHECK(m.ignored.empty());
+  }
+}
+
+TEST_CASE("PLY: malformed files are errors naming the line or byte", "[formats]") {
+  TempDir dir;
+  using psf::detail::read_ply;
+  SECTION("truncated binary") {
+    std::string full = binary_ply(false);
+    std::string path = dir.write("t.ply", full.substr(0, full.size() - 13));
+    auto [line, msg] = error_of([&] { read_ply(path); });
+    CHECK(line == 0);
+    CHECK(contains(msg, "byte "));
+    CHECK(contains(msg, "truncated"));
+    // A header promising more vertices than the file can hold fails before reading them.
+    std::string huge = ply_header("binary_little_endian");
+    huge.replace(huge.find("vertex 5"), 8, "vertex 4000000000");
+    std::string hp = dir.write("h.ply", huge + "xyz");
+    CHECK(contains(error_of([&] { read_ply(hp); }).second, "more than the rest of the file"));
+  }
+  SECTION("bad headers") {
+    auto header_error = [&](const std::string& text) { return error_of([&] { read_ply(dir.write("x.ply", text)); }); };
+    CHECK(header_error("plx\n").first == 1);
+    auto [l1, m1] = header_error("ply\nformat ascii 2.0\nend_header\n");
+    CHECK(l1 == 2);
+    CHECK(contains(m1, "version"));
+    auto [l2, m2] = header_error("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n");
+    CHECK(l2 == 4);
+    CHECK(contains(m2, "quad"));
+    CHECK(header_error("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n").second.find("end_header") !=
+          std::string::npos);
+    CHECK(header_error("ply\nformat ascii 1.0\nelement vertex -3\nend_header\n").first == 3);
+    CHECK(contains(header_error("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n").second,
+                   "lacks x, y or z"));
+  }
+  SECTION("out-of-range indices") {
+    std::string text = ascii_ply();
+    text.replace(text.find("7 5 0 1 2 4 3"), 13, "7 5 0 1 2 9 3");
+    std::string path = dir.write("r.ply", text);
+    auto [line, msg] = error_of([&] { read_ply(path); });
+    CHECK(line == 28);  // 21 header lines, 5 vertices, the second face
+    CHECK(contains(msg, "index 9 out of range"));
+    std::string bin = dir.write("rb.ply", binary_ply(true, 5));
+    CHECK(contains(error_of([&] { read_ply(bin); }).second, "index 5 out of range"));
+    std::string neg = dir.write("rn.ply", binary_ply(false, -1 - 0x7fffffff));
+    CHECK(contains(error_of([&] { read_ply(neg); }).second, "out of range"));
+  }
+  SECTION("non-finite vertices") {
+    std::string text = ascii_ply();
+    size_t at = text.find("end_header\n") + 11;
+    at = text.find('\n', at) + 1;  // the second vertex line (line 23)
+    text.replace(at, text.find(' ', at) - at, "nan");
+    auto [line, msg] = error_of([&] { read_ply(dir.write("n.ply", text)); });
+    CHECK(line == 23);
+    CHECK(contains(msg, "non-finite"));
+    std::string bin = binary_ply(false);
+    float inf = INFINITY;
+    size_t body = bin.find("end_header\n") + 11;
+    std::memcpy(&bin[body + 4], &inf, 4);  // y of vertex 0
+    CHECK(contains(error_of([&] { read_ply(dir.write("i.ply", bin)); }).second, "non-finite"));
+  }
+  SECTION("ASCII values that are not numbers, or too many") {
+    std::string text = ascii_ply();
+    text.replace(text.find("7 4 0 1 2 3"), 11, "7 4 0 1 x 3");
+    CHECK(contains(error_of([&] { read_ply(dir.write("w.ply", text)); }).second, "'x' is not an integer"));
+    std::string extra = ascii_ply();
+    extra.replace(extra.find("7 4 0 1 2 3"), 11, "7 4 0 1 2 3 8");
+    CHECK(error_of([&] { read_ply(dir.write("e.ply", extra)); }).first == 27);
+  }
+}
+
+TEST_CASE("PLY: load_scene and Mitsuba's ply shape", "[formats]") {
+  TempDir dir;
+  std::string path = dir.write("mesh.ply", binary_ply(false));
+  psf::Scene s = psf::load_scene(path);
+  CHECK(s.triangles.size() == 5);
+  CHECK(s.width == 512);
+  REQUIRE(s.materials.size() == 1);
+  REQUIRE(s.lights.size() == 1);  // no emitter: the default sky
+  CHECK(s.lights[0].type == psf::LightType::Envmap);
+  CHECK(s.lights[0].source == "default sky");
+  REQUIRE(s.warnings.size() == 1);  // the properties read past, named
+  CHECK(contains(s.warnings[0], "vertex.red"));
+  CHECK(contains(s.warnings[0], "edge"));
+
+  std::string xml = dir.write("scene.xml",
+                              "<scene version=\"0.5.0\">\n<shape type=\"ply\"><string name=\"filename\" value=\"mesh.ply\"/>"
+                              "<transform name=\"toWorld\"><translate x=\"10\"/></transform></shape>\n</scene>\n");
+  psf::Scene m = psf::load_scene(xml);
+  REQUIRE(m.positions.size() == 5);
+  CHECK(m.positions[4] == glm::vec3(10.5f, 2, 0));
+  CHECK(m.lights.empty());  // Mitsuba scenes get no default light
+  bool named = false;
+  for (const auto& w : m.warnings) named = named || (contains(w, "scene.xml:2") && contains(w, "vertex.red"));
+  CHECK(named);
+  // An error in the PLY file names the PLY file.
+  dir.write("bad.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                       "end_header\n0 0 inf\n");
+  std::string bad = dir.write("bad.xml", "<scene version=\"3.0.0\">\n<shape type=\"ply\"><string name=\"filename\" "
+                                         "value=\"bad.ply\"/></shape>\n</scene>\n");
+  auto [line, msg] = error_of([&] { psf::load_scene(bad); });
+  CHECK(line == 8);
+  CHECK(contains(msg, "bad.ply"));
+}
+
+TEST_CASE("PLY: the shared Stanford bunny (binary)", "[formats]") {
+  std::optional<std::string> shared = psf::test::shared_dir();
+  if (!shared || !fs::exists(*shared + "/scenes/bunny/bunny.ply")) {
+    WARN("shared/scenes/bunny/bunny.ply not found: skipped");
+    return;
+  }
+  std::string path = *shared + "/scenes/bunny/bunny.ply";
+  // The counts from the file's own header.
+  std::ifstream in(path, std::ios::binary);
+  uint64_t vertices = 0, faces = 0;
+  for (std::string line; std::getline(in, line) && line.rfind("end_header", 0) != 0;) {
+    if (line.rfind("element vertex ", 0) == 0) vertices = std::stoull(line.substr(15));
+    if (line.rfind("element face ", 0) == 0) faces = std::stoull(line.substr(13));
+  }
+  psf::detail::PlyMesh m = psf::detail::read_ply(path);
+  CHECK(m.mesh.positions.size() == vertices);
+  CHECK(m.mesh.triangles.size() >= faces);
+  glm::vec3 lo(1e30f), hi(-1e30f);
+  for (const glm::vec3& p : m.mesh.positions) lo = glm::min(lo, p), hi = glm::max(hi, p);
+  CHECK(glm::length(hi - lo) > 0.0f);
+  CHECK(glm::length(hi - lo) < 1e3f);
+}
+
+TEST_CASE("glTF: meshes, node transforms, materials, camera and punctual lights", "[formats]") {
+  TempDir dir;
+  std::string bin = gltf_buffer();
+  REQUIRE(bin.size() == 176);
+  SECTION(".gltf with an embedded base64 buffer") {
+    std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(bin) + "\"}");
+    check_gltf_scene(psf::load_scene(dir.write("scene.gltf", json)));
+  }
+  SECTION(".gltf with a .bin beside it") {
+    dir.write("scene.bin", bin);
+    check_gltf_scene(psf::load_scene(dir.write("scene.gltf", gltf_json(R"({"byteLength": 176, "uri": "scene.bin"})"))));
+  }
+  SECTION(".glb") {
+    check_gltf_scene(psf::load_scene(dir.write("scene.glb", glb(gltf_json(R"({"byteLength": 176})"), bin))));
+  }
+  SECTION("no lights: the default sky (the emissive triangle is the only emitter otherwise)") {
+    std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(bin) + "\"}",
+                                 6, false);
+    json.replace(json.find("\"emissiveFactor\": [1, 0.5, 0.25]"), 32, "\"emissiveFactor\": [0, 0, 0]");
+    psf::Scene s = psf::load_scene(dir.write("dark.gltf", json));
+    REQUIRE(s.lights.size() == 1);
+    CHECK(s.lights[0].source == "default sky");
+  }
+}
+
+TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
+  TempDir dir;
+  std::string bin = gltf_buffer();
+  std::string embedded = R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(bin) + "\"}";
+  SECTION("an index accessor running past its buffer view") {
+    auto [line, msg] = error_of([&] { psf::load_scene(dir.write("a.gltf", gltf_json(embedded, 9))); });
+    CHECK(contains(msg, "accessors[1]"));
+    CHECK(contains(msg, "do not fit"));
+  }
+  SECTION("an out-of-range index") {
+    std::string b = bin;
+    uint16_t nine = 9;
+    std::memcpy(&b[48 + 2 * 4], &nine, 2);
+    std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(b) + "\"}");
+    auto [line, msg] = error_of([&] { psf::load_scene(dir.write("i.gltf", json)); });
+    CHECK(contains(msg, "accessors[1][4]"));
+    CHECK(contains(msg, "index 9 out of range"));
+  }
+  SECTION("a non-finite position") {
+    std::string b = bin;
+    float nan = NAN;
+    std::memcpy(&b[4 * 4], &nan, 4);  // vertex 1, y
+    std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(b) + "\"}");
+    CHECK(contains(error_of([&] { psf::load_scene(dir.write("n.gltf", json)); }).second, "accessors[0][1]"));
+  }
+  SECTION("an embedded base colour texture (sRGB) times the factor") {
+    // 2x2 sRGB texels: red, green, blue, white; factor (0.5, 1, 1).
+    const unsigned char px[] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255};
+    std::string png;
+    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
+                           &png, 2, 2, 3, px, 6);
+    std::string json = gltf_json(embedded);
+    const std::string factor = "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]";
+    json.replace(json.find(factor), factor.size(),
+                 "\"baseColorFactor\": [0.5, 1, 1, 1], \"baseColorTexture\": {\"index\": 0}");
+    json.replace(json.find("\"asset\""), 0,
+                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
+                     "\"}], \"textures\": [{\"source\": 0, \"sampler\": 0}], "
+                     "\"samplers\": [{\"magFilter\": 9728, \"wrapS\": 33071, \"wrapT\": 33071}],\n  ");
+    psf::Scene s = psf::load_scene(dir.write("tex.gltf", json));
+    CHECK(s.warnings.empty());
+    const Material& m = s.materials[s.tri_material[0]];
+    REQUIRE(m.tex_color != PSF_NO_TEXTURE);
+    REQUIRE(m.tex_color < s.textures.size());
+    CHECK(m.albedo.s[0] == Approx(0.25f));  // mean of (1, 0, 0, 1) x 0.5
+    CHECK(m.albedo.s[1] == Approx(0.5f));
+    CHECK(m.albedo.s[2] == Approx(0.5f));
+  }
+  SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
+  SECTION("textures and metals are reported, once per material") {
+    std::string json = gltf_json(embedded);
+    json.replace(json.find("\"metallicFactor\": 0}, \"doubleSided\""), 20,
+                 "\"metallicFactor\": 1, \"baseColorTexture\": {\"index\": 0}}");
+    json.replace(json.find("\"asset\""), 0,
+                 "\"images\": [{\"uri\": \"missing.png\"}], \"textures\": [{\"source\": 0}],\n  ");
+    psf::Scene s = psf::load_scene(dir.write("t.gltf", json));
+    size_t n = 0;
+    for (const auto& w : s.warnings)
+      if (contains(w, "materials[0]") && contains(w, "baseColorTexture") && contains(w, "metallic")) ++n;
+    CHECK(n == 1);
+  }
+}
+
+TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
+  TempDir dir;
+  const char* bin_env = std::getenv("PSF_BINARY");
+  std::string psf_binary = bin_env ? bin_env : PSF_BINARY_DEFAULT;
+  auto run = [&](const std::string& args, std::string& output) {
+    FILE* p = popen((psf_binary + " " + args + " 2>&1").c_str(), "r");
+    REQUIRE(p);
+    char buf[4096];
+    size_t n;
+    output.clear();
+    while ((n = fread(buf, 1, sizeof buf, p)) > 0) output.append(buf, n);
+    int st = pclose(p);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  };
+  std::string out;
+  std::string ply = dir.write("mesh.ply", binary_ply(true));
+  std::string exr = fs::path(ply).replace_extension(".exr").string();
+  CHECK(run("render " + ply + " -o " + exr + " --spp 2 --width 12 --height 8 --filter off -q", out) == 0);
+  INFO(out);
+  psf::Image img = psf::read_exr(exr);
+  CHECK(img.width == 12);
+  // The default sky lights the mesh and fills the background: nothing is black.
+  for (float v : img.rgb) CHECK(v > 0.0f);
+
+  std::string bin = gltf_buffer();
+  std::string gltf = dir.write("scene.gltf", gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" +
+                                                       base64(bin) + "\"}"));
+  CHECK(run("render " + gltf + " -o " + dir.write("g.exr", "") + " --spp 1 --width 12 --height 8 --filter off -q", out) == 0);
+
+  psf::Image a, b;
+  a.width = b.width = 32;
+  a.height = b.height = 18;
+  a.rgb.assign(32 * 18 * 3, 2.0f);
+  b.rgb.assign(32 * 18 * 3, 1.0f);
+  std::string pa = dir.write("a.exr", ""), pb = dir.write("b.exr", "");
+  psf::write_exr(pa, a);
+  psf::write_exr(pb, b);
+  CHECK(run("compare " + pa + " " + pb, out) == 0);
+  CHECK(contains(out, "relMSE: 0.990099"));
+  CHECK(contains(out, "blocks 16x9: mean relative error 100.00 %"));
+  CHECK(contains(out, "(+100.00 %)"));
+  CHECK(run("compare " + pa + " " + pb + " --blocks 4x2", out) == 0);
+  CHECK(contains(out, "blocks 4x2"));
+  CHECK(run("compare " + pa + " " + pb + " --blocks four", out) == 2);
+}
+
+TEST_CASE("OBJ: a file without Ke gets the default sky; one with Ke does not", "[formats]") {
+  TempDir dir;
+  std::string dark = dir.write("dark.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  psf::Scene s = psf::load_scene(dark);
+  REQUIRE(s.lights.size() == 1);
+  const psf::LightDesc& sky = s.lights[0];
+  CHECK(sky.type == psf::LightType::Envmap);
+  CHECK(sky.width == 64);
+  CHECK(sky.height == 32);
+  // Brighter above the horizon (row 0: near the zenith, bluish) than below it.
+  CHECK(sky.texels[2] > sky.texels[0]);
+  CHECK(sky.texels[(size_t(31) * 64) * 3 + 1] == Approx(0.3f));
+  dir.write("lamp.mtl", "newmtl lamp\nKe 1 1 1\n");
+  std::string lit = dir.write("lit.obj", "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n");
+  CHECK(psf::load_scene(lit).lights.empty());
+}
