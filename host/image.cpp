@@ -117,6 +117,31 @@ Image read_exr(const std::string& path) {
   }
 }
 
+ExrFile read_exr_file(const std::string& path) {
+  try {
+    Imf::InputFile file(path.c_str());
+    Imath::Box2i dw = file.header().dataWindow();
+    ExrFile out;
+    out.width = dw.max.x - dw.min.x + 1;
+    out.height = dw.max.y - dw.min.y + 1;
+    for (auto it = file.header().begin(); it != file.header().end(); ++it)
+      if (const auto* a = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) out.attributes[it.name()] = a->value();
+    Imf::FrameBuffer fb;
+    const size_t n = size_t(out.width) * out.height;
+    for (auto c = file.header().channels().begin(); c != file.header().channels().end(); ++c) {
+      std::vector<float>& data = out.channels[c.name()];
+      data.assign(n, 0.0f);
+      char* base = reinterpret_cast<char*>(data.data()) - (size_t(dw.min.x) + size_t(dw.min.y) * out.width) * sizeof(float);
+      fb.insert(c.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * out.width));
+    }
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    return out;
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot read OpenEXR file: " + e.what());
+  }
+}
+
 void write_png(const std::string& path, const Image& image, float exposure) {
   std::vector<uint8_t> px(size_t(image.width) * image.height * 3);
   for (size_t i = 0; i < px.size(); ++i)

@@ -27,6 +27,14 @@ void write_exr(const std::string& path, const Image& image,
                const std::vector<ExrLayer>& layers = {});
 Image read_exr(const std::string& path);
 
+// Every channel of an OpenEXR file as floats, with its string attributes.
+struct ExrFile {
+  int width = 0, height = 0;                              // data window
+  std::map<std::string, std::string> attributes;          // string attributes only
+  std::map<std::string, std::vector<float>> channels;     // by channel name, row-major
+};
+ExrFile read_exr_file(const std::string& path);
+
 // sRGB-encoded 8-bit PNG of exposure-scaled, clamped linear RGB.
 void write_png(const std::string& path, const Image& image, float exposure = 1.0f);
 

@@ -11,6 +11,8 @@
 #include "image.h"
 #include "render.h"
 #include "scene/scene.h"
+#include "scheduler.h"
+#include "session.h"
 
 namespace {
 
@@ -53,6 +55,11 @@ struct RenderArgs {
   int max_depth = -2;                  // -2: the scene's integrator
   uint32_t seed = 0;
   bool stats = false, quiet = false, no_png = false;
+  double time = 0;                     // --time seconds
+  double checkpoint_seconds = 30;      // --checkpoint-seconds
+  std::string memory_budget;           // --memory-budget
+  std::string resume;                  // --resume EXR
+  int batch_log2 = 20;                 // --batch-log2
 };
 
 int run_render(const RenderArgs& a) {
@@ -93,60 +100,76 @@ int run_render(const RenderArgs& a) {
   if (a.width > 0) scene.width = a.width;
   if (a.height > 0) scene.height = a.height;
 
+  uint64_t memory_budget = 0;
+  if (!a.memory_budget.empty()) {
+    try {
+      memory_budget = psf::parse_bytes(a.memory_budget);
+    } catch (const std::invalid_argument& e) {
+      std::cerr << "psf: --memory-budget: " << e.what() << "\n";
+      return kExitBadInput;
+    }
+  }
+  if (!a.resume.empty()) {
+    try {
+      psf::read_exr_file(a.resume);
+    } catch (const std::exception& e) {
+      std::cerr << "psf: " << e.what() << "\n";
+      return kExitBadInput;
+    }
+  }
   psf::RenderOptions opt;
   opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
   opt.seed = a.seed;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.filter = a.fopt;
   opt.filter.enabled = a.filter == "psf";
-  bool aov_unfiltered = false, aov_neighbours = false;
+  bool aov_unfiltered = false, aov_neighbours = false, aov_albedo = false, aov_normal = false, aov_depth = false;
   for (size_t b = 0; b <= a.aov.size();) {
     size_t e = a.aov.find(',', b);
     if (e == std::string::npos) e = a.aov.size();
     std::string name = a.aov.substr(b, e - b);
     if (name == "unfiltered") aov_unfiltered = true;
     else if (name == "neighbours") aov_neighbours = true;
+    else if (name == "albedo") aov_albedo = true;
+    else if (name == "normal") aov_normal = true;
+    else if (name == "depth") aov_depth = true;
     else if (!name.empty()) {
-      std::cerr << "psf: --aov " << name << ": unknown layer (unfiltered, neighbours)\n";
+      std::cerr << "psf: --aov " << name << ": unknown layer (unfiltered, neighbours, albedo, normal, depth)\n";
       return kExitBadInput;
     }
     b = e + 1;
   }
 
-  psf::DeviceInfo device = psf::choose_device(a.device);
-  psf::Runtime rt(device);
-  if (!a.quiet)
-    std::cerr << "psf: " << device.name << " (" << device.platform << "), program built in "
-              << rt.build_seconds() << " s; " << scene.triangles.size() << " triangles, " << scene.width << "x"
-              << scene.height << ", " << opt.spp << " spp\n";
-  psf::Renderer renderer(rt, scene);
-  psf::RenderResult r = renderer.render(opt);
-
-  std::vector<psf::ExrLayer> layers;
-  if (aov_unfiltered) layers.push_back({"unfiltered", 3, r.unfiltered.rgb});
-  if (aov_neighbours) layers.push_back({"neighbours", 1, r.neighbours});
-  psf::write_exr(out, r.image,
-                 {{"psf:scene", a.scene},
-                  {"psf:spp", std::to_string(opt.spp)},
-                  {"psf:seed", std::to_string(opt.seed)},
-                  {"psf:filter", a.filter}},
-                 layers);
-  if (!a.no_png) psf::write_png(png, r.image);
+  psf::SessionOptions so;
+  so.render = opt;
+  so.render.spp = a.spp > 0 ? a.spp : (a.time > 0 ? 0 : opt.spp);
+  so.scene_path = a.scene;
+  so.params = params;
+  so.device = a.device;
+  so.time_limit = a.time;
+  so.checkpoint_seconds = a.checkpoint_seconds;
+  so.memory_budget = memory_budget;
+  so.max_batch_log2 = a.batch_log2;
+  so.output = out;
+  so.png = a.no_png ? "" : png;
+  so.resume = a.resume;
+  so.aov_unfiltered = aov_unfiltered;
+  so.aov_neighbours = aov_neighbours;
+  so.aov_albedo = aov_albedo;
+  so.aov_normal = aov_normal;
+  so.aov_depth = aov_depth;
+  so.quiet = a.quiet;
+  so.stats = a.stats;
+  psf::SessionResult r = psf::run_session(scene, so);
   if (!a.quiet) {
-    std::cerr << "psf: " << r.paths << " paths in " << r.seconds << " s (" << r.paths / r.seconds / 1e6
-              << " M paths/s), batch " << r.batch_size << "; wrote " << out << (a.no_png ? "" : " and " + png)
-              << "\n";
-    if (r.filter_off_after)
-      std::cerr << "psf: path space filtering switched itself off after " << r.filter_off_after
-                << " paths: no vertex had a neighbour any more\n";
+    std::cerr << "psf: " << r.paths << " paths (" << double(r.paths) / double(uint64_t(scene.width) * scene.height)
+              << " spp) in " << r.seconds << " s, " << r.paths / std::max(r.seconds, 1e-9) / 1e6
+              << " M paths/s; device time: tracing " << r.trace_ms / 1000 << " s, filtering " << r.filter_ms / 1000
+              << " s; wrote " << out << (a.no_png ? "" : " and " + png) << "\n";
     if (r.nonfinite) std::cerr << "psf: warning: " << r.nonfinite << " paths had NaN/Inf radiance and were left out\n";
+    if (r.interrupted) std::cerr << "psf: interrupted: the image holds every finished batch\n";
   }
-  if (a.stats) {
-    std::printf("%-24s %10s %12s %12s\n", "kernel", "launches", "total ms", "ms/launch");
-    for (const auto& [name, t] : rt.stats())
-      std::printf("%-24s %10llu %12.3f %12.4f\n", name.c_str(), (unsigned long long)t.launches, t.ms,
-                  t.ms / double(t.launches));
-  }
+  if (r.interrupted) return 128 + r.signal;
   return 0;
 }
 
@@ -215,8 +238,18 @@ int main(int argc, char** argv) {
   render->add_option("--albedo-threshold", ra.fopt.albedo_tol, "Similar vertices: |albedo_i - albedo_j| <= this (0.05)")
       ->check(CLI::NonNegativeNumber);
   render->add_flag("--cells27", ra.fopt.cells27, "Neighbour search in cells of size r (27 cells) instead of 2r (8 cells)");
-  render->add_option("--aov", ra.aov, "Extra EXR layers, comma-separated: unfiltered, neighbours");
+  render->add_option("--aov", ra.aov,
+                     "Extra EXR layers, comma-separated: unfiltered, neighbours, albedo, normal, depth");
   render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");
+  render->add_option("--time", ra.time, "Render until this many seconds have passed (with --spp: whichever comes first)")
+      ->check(CLI::PositiveNumber);
+  render->add_option("--checkpoint-seconds", ra.checkpoint_seconds,
+                     "Rewrite the output (atomically) this often while rendering; 0: only at the end (30)")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--memory-budget", ra.memory_budget, "Device memory for the batch buffers, e.g. 256M, 2G");
+  render->add_option("--batch-log2", ra.batch_log2, "Largest batch: 2^N paths (20)")->check(CLI::Range(6, 26));
+  render->add_option("--resume", ra.resume, "Continue the render saved in this EXR (same scene and options) to --spp")
+      ->check(CLI::ExistingFile);
   render->add_flag("--stats", ra.stats, "Print device time per kernel");
   render->add_flag("-q,--quiet", ra.quiet, "Print nothing but errors");
   render->add_flag("--no-png", ra.no_png, "Do not write the PNG preview");

@@ -77,132 +77,293 @@ struct Renderer::Impl {
   }
 };
 
+void Accumulator::reset(int w, int h, bool aovs) {
+  width = w;
+  height = h;
+  size_t n = size_t(w) * h;
+  filtered.assign(n * 4, 0.0f);
+  unfiltered.assign(n * 4, 0.0f);
+  bad_filtered.assign(n, 0);
+  bad_unfiltered.assign(n, 0);
+  aov.assign(aovs ? n * 8 : 0, 0.0f);
+  paths = 0;
+  next_batch = 0;
+}
+
+void Accumulator::add(const BatchImages& b) {
+  if (b.index != next_batch) throw std::logic_error("batches must be accumulated in order");
+  const uint64_t pixels = uint64_t(width) * height;
+  auto add_to = [&](std::vector<float>& sums, std::vector<uint32_t>& bad, const std::vector<cl_float4>& v) {
+    uint64_t p = b.first % pixels;
+    for (size_t j = 0; j < v.size(); ++j, p = (p + 1 == pixels ? 0 : p + 1)) {
+      const cl_float4& c = v[j];
+      if (std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2])) {
+        for (int k = 0; k < 3; ++k) sums[p * 4 + k] += c.s[k];
+      } else {
+        bad[p] += 1;
+      }
+      sums[p * 4 + 3] += c.s[3];
+    }
+  };
+  add_to(filtered, bad_filtered, b.filtered);
+  add_to(unfiltered, bad_unfiltered, b.unfiltered);
+  if (!aov.empty()) {
+    uint64_t p = b.first % pixels;
+    for (size_t j = 0; j < b.vertices.size(); ++j, p = (p + 1 == pixels ? 0 : p + 1)) {
+      const PathVertex& v = b.vertices[j];
+      if (v.albedo.s[3] == 0.0f) continue;
+      float* a = &aov[p * 8];  // albedo rgb, depth, normal xyz, vertices
+      for (int k = 0; k < 3; ++k) {
+        a[k] += v.albedo.s[k];
+        a[4 + k] += v.normal.s[k];
+      }
+      a[3] += v.position.s[3];
+      a[7] += 1.0f;
+    }
+  }
+  paths += b.unfiltered.size();
+  next_batch += 1;
+}
+
+namespace {
+
+// Paths of pixel i among the first `paths` paths of a render: i, i + pixels, ...
+uint64_t pixel_paths(uint64_t i, uint64_t pixels, uint64_t paths) {
+  return paths / pixels + (i < paths % pixels ? 1 : 0);
+}
+
+Image average(const std::vector<float>& sums, const std::vector<uint32_t>& bad, int w, int h, uint64_t paths) {
+  Image img;
+  img.width = w;
+  img.height = h;
+  uint64_t pixels = uint64_t(w) * h;
+  img.rgb.resize(pixels * 3);
+  for (uint64_t i = 0; i < pixels; ++i) {
+    uint64_t n = pixel_paths(i, pixels, paths) - bad[i];
+    for (int c = 0; c < 3; ++c) img.rgb[i * 3 + c] = n ? sums[i * 4 + c] / float(n) : 0.0f;
+  }
+  return img;
+}
+
+}  // namespace
+
+Image Accumulator::image() const { return average(filtered, bad_filtered, width, height, paths); }
+Image Accumulator::unfiltered_image() const { return average(unfiltered, bad_unfiltered, width, height, paths); }
+
+std::vector<float> Accumulator::neighbours() const {
+  uint64_t pixels = uint64_t(width) * height;
+  std::vector<float> out(pixels);
+  for (uint64_t i = 0; i < pixels; ++i) {
+    uint64_t n = pixel_paths(i, pixels, paths);
+    out[i] = n ? filtered[i * 4 + 3] / float(n) : 0.0f;
+  }
+  return out;
+}
+
+std::vector<float> Accumulator::aov_layer(int which) const {
+  uint64_t pixels = uint64_t(width) * height;
+  int channels = which == 2 ? 1 : 3;
+  std::vector<float> out(pixels * channels, 0.0f);
+  if (aov.empty()) return out;
+  for (uint64_t i = 0; i < pixels; ++i) {
+    float vertices = aov[i * 8 + 7];  // paths of the pixel that have a filtering vertex
+    if (vertices <= 0) continue;
+    const float* a = &aov[i * 8];     // albedo rgb, depth, normal xyz, vertices
+    if (which == 0)
+      for (int c = 0; c < 3; ++c) out[i * 3 + c] = a[c] / vertices;
+    else if (which == 1)
+      for (int c = 0; c < 3; ++c) out[i * 3 + c] = a[4 + c] / vertices;
+    else
+      out[i] = a[3] / vertices;
+  }
+  return out;
+}
+
+uint64_t Accumulator::nonfinite() const {
+  uint64_t n = 0;
+  for (uint32_t b : bad_filtered) n += b;
+  return n;
+}
+
+struct Renderer::Batch {
+  RenderOptions o;       // the options prepare() was given
+  uint32_t size = 0;     // paths per batch
+  cl::Buffer states, vertices, rays, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
+  cl::Buffer contrib, contrib_unfiltered, alive;
+  std::unique_ptr<PathSpaceFilter> filter;
+  float footprint = 0;   // sqrt(dOmega / pi) of the footprint
+};
+
 Renderer::Renderer(Runtime& rt, const Scene& scene) : impl_(std::make_unique<Impl>(rt, scene)) {}
 Renderer::~Renderer() = default;
+Runtime& Renderer::runtime() { return impl_->rt; }
+uint32_t Renderer::batch_size() const { return batch_ ? batch_->size : 0; }
 
-RenderResult Renderer::render(const RenderOptions& o) {
-  Impl& s = *impl_;
-  Runtime& rt = s.rt;
-  const uint32_t width = uint32_t(s.scene.width), height = uint32_t(s.scene.height);
-  const uint64_t pixels = uint64_t(width) * height;
-  const uint64_t total = pixels * uint64_t(std::max(o.spp, 0));
+std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs) {
+  std::vector<BufferNeed> needs = {
+      {"path states", sizeof(PathState)}, {"filtering vertices", sizeof(PathVertex)},
+      {"rays", sizeof(Ray)},              {"hits", sizeof(Hit)},
+      {"shadow rays", sizeof(Ray)},       {"shadow hits", sizeof(Hit)},
+      {"values c", sizeof(cl_float4)},    {"counts", 2 * sizeof(uint32_t)},
+      {"contributions", 2 * sizeof(cl_float4)},
+  };
+  if (filtering) {
+    needs.push_back({"filtered values", sizeof(cl_float4)});
+    needs.push_back({"filter tuples, keys, sort and cell ranges", double(PathSpaceFilter::bytes_per_tuple())});
+  }
+  (void)aovs;  // AOV images are per pixel: fixed_bytes()
+  return needs;
+}
 
-  // Batch of 2^m paths: bounded by --batch and by the device's allocation limit.
-  const size_t bytes_per_path = sizeof(PathState) + sizeof(PathVertex) + 2 * sizeof(Ray) + 2 * sizeof(Hit);
-  int m = o.batch_log2;
-  while (m > 8 && ((size_t(1) << m) * sizeof(PathState) > rt.device().max_alloc ||
-                   (size_t(1) << m) * bytes_per_path > rt.device().global_mem / 2))
-    --m;
-  const uint32_t batch = uint32_t(1) << m;
+uint64_t Renderer::fixed_bytes() const {
+  const Scene& s = impl_->scene;
+  uint64_t pixels = uint64_t(s.width) * s.height;
+  // Scene: triangles (positions, BVH, attributes, materials) with generous slack,
+  // textures and the environment; the image lives on the host.
+  (void)pixels;
+  return uint64_t(s.triangles.size()) * 256 + uint64_t(s.texels.size()) * 2 + (64u << 20);
+}
 
-  cl::Buffer states = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(PathState));
-  cl::Buffer vertices = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(PathVertex));
-  cl::Buffer rays = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Ray));
-  cl::Buffer hits = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Hit));
-  cl::Buffer shadow_rays = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Ray));
-  cl::Buffer shadow_hits = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(Hit));
-  cl::Buffer values = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(cl_float4));
-  cl::Buffer filtered = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(cl_float4));
-  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, size_t(batch) * sizeof(uint32_t));
-  cl::Buffer ones = rt.upload(std::vector<uint32_t>(batch, 1u));
-  std::vector<psf_float4> zero_image(pixels, psf_float4{{0, 0, 0, 0}});
-  cl::Buffer image = rt.upload(zero_image, CL_MEM_READ_WRITE);
-  cl::Buffer unfiltered = rt.upload(zero_image, CL_MEM_READ_WRITE);
-  bool filtering = o.filter.enabled;
-  std::unique_ptr<PathSpaceFilter> filter;
-  if (filtering) filter = std::make_unique<PathSpaceFilter>(rt, batch);
+void Renderer::prepare(const RenderOptions& o, int batch_log2) {
+  Runtime& rt = impl_->rt;
+  const Scene& scene = impl_->scene;
+  batch_.reset();
+  auto b = std::make_unique<Batch>();
+  b->o = o;
+  b->size = uint32_t(1) << batch_log2;
+  const size_t n = b->size;
+  b->states = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathState));
+  b->vertices = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathVertex));
+  b->rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
+  b->hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
+  b->shadow_rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
+  b->shadow_hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
+  b->values = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  b->filtered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  b->counts = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  b->ones = rt.upload(std::vector<uint32_t>(n, 1u));
+  b->contrib = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  b->contrib_unfiltered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  b->alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+  if (o.filter.enabled) b->filter = std::make_unique<PathSpaceFilter>(rt, b->size);
   // r0_i = d_i sqrt(dOmega / pi), dOmega the solid angle of footprint_pixels^2
   // pixels at the image centre.
-  const float pixel_w = 2.0f * glm::length(glm::vec3(s.camera.right.s[0], s.camera.right.s[1], s.camera.right.s[2])) / width;
-  const float pixel_h = 2.0f * glm::length(glm::vec3(s.camera.down.s[0], s.camera.down.s[1], s.camera.down.s[2])) / height;
-  const float footprint = o.filter.footprint_pixels * std::sqrt(pixel_w * pixel_h / float(M_PI));
-  RenderResult r;
-  cl::Buffer nonfinite = rt.upload(std::vector<uint32_t>(pixels, 0u), CL_MEM_READ_WRITE);
-  cl::Buffer nonfinite_filtered = rt.upload(std::vector<uint32_t>(pixels, 0u), CL_MEM_READ_WRITE);
-  cl::Buffer alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+  const Camera& cam = impl_->camera;
+  const float pixel_w = 2.0f * glm::length(glm::vec3(cam.right.s[0], cam.right.s[1], cam.right.s[2])) / scene.width;
+  const float pixel_h = 2.0f * glm::length(glm::vec3(cam.down.s[0], cam.down.s[1], cam.down.s[2])) / scene.height;
+  b->footprint = o.filter.footprint_pixels * std::sqrt(pixel_w * pixel_h / float(M_PI));
+  rt.finish();  // surfaces allocation failures here
+  batch_ = std::move(b);
+}
 
+BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering) {
+  Impl& s = *impl_;
+  Runtime& rt = s.rt;
+  Batch& b = *batch_;
+  const RenderOptions& o = b.o;
+  const uint32_t width = uint32_t(s.scene.width), height = uint32_t(s.scene.height);
+  const uint64_t pixels = uint64_t(width) * height;
+  const uint64_t first = index * b.size;
   const size_t L = Runtime::kDefaultLocal;
+  filtering = filtering && b.filter;
+
+  FrameParams p{};
+  p.width = width;
+  p.height = height;
+  p.seed = o.seed;
+  p.max_depth = uint32_t(o.max_depth);
+  p.first_path_lo = uint32_t(first);
+  p.first_path_hi = uint32_t(first >> 32);
+  p.batch_size = uint32_t(std::min<uint64_t>(b.size, total - first));
+  p.num_emitters = s.num_emitters;
+  p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
+  auto& states = b.states;
+  auto& vertices = b.vertices;
+  auto& rays = b.rays;
+  auto& hits = b.hits;
+  auto& shadow_rays = b.shadow_rays;
+  auto& shadow_hits = b.shadow_hits;
+  auto& alive = b.alive;
+
+  rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, rays);
+  for (int depth = 0; o.max_depth < 0 || depth < o.max_depth; ++depth) {
+    s.caster->closest(rays, hits, p.batch_size);
+    uint32_t zero = 0;
+    rt.write(alive, &zero, sizeof(zero));
+    rt.launch("shade", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
+              s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, hits, rays, states, vertices, shadow_rays, alive,
+              s.tri_attribs, s.textures, s.texels);
+    s.caster->any(shadow_rays, shadow_hits, p.batch_size);
+    rt.launch("shade_shadows", p.batch_size, L, p.batch_size, shadow_hits, states, vertices);
+    uint32_t n_alive = 0;
+    rt.read(alive, &n_alive, sizeof(n_alive));
+    if (n_alive == 0) break;
+  }
+
+  // The tuple store, then path space filtering of the batch's c_i, then each
+  // path's contribution, filtered and not, for the host to add in path order.
+  BatchImages out;
+  out.index = index;
+  out.first = first;
+  rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
+  rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.values, b.ones, b.contrib_unfiltered);
+  if (filtering) {
+    FilterParams fp{};
+    fp.r0 = o.filter.r0;
+    fp.footprint = b.footprint;
+    // n: paths per pixel so far, so r0 is the radius of the first pass.
+    double n = std::max(1.0, double(first + p.batch_size) / double(pixels));
+    fp.n_scale = float(std::pow(n, -double(o.filter.alpha)));
+    fp.normal_cos = o.filter.normal_cos;
+    fp.albedo_tol = o.filter.albedo_tol;
+    fp.count = p.batch_size;
+    fp.cells27 = o.filter.cells27 ? 1u : 0u;
+    out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
+    out.params = fp;
+    rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.filtered, b.counts, b.contrib);
+    out.filtered = rt.download<cl_float4>(b.contrib, p.batch_size);
+  }
+  out.unfiltered = rt.download<cl_float4>(b.contrib_unfiltered, p.batch_size);
+  if (!filtering) out.filtered = out.unfiltered;
+  if (o.aovs) out.vertices = rt.download<PathVertex>(vertices, p.batch_size);
+  rt.finish();
+  return out;
+}
+
+RenderResult Renderer::render(const RenderOptions& o) {
+  Runtime& rt = impl_->rt;
+  const Scene& scene = impl_->scene;
+  const uint64_t pixels = uint64_t(scene.width) * scene.height;
+  const uint64_t total = pixels * uint64_t(std::max(o.spp, 0));
+  bool filtering = o.filter.enabled;
+  BatchPlan plan = plan_batch(batch_needs(filtering, o.aovs), fixed_bytes(), rt.device().global_mem,
+                              rt.device().max_alloc, 0, o.batch_log2, std::min(o.batch_log2, 6));
+  prepare(o, plan.log2);
+  RenderResult r;
+  Accumulator acc;
+  acc.reset(scene.width, scene.height, o.aovs);
   auto t0 = std::chrono::steady_clock::now();
-  for (uint64_t first = 0; first < total; first += batch) {
-    FrameParams p{};
-    p.width = width;
-    p.height = height;
-    p.seed = o.seed;
-    p.max_depth = uint32_t(o.max_depth);
-    p.first_path_lo = uint32_t(first);
-    p.first_path_hi = uint32_t(first >> 32);
-    p.batch_size = uint32_t(std::min<uint64_t>(batch, total - first));
-    p.num_emitters = s.num_emitters;
-    p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
-
-    rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, rays);
-    for (int depth = 0; o.max_depth < 0 || depth < o.max_depth; ++depth) {
-      s.caster->closest(rays, hits, p.batch_size);
-      uint32_t zero = 0;
-      rt.write(alive, &zero, sizeof(zero));
-      rt.launch("shade", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
-                s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, hits, rays, states, vertices, shadow_rays, alive,
-                s.tri_attribs, s.textures, s.texels);
-      s.caster->any(shadow_rays, shadow_hits, p.batch_size);
-      rt.launch("shade_shadows", p.batch_size, L, p.batch_size, shadow_hits, states, vertices);
-      uint32_t n_alive = 0;
-      rt.read(alive, &n_alive, sizeof(n_alive));
-      if (n_alive == 0) break;
+  const uint64_t batches = (total + batch_size() - 1) / batch_size();
+  for (uint64_t index = 0; index < batches; ++index) {
+    BatchImages b = trace_batch(index, total, filtering);
+    acc.add(b);
+    if (filtering && b.max_count <= 1) {
+      filtering = false;
+      r.filter_off_after = acc.paths;
     }
-
-    // The tuple store, then path space filtering of the batch's c_i.
-    rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, values);
-    rt.launch("accumulate", pixels, L, p, states, vertices, values, ones, unfiltered, nonfinite);
-    if (filtering) {
-      FilterParams fp{};
-      fp.r0 = o.filter.r0;
-      fp.footprint = footprint;
-      // n: paths per pixel so far, so r0 is the radius of the first pass.
-      double n = std::max(1.0, double(first + p.batch_size) / double(pixels));
-      fp.n_scale = float(std::pow(n, -double(o.filter.alpha)));
-      fp.normal_cos = o.filter.normal_cos;
-      fp.albedo_tol = o.filter.albedo_tol;
-      fp.count = p.batch_size;
-      fp.cells27 = o.filter.cells27 ? 1u : 0u;
-      uint32_t max_count = filter->run(fp, o.filter.iterations, vertices, values, filtered, counts);
-      rt.launch("accumulate", pixels, L, p, states, vertices, filtered, counts, image, nonfinite_filtered);
-      if (o.keep_last_batch && first + batch >= total) r.last_batch.params = fp;
-      if (max_count <= 1) {
-        filtering = false;
-        r.filter_off_after = first + p.batch_size;
-      }
-    } else {
-      rt.launch("accumulate", pixels, L, p, states, vertices, values, ones, image, nonfinite_filtered);
+    if (o.keep_last_batch && index + 1 == batches) {
+      r.last_batch.params = b.params;
+      r.last_batch.vertices = rt.download<PathVertex>(batch_->vertices, b.unfiltered.size());
+      r.last_batch.values = rt.download<cl_float4>(batch_->values, b.unfiltered.size());
     }
-    if (o.keep_last_batch && first + batch >= total) {
-      r.last_batch.vertices = rt.download<PathVertex>(vertices, p.batch_size);
-      r.last_batch.values = rt.download<cl_float4>(values, p.batch_size);
-    }
-    rt.finish();
   }
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.paths = total;
-  r.batch_size = batch;
-  auto resolve = [&](const cl::Buffer& sums_buf, const cl::Buffer& bad_buf, Image& out, bool neighbours) {
-    auto sums = rt.download<psf_float4>(sums_buf, pixels);
-    auto bad = rt.download<uint32_t>(bad_buf, pixels);
-    out.width = int(width);
-    out.height = int(height);
-    out.rgb.resize(pixels * 3);
-    if (neighbours) r.neighbours.resize(pixels);
-    uint64_t nonfinite = 0;
-    for (uint64_t i = 0; i < pixels; ++i) {
-      // Paths of pixel i: indices i, i + pixels, ... below total, less the non-finite ones.
-      uint64_t all = total / pixels + (i < total % pixels ? 1 : 0);
-      uint64_t n = all - bad[i];
-      nonfinite += bad[i];
-      for (int c = 0; c < 3; ++c) out.rgb[i * 3 + c] = n ? sums[i].s[c] / float(n) : 0.0f;
-      if (neighbours) r.neighbours[i] = all ? sums[i].s[3] / float(all) : 0.0f;
-    }
-    return nonfinite;
-  };
-  r.nonfinite = resolve(image, nonfinite_filtered, r.image, true);
-  resolve(unfiltered, nonfinite, r.unfiltered, false);
+  r.batch_size = batch_size();
+  r.image = acc.image();
+  r.unfiltered = acc.unfiltered_image();
+  r.neighbours = acc.neighbours();
+  r.nonfinite = acc.nonfinite();
   return r;
 }
 

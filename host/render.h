@@ -9,17 +9,52 @@
 #include "filter.h"
 #include "image.h"
 #include "scene/scene.h"
+#include "scheduler.h"
 
 namespace psf {
 
 struct RenderOptions {
-  int spp = 16;              // samples (paths) per pixel
+  int spp = 16;              // samples (paths) per pixel (the target of a progressive render)
   uint32_t seed = 0;         // scrambling seed: the render is a function of it
   int max_depth = -1;        // path segments, Mitsuba's convention; -1 unbounded
   int rr_depth = 5;          // Russian roulette from this many segments on
   int batch_log2 = 20;       // paths per batch: 2^batch_log2 (capped by device memory)
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
   bool keep_last_batch = false;  // return the last batch's tuples (tests)
+  bool aovs = false;         // also accumulate albedo, normal and depth of the filtering vertices
+};
+
+// The contributions of one batch's paths (Renderer::trace_batch), in path order,
+// added to an Accumulator in batch order so that the image never depends on the
+// batch size or on which device rendered which batch.
+struct BatchImages {
+  uint64_t index = 0;                 // batch number
+  uint64_t first = 0;                 // global index of its first path
+  std::vector<cl_float4> filtered;    // per path: prefix + alpha c-bar, w: tuples averaged
+  std::vector<cl_float4> unfiltered;  // per path: prefix + alpha c, w: 1
+  std::vector<PathVertex> vertices;   // with RenderOptions::aovs: the filtering vertices
+  uint32_t max_count = 0;             // largest number of tuples averaged (0: not filtered)
+  FilterParams params{};              // the filter's parameters (when filtered)
+};
+
+// Per-pixel sums of a render in progress: what an image, a checkpoint and a
+// resumed render are made of.
+struct Accumulator {
+  int width = 0, height = 0;          // film
+  std::vector<float> filtered;        // 4 per pixel: RGB sums, then the sum of tuples averaged
+  std::vector<float> unfiltered;      // 4 per pixel: RGB sums, then the number of paths
+  std::vector<uint32_t> bad_filtered, bad_unfiltered;  // non-finite paths per pixel
+  std::vector<float> aov;             // 8 per pixel when AOVs are kept (BatchImages::aov)
+  uint64_t paths = 0;                 // paths accumulated
+  uint64_t next_batch = 0;            // the batch to add next
+
+  void reset(int width, int height, bool aovs);
+  void add(const BatchImages& b);     // b.index must equal next_batch
+  Image image() const;                // filtered average
+  Image unfiltered_image() const;     // unfiltered average
+  std::vector<float> neighbours() const;  // mean tuples averaged per pixel
+  std::vector<float> aov_layer(int which) const;  // 0 albedo (3), 1 normal (3), 2 depth (1)
+  uint64_t nonfinite() const;         // paths left out of the filtered image
 };
 
 // The tuples of one batch, in path order (RenderOptions::keep_last_batch).
@@ -45,11 +80,27 @@ class Renderer {
  public:
   Renderer(Runtime& rt, const Scene& scene);
   ~Renderer();
+
+  // The whole render in one call: prepare, every batch in order, accumulate.
   RenderResult render(const RenderOptions& options);
+
+  // Allocates the buffers for batches of 2^batch_log2 paths (throws ClError, e.g.
+  // CL_MEM_OBJECT_ALLOCATION_FAILURE, when the device cannot hold them).
+  void prepare(const RenderOptions& options, int batch_log2);
+  // Device bytes per path of a batch, and bytes independent of the batch (scene, image).
+  static std::vector<BufferNeed> batch_needs(bool filtering, bool aovs);
+  uint64_t fixed_bytes() const;
+  // Traces batch `index` of a render of `total` paths (its paths are index * 2^m up
+  // to the next multiple or total), filters it when `filtering`, and returns its sums.
+  BatchImages trace_batch(uint64_t index, uint64_t total, bool filtering);
+  uint32_t batch_size() const;
+  Runtime& runtime();
 
  private:
   struct Impl;
+  struct Batch;
   std::unique_ptr<Impl> impl_;
+  std::unique_ptr<Batch> batch_;
 };
 
 }  // namespace psf
