@@ -7,11 +7,14 @@
 #include <ImfOutputFile.h>
 #include <ImfStringAttribute.h>
 #include <stb_image_write.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cerrno>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <random>
 #include <stdexcept>
@@ -42,6 +45,13 @@ float srgb_encode(float x) {
   return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
 }
 
+// A data window psf could have written (each side 1 to 65536, at most 2^28 pixels);
+// a corrupt header would otherwise ask for any amount of memory.
+void check_size(int64_t width, int64_t height) {
+  if (width <= 0 || height <= 0 || width > 65536 || height > 65536 || width * height > (int64_t(1) << 28))
+    throw std::runtime_error("data window " + std::to_string(width) + "x" + std::to_string(height) + " out of range");
+}
+
 }  // namespace
 
 void check_writable(const std::string& path) {
@@ -51,6 +61,13 @@ void check_writable(const std::string& path) {
   fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
   if (!fs::is_directory(dir)) throw std::invalid_argument(path + ": folder " + dir.string() + " does not exist");
   if (access(dir.c_str(), W_OK) != 0) throw std::invalid_argument(path + ": folder " + dir.string() + " is not writable");
+  // access() says yes to root and on read-only file systems: create (and remove) the
+  // temporary file a write would use, so the check is the write's own.
+  std::string probe = temp_name(path);
+  int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+  if (fd < 0) throw std::invalid_argument(path + ": cannot create a file in folder " + dir.string() + ": " + std::strerror(errno));
+  ::close(fd);
+  ::unlink(probe.c_str());
 }
 
 void write_exr(const std::string& path, const Image& image, const std::map<std::string, std::string>& attributes,
@@ -99,6 +116,7 @@ Image read_exr(const std::string& path) {
     Imf::InputFile file(path.c_str());
     Imath::Box2i dw = file.header().dataWindow();
     Image img;
+    check_size(int64_t(dw.max.x) - dw.min.x + 1, int64_t(dw.max.y) - dw.min.y + 1);
     img.width = dw.max.x - dw.min.x + 1;
     img.height = dw.max.y - dw.min.y + 1;
     img.rgb.assign(size_t(img.width) * img.height * 3, 0.0f);
@@ -122,6 +140,7 @@ ExrFile read_exr_file(const std::string& path) {
     Imf::InputFile file(path.c_str());
     Imath::Box2i dw = file.header().dataWindow();
     ExrFile out;
+    check_size(int64_t(dw.max.x) - dw.min.x + 1, int64_t(dw.max.y) - dw.min.y + 1);
     out.width = dw.max.x - dw.min.x + 1;
     out.height = dw.max.y - dw.min.y + 1;
     for (auto it = file.header().begin(); it != file.header().end(); ++it)
@@ -129,6 +148,8 @@ ExrFile read_exr_file(const std::string& path) {
     Imf::FrameBuffer fb;
     const size_t n = size_t(out.width) * out.height;
     for (auto c = file.header().channels().begin(); c != file.header().channels().end(); ++c) {
+      if (c.channel().xSampling != 1 || c.channel().ySampling != 1)
+        throw std::runtime_error(std::string("channel ") + c.name() + " is subsampled (not written by psf)");
       std::vector<float>& data = out.channels[c.name()];
       data.assign(n, 0.0f);
       char* base = reinterpret_cast<char*>(data.data()) - (size_t(dw.min.x) + size_t(dw.min.y) * out.width) * sizeof(float);

@@ -99,6 +99,17 @@ int run_render(const RenderArgs& a) {
     for (const auto& w : scene.warnings) std::cerr << "psf: warning: " << w << "\n";
   if (a.width > 0) scene.width = a.width;
   if (a.height > 0) scene.height = a.height;
+  // The film's per-pixel sums alone take 40 bytes a pixel on the host: refuse
+  // sizes that cannot be held rather than fail in an allocation mid-render.
+  constexpr int kMaxFilmSide = 65536;
+  constexpr uint64_t kMaxFilmPixels = uint64_t(1) << 27;
+  if (scene.width <= 0 || scene.height <= 0 || scene.width > kMaxFilmSide || scene.height > kMaxFilmSide ||
+      uint64_t(scene.width) * uint64_t(scene.height) > kMaxFilmPixels) {
+    std::cerr << "psf: " << a.scene << ": film " << scene.width << "x" << scene.height
+              << " is out of range (each side 1 to " << kMaxFilmSide << ", at most " << kMaxFilmPixels
+              << " pixels); set --width and --height\n";
+    return kExitBadInput;
+  }
 
   uint64_t memory_budget = 0;
   if (!a.memory_budget.empty()) {

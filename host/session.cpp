@@ -135,6 +135,8 @@ class Writer {
   std::string hash_;
 };
 
+}  // namespace
+
 // Loads the state of `path` into `acc` after checking it belongs to this render.
 ResumeState load_state(const std::string& path, const std::string& hash, const std::string& options, Accumulator& acc) {
   ExrFile f = read_exr_file(path);
@@ -192,6 +194,8 @@ ResumeState load_state(const std::string& path, const std::string& hash, const s
   acc.next_batch = st.next_batch;
   return st;
 }
+
+namespace {
 
 std::string clock_text(double s) {
   char buf[32];

@@ -54,6 +54,13 @@ struct ResumeState {
 std::string scene_hash(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params,
                        int width, int height);
 
+// Loads the resume state of the EXR at `path` into `acc` (already reset to the
+// film size) after checking its scene hash and options. Throws
+// std::invalid_argument (wrong render, malformed state) or std::runtime_error
+// (not a readable OpenEXR file), each naming the path.
+ResumeState load_state(const std::string& path, const std::string& hash, const std::string& options,
+                       Accumulator& acc);
+
 // Runs the session, writing the output as it goes. Throws SceneError-free errors:
 // std::invalid_argument for an incompatible --resume, ClError, std::runtime_error.
 SessionResult run_session(const Scene& scene, const SessionOptions& options);

@@ -287,6 +287,14 @@ inline float3 plastic_base(Material m) {
   return (m.flags & PSF_MATFLAG_NONLINEAR) ? d / (1.0f - d * m.eta.z) : d / (1.0f - m.eta.z);
 }
 
+/* roughplastic's external transmittance T(cos) from its table; 1 - F(cos) (the
+ * smooth coat's) for a material made without one. */
+inline float rough_transmittance(Material m, __global const half* table, float cos_t) {
+  if (m.tex_table != PSF_NO_TEXTURE) return table_lookup(table, cos_t);
+  float c, e;
+  return 1.0f - fresnel_dielectric(cos_t, m.eta.x, &c, &e);
+}
+
 /* Probability of choosing a plastic's coating lobe, given the coating's
  * reflectance r (F(cos_o) smooth, 1 - T(cos_o) rough) at wo. */
 inline float plastic_prob_specular(Material m, float r) {
@@ -323,7 +331,7 @@ inline float3 bsdf_eval_local(Material m, __global const half* table, float3 o, 
   }
   if (type == PSF_MATERIAL_ROUGH_PLASTIC) {
     if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
-    float to = table_lookup(table, o.z), ti = table_lookup(table, i.z);
+    float to = rough_transmittance(m, table, o.z), ti = rough_transmittance(m, table, i.z);
     float ps = plastic_prob_specular(m, 1.0f - to);
     float3 h = normalize(o + i);
     float oh = dot(o, h);
@@ -439,7 +447,7 @@ inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Fr
   }
   if (type == PSF_MATERIAL_ROUGH_PLASTIC) {
     if (o.z <= 0.0f) return bsdf_fail(wo);
-    float ps = plastic_prob_specular(m, 1.0f - table_lookup(table, o.z));
+    float ps = plastic_prob_specular(m, 1.0f - rough_transmittance(m, table, o.z));
     float3 i;
     if (uc < ps) {
       float3 h = mf_sample(o, au, av, beckmann, u1, u2);

@@ -263,7 +263,7 @@ class GltfLoader {
         if (n.size() != p.size()) fail(where, "NORMAL and POSITION have different counts");
         tm.normals.resize(nv);
         for (size_t i = 0; i < nv; ++i) {
-          glm::vec3 v(float(n[3 * i]), float(n[3 * i + 1]), float(n[3 * i + 2]));
+          glm::vec3 v{float(n[3 * i]), float(n[3 * i + 1]), float(n[3 * i + 2])};
           tm.normals[i] = std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) ? v : glm::vec3(0.0f);
         }
       }

@@ -348,8 +348,8 @@ PlyMesh read_ply(const std::string& path) {
       }
       body.end_ascii_item();
       if (is_vertex) {
-        glm::vec3 p(float(values[size_t(role_of[kX])]), float(values[size_t(role_of[kY])]),
-                    float(values[size_t(role_of[kZ])]));
+        glm::vec3 p{float(values[size_t(role_of[kX])]), float(values[size_t(role_of[kY])]),
+                    float(values[size_t(role_of[kZ])])};
         if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
           body.fail("vertex " + std::to_string(item) + " has a non-finite position");
         out.mesh.positions.push_back(p);

@@ -1,0 +1,230 @@
+// Bad input: truncated and malformed files of every format (tests/data/bad/),
+// NaN/Inf vertices, degenerate triangles, out-of-range indices, missing
+// textures, absurd film sizes, bad options and output paths. Each run of the
+// psf binary must end with exit 2 and a message naming the file (or exit 0 and
+// a warning for a documented fallback), never with a signal or a timeout, and
+// must leave an existing output file untouched. Also: NaN/Inf path
+// contributions never reach the image and are counted.
+#include <catch2/catch.hpp>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include "render.h"
+#include "support.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+  int status = -1;     // exit status; 124 timeout, >= 128 killed by a signal
+  std::string output;  // stdout and stderr together
+};
+
+std::string binary() {
+  const char* b = std::getenv("PSF_BINARY");
+  return b ? b : PSF_BINARY_DEFAULT;
+}
+
+// Runs psf with a time limit (a hang is a failure too: timeout exits 124, or
+// 128 + signal when it or psf was killed).
+Run run(const std::string& args) {
+  std::string cmd = "timeout -k 10 300 " + binary() + " " + args + " 2>&1";
+  Run r;
+  FILE* p = popen(cmd.c_str(), "r");
+  REQUIRE(p);
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
+  return r;
+}
+
+fs::path temp_dir() {
+  fs::path d = fs::temp_directory_path() / ("psf-bad-input-" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d;
+}
+
+std::string read_file(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string bad(const std::string& name) { return psf::test::source_path("tests/data/bad/" + name); }
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+// A small, fast render of `scene` over an existing output file that must survive a failure.
+struct Outcome {
+  Run run;
+  bool output_kept;  // the existing output file is byte for byte what it was
+};
+Outcome render(const std::string& scene, const std::string& extra = "") {
+  fs::path dir = temp_dir();
+  fs::path out = dir / "keep.exr";
+  std::ofstream(out) << "precious";
+  Outcome o;
+  o.run = run("render " + scene + " --no-png --spp 1 --width 8 --height 8 -o " + out.string() + " " + extra);
+  o.output_kept = read_file(out) == "precious";
+  return o;
+}
+
+void require_clear_error(const Outcome& o, const std::string& names) {
+  INFO(o.run.output);
+  CHECK(o.run.status == 2);
+  CHECK(contains(o.run.output, names));
+  CHECK(o.output_kept);
+}
+
+}  // namespace
+
+TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the file", "[bad_input]") {
+  // file, and the part of the message that says where
+  const std::pair<const char*, const char*> cases[] = {
+      {"truncated.xml", "truncated.xml:3:"},
+      {"malformed.xml", "malformed.xml:"},
+      {"film-zero.xml", "film-zero.xml:5:"},
+      {"film-negative.xml", "film-negative.xml:5:"},
+      {"nan-transform.xml", "nan-transform.xml:3:"},
+      {"missing-mesh.xml", "no-such-mesh.obj"},
+      {"truncated.obj", "truncated.obj:6:"},
+      {"nan-vertex.obj", "nan-vertex.obj:3:"},
+      {"inf-vertex.obj", "inf-vertex.obj:3:"},
+      {"index-out-of-range.obj", "index-out-of-range.obj:4:"},
+      {"negative-index.obj", "negative-index.obj:4:"},
+      {"truncated.ply", "truncated.ply: byte"},
+      {"not-a-ply.ply", "not-a-ply.ply:1:"},
+      {"inf-vertex.ply", "inf-vertex.ply:11:"},
+      {"index-out-of-range.ply", "index-out-of-range.ply:13:"},
+      {"huge-count.ply", "huge-count.ply: byte"},
+      {"truncated.gltf", "truncated.gltf:"},
+      {"truncated.glb", "truncated.glb:"},
+      {"nan-vertex.gltf", "nan-vertex.gltf:"},
+      {"index-out-of-range.gltf", "index-out-of-range.gltf:"},
+      {"accessor-past-buffer.gltf", "accessor-past-buffer.gltf:"},
+      {"missing-buffer.gltf", "missing.bin"},
+  };
+  for (const auto& [file, where] : cases) {
+    SECTION(file) { require_clear_error(render(bad(file)), where); }
+  }
+}
+
+TEST_CASE("Bad input: a film of 100000x100000 pixels is refused before anything is allocated", "[bad_input]") {
+  fs::path dir = temp_dir();
+  fs::path out = dir / "keep.exr";
+  std::ofstream(out) << "precious";
+  Run r = run("render " + bad("film-huge.xml") + " --no-png --spp 1 -o " + out.string());
+  INFO(r.output);
+  CHECK(r.status == 2);
+  CHECK(contains(r.output, "film-huge.xml: film 100000x100000 is out of range"));
+  CHECK(read_file(out) == "precious");
+  // --width and --height override the film: the documented way out.
+  Outcome small = render(bad("film-huge.xml"));
+  CHECK(small.run.status == 0);
+}
+
+TEST_CASE("Bad input: documented fallbacks render with a warning", "[bad_input]") {
+  SECTION("a missing bitmap texture in Mitsuba XML: a constant 0.5 reflectance") {
+    Outcome o = render(bad("missing-texture.xml"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+    CHECK(contains(o.run.output, "warning: " + bad("missing-texture.xml") + ":8: texture file 'no-such-texture.png' not found"));
+  }
+  SECTION("a missing map_Kd in an MTL file: Kd") {
+    Outcome o = render(bad("missing-texture.obj"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+    CHECK(contains(o.run.output, "missing-texture.mtl:1: map_Kd 'no-such-texture.png'"));
+  }
+  SECTION("a missing MTL library: the default material") {
+    Outcome o = render(bad("missing-mtl.obj"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+    CHECK(contains(o.run.output, "warning: " + bad("missing-mtl.obj")));
+    CHECK(contains(o.run.output, "no-such-library.mtl"));
+  }
+  SECTION("a malformed MTL file: what can be read, with a warning") {
+    Outcome o = render(bad("malformed-mtl.obj"));
+    INFO(o.run.output);
+    CHECK(o.run.status < 3);
+    CHECK(contains(o.run.output, "malformed.mtl"));
+    if (o.run.status == 2) CHECK(o.output_kept);
+  }
+  SECTION("zero-area and degenerate triangles are never hit") {
+    Outcome o = render(bad("degenerate.obj"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+  }
+}
+
+TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage nothing", "[bad_input]") {
+  std::string scene = bad("film-zero.xml");  // never read: the options are checked first
+  fs::path dir = temp_dir();
+  for (const char* opt : {"--spp 0", "--spp -3", "--width 0", "--width -8", "--height 100000", "--width abc"}) {
+    SECTION(opt) {
+      Outcome o = render(bad("degenerate.obj"), opt);
+      INFO(o.run.output);
+      CHECK(o.run.status == 2);
+      CHECK(contains(o.run.output, std::string(opt).substr(0, std::string(opt).find(' '))));
+      CHECK(o.output_kept);
+    }
+  }
+  SECTION("the output path is a folder") {
+    Run r = run("render " + bad("degenerate.obj") + " --spp 1 -o " + dir.string());
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(contains(r.output, dir.string() + ": output path is a folder"));
+    CHECK(fs::is_directory(dir));
+  }
+  SECTION("the output folder cannot be written (even as root)") {
+    Run r = run("render " + bad("degenerate.obj") + " --spp 1 -o /proc/psf-bad-input.exr");
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(contains(r.output, "/proc/psf-bad-input.exr"));
+  }
+  SECTION("the output folder does not exist") {
+    Run r = run("render " + bad("degenerate.obj") + " --spp 1 -o " + (dir / "nope" / "x.exr").string());
+    CHECK(r.status == 2);
+    CHECK(contains(r.output, "does not exist"));
+  }
+  SECTION("--resume of a file that is not OpenEXR") {
+    Outcome o = render(bad("degenerate.obj"), "--resume " + bad("not-an-exr.exr"));
+    INFO(o.run.output);
+    require_clear_error(o, "not-an-exr.exr");
+  }
+}
+
+TEST_CASE("Bad input: NaN/Inf path contributions never reach the image and are counted", "[bad_input]") {
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  psf::Accumulator acc;
+  acc.reset(2, 1, false);
+  psf::BatchImages b;
+  b.index = 0;
+  b.first = 0;
+  // Pixel 0: a good path, a NaN and an Inf; pixel 1: a good path and a -Inf.
+  b.filtered = {{{1, 2, 3, 1}}, {{4, 5, 6, 1}}, {{nan, 0, 0, 1}}, {{0, 0, 1, 1}}, {{0, inf, 0, 1}}, {{0, 0, -inf, 1}}};
+  b.unfiltered = {{{1, 2, 3, 1}}, {{4, 5, 6, 1}}, {{0, nan, 0, 1}}, {{0, 0, 1, 1}}, {{0, inf, 0, 1}}, {{0, 0, -inf, 1}}};
+  acc.add(b);
+  CHECK(acc.nonfinite() == 3);
+  CHECK(acc.bad_filtered == std::vector<uint32_t>{2, 1});
+  CHECK(acc.bad_unfiltered == std::vector<uint32_t>{2, 1});
+  // The averages are over the finite paths only: (1,2,3) and ((4,5,6) + (0,0,1)) / 2.
+  CHECK(acc.image().rgb == std::vector<float>{1, 2, 3, 2, 2.5f, 3.5f});
+  for (float v : acc.image().rgb) CHECK(std::isfinite(v));
+  for (float v : acc.unfiltered_image().rgb) CHECK(std::isfinite(v));
+  for (float v : acc.filtered) CHECK(std::isfinite(v));
+}
