@@ -101,8 +101,12 @@ TEST_CASE("Session: an interrupted render leaves a readable image of its finishe
   fs::path d = temp_dir();
   std::string out = (d / "int.exr").string();
   const char* b = std::getenv("PSF_BINARY");
-  std::string cmd = std::string(b ? b : PSF_BINARY_DEFAULT) + " " + box("--spp 1000000 -o " + out) +
-                    " & pid=$!; sleep 3; kill -INT $pid; wait $pid; echo status=$?";
+  // Interrupt once the first checkpoint exists (whatever the program build costs),
+  // then let the render go on a little: it must finish its batch and write again.
+  std::string cmd = std::string(b ? b : PSF_BINARY_DEFAULT) + " " +
+                    box("--spp 1000000 --checkpoint-seconds 0.2 -o " + out) +
+                    " & pid=$!; for i in $(seq 600); do [ -f " + out +
+                    " ] && break; sleep 0.1; done; sleep 1; kill -INT $pid; wait $pid; echo status=$?";
   FILE* p = popen(("sh -c '" + cmd + "' 2>&1").c_str(), "r");
   REQUIRE(p);
   std::string text;
