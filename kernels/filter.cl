@@ -52,17 +52,15 @@ __kernel void filter(FilterParams p, __global const float4* positions, __global 
   float3 x = xi.xyz;
   float size = cell_size(level, p.cells27);
   int3 c = cell_of(x, size);
-  /* The cells that can hold points within r: 3x3x3 around c, or the 2x2x2 block
-   * towards the half of c that x lies in. */
-  int3 lo, hi;
-  if (p.cells27) {
-    lo = c - (int3)(1);
-    hi = c + (int3)(1);
-  } else {
-    float3 f = x / size - convert_float3(c);
-    lo = c - (int3)(f.x < 0.5f ? 1 : 0, f.y < 0.5f ? 1 : 0, f.z < 0.5f ? 1 : 0);
-    hi = lo + (int3)(1);
-  }
+  /* The cells that can hold points within r: c, and along each axis the
+   * neighbour across a face nearer to x than r (with a margin for rounding:
+   * visiting a cell too many never changes the result). Cells of size >= r (27)
+   * or >= 2r (8) make that at most 3 or 2 cells per axis. */
+  float3 below = x - convert_float3(c) * size;        /* distance to the lower face */
+  float3 above = convert_float3(c + (int3)(1)) * size - x;  /* to the upper face */
+  float reach = r * 1.0001f;
+  int3 lo = c - (int3)(below.x < reach ? 1 : 0, below.y < reach ? 1 : 0, below.z < reach ? 1 : 0);
+  int3 hi = c + (int3)(above.x < reach ? 1 : 0, above.y < reach ? 1 : 0, above.z < reach ? 1 : 0);
   float r2 = r * r;
   float3 sum = (float3)(0.0f);
   uint n = 0u;
@@ -85,12 +83,16 @@ __kernel void filter(FilterParams p, __global const float4* positions, __global 
           float8 dz = vload8(0, zs + j) - (float8)(x.z);
           int8 in = (dx * dx + dy * dy + dz * dz < (float8)(r2)) | ((int8)(j) + lane == (int8)(i));
           in &= ((int8)(j) + lane) < (int8)(range.y);
-          if (!any(in)) continue;
-          int m[PSF_FILTER_LANES];
-          vstore8(in, 0, m);
-          for (uint k = 0u; k < PSF_FILTER_LANES; ++k)
-            if (m[k]) filter_candidate(i, j + k, level, ni, ai, p.normal_cos, p.albedo_tol, normals, albedos, values,
-                                       &sum, &n);
+          /* The lanes inside as a bit mask, visited lowest first. */
+          int8 bits = in & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+          int4 b4 = bits.lo | bits.hi;
+          int2 b2 = b4.lo | b4.hi;
+          uint mask = (uint)(b2.x | b2.y);
+          while (mask != 0u) {
+            uint k = 31u - clz(mask & (0u - mask));
+            mask &= mask - 1u;
+            filter_candidate(i, j + k, level, ni, ai, p.normal_cos, p.albedo_tol, normals, albedos, values, &sum, &n);
+          }
         }
       }
   if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
