@@ -357,7 +357,10 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
       state = acc;
       state_saved = true;
     }
-    acc.add(img);
+    {
+      std::lock_guard<std::mutex> lock(mu);  // workers read acc.next_batch
+      acc.add(img);
+    }
     cv.notify_all();
     if (ro.filter.enabled && !filter_off && img.max_count <= 1) {
       filter_off = true;
