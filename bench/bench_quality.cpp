@@ -11,8 +11,10 @@
 //   independent), cached as <build>/quality/<scene>_ref_<spp>spp_<w>x<h>.exr
 //   (--ref_refresh=1 renders it again; delete it after renderer changes).
 // quality/<scene>/<method>/spp:<N>: one render of N spp (N = 1, 2, 4, ... up to
-//   the scene's maximum), its wall time (RenderResult::seconds, median of 3 renders
-//   for N <= 16) and relMSE: the convergence curve (bench/plot_quality.py plots it).
+//   the scene's maximum: --max_spp, default 1024, living-room 16), its wall time
+//   (RenderResult::seconds, median of 3 renders for N <= 64; also the process's
+//   CPU time, which shows contention) and relMSE: the convergence curve
+//   (bench/plot_quality.py plots it).
 // equal_time/<scene>/spp:<N> for N in --equal (default 4,16,64,1024): the wall
 //   time t of pt at N spp; psf and psf2 get the largest spp count s whose wall time
 //   stays within 1.1 t (first guess s = N t / t_method(N), then refined by measured
@@ -28,6 +30,7 @@
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
 //                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64]
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -50,7 +53,7 @@ struct Options {
   std::vector<std::string> scenes;              // scene files; empty: the defaults
   std::vector<int> equal = {4, 16, 64, 1024};   // pt spp counts of the equal-time rows
   std::vector<int> crops = {4, 64};             // rows that get side-by-side images
-  int max_spp = 0;                              // 0: per scene (living-room 64, others 1024)
+  int max_spp = 0;                              // 0: per scene (living-room 16, others 1024)
   int ref_spp = 4096;                           // spp of a rendered reference
   bool ref_refresh = false;                     // render the reference even when cached
   std::string images;                           // folder of the PNGs
@@ -66,6 +69,7 @@ const Method kMethods[] = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}
 struct Point {
   int spp = 0;
   double seconds = 0;  // wall time of the render (median)
+  double cpu_seconds = 0;  // CPU time of this process (all threads) in that render: contention shows as cpu << wall * cores
   double relmse = 0;
   psf::Image image;
 };
@@ -79,6 +83,12 @@ struct Bench {
   std::unique_ptr<psf::Renderer> renderer;
   std::map<std::string, std::map<int, Point>> points;  // method -> spp -> result
 };
+
+double cpu_seconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
 
 double relmse(const psf::Image& x, const psf::Image& y) {
   double sum = 0;
@@ -110,21 +120,24 @@ psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t se
 
 // Renders `spp` with method m (median time of `repeats` renders; they are identical images).
 Point render(psf::Runtime& rt, Bench& b, const Method& m, int spp, int repeats) {
-  std::vector<double> t;
+  std::vector<std::pair<double, double>> t;  // (wall, cpu)
   Point p;
   p.spp = spp;
   for (int k = 0; k < repeats; ++k) {
+    double c0 = cpu_seconds();
     psf::RenderResult r = b.renderer->render(options(b, m, spp));
     rt.finish();
-    t.push_back(r.seconds);
+    t.push_back({r.seconds, cpu_seconds() - c0});
     if (k == 0) p.image = std::move(r.image);
   }
-  p.seconds = bench::summarize(t).median_s;
+  std::sort(t.begin(), t.end());
+  p.seconds = t[t.size() / 2].first;
+  p.cpu_seconds = t[t.size() / 2].second;
   p.relmse = relmse(p.image, b.reference);
   return p;
 }
 
-int repeats_for(int spp) { return spp <= 16 ? 3 : 1; }
+int repeats_for(int spp) { return spp <= 64 ? 3 : 1; }
 
 // Side by side, 4 px white gaps: pt | psf | psf2 | reference, the whole image when
 // it is at most 320 px wide, else a 320 x 240 crop about the centre.
@@ -207,7 +220,7 @@ int main(int argc, char** argv) {
              b->name == "living-room" ? "; its envmap is not supported yet" : "");
       continue;
     }
-    b->max_spp = opt.max_spp > 0 ? opt.max_spp : (b->name == "living-room" ? 64 : 1024);
+    b->max_spp = opt.max_spp > 0 ? opt.max_spp : (b->name == "living-room" ? 16 : 1024);
     b->renderer = std::make_unique<psf::Renderer>(rt, b->scene);
     // The reference.
     bench::fs::path tungsten = bench::fs::path(path).parent_path() / "TungstenRender.exr";
@@ -258,7 +271,8 @@ int main(int argc, char** argv) {
           state.counters["spp"] = spp;
           state.counters["seconds"] = p.seconds;
           state.counters["relMSE"] = p.relmse;
-          report("%s: %.3f s, relMSE %.5g\n", bname.c_str(), p.seconds, p.relmse);
+          state.counters["cpu_seconds"] = p.cpu_seconds;
+          report("%s: %.3f s (CPU %.3f s), relMSE %.5g\n", bname.c_str(), p.seconds, p.cpu_seconds, p.relmse);
           b->points[m.name][spp] = std::move(p);
         })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
       }
@@ -301,6 +315,7 @@ int main(int argc, char** argv) {
         state.counters["pt_spp"] = n;
         state.counters["pt_seconds"] = pt.seconds;
         state.counters["pt_relMSE"] = pt.relmse;
+        state.counters["pt_cpu_seconds"] = pt.cpu_seconds;
         std::string line;
         char buf[256];
         for (const Method& m : kMethods) {
@@ -311,6 +326,7 @@ int main(int argc, char** argv) {
           state.counters[k + "_spp"] = q.spp;
           state.counters[k + "_seconds"] = q.seconds;
           state.counters[k + "_relMSE"] = q.relmse;
+          state.counters[k + "_cpu_seconds"] = q.cpu_seconds;
           state.counters[k + "_gain"] = gain;
           std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s relMSE %.5g (%.2fx lower)", m.name, q.spp, q.seconds,
                         q.relmse, gain);
