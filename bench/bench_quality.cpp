@@ -15,11 +15,14 @@
 //   (RenderResult::seconds, median of 3 renders for N <= 64; also the process's
 //   CPU time, which shows contention) and relMSE: the convergence curve
 //   (bench/plot_quality.py plots it).
+//   The curve is measured interleaved (every method at 1 spp, then at 2, ...).
 // equal_time/<scene>/spp:<N> for N in --equal (default 4,16,64,1024): the wall
-//   time t of pt at N spp; psf and psf2 get the largest spp count s whose wall time
-//   stays within 1.1 t (first guess s = N t / t_method(N), then refined by measured
-//   times, up to 5 renders; 1 spp if even that takes longer); reported: s, the
-//   actual times, relMSE and relMSE(pt) / relMSE(method).
+//   time t of pt at N spp (the fastest repeat); psf and psf2 get the largest spp
+//   count s whose time stays within 1.1 t (first guess s = N t / t_method(N), then
+//   refined by measured times, up to 5 renders; 1 spp if even that takes longer);
+//   reported: s, the actual times, relMSE and relMSE(pt) / relMSE(method).
+//   --time=cpu compares the process's CPU time instead of wall time: on a machine
+//   shared with other work, wall time depends on their load, CPU time much less.
 // Goals: >= 10x lower relMSE than pt at equal time at 4 spp; never worse at 1024.
 // Side-by-side images (pt | psf | psf2 | reference, the whole image or a crop)
 // at the --crops spp counts go to --images (default <build>/quality).
@@ -28,7 +31,7 @@
 // is not supported) or no reference.
 //
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
-//                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64]
+//                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64] [--time=wall|cpu]
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -66,10 +69,16 @@ struct Method {
 };
 const Method kMethods[] = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}};
 
+// --time=cpu: equal time means equal CPU time of the process instead of wall time.
+bool g_cpu_time = false;
+
 struct Point {
   int spp = 0;
-  double seconds = 0;  // wall time of the render (median)
-  double cpu_seconds = 0;  // CPU time of this process (all threads) in that render: contention shows as cpu << wall * cores
+  double seconds = 0;      // wall time of the render (median of the repeats)
+  double min_seconds = 0;  // wall time, the fastest repeat
+  double cpu_seconds = 0;  // CPU time of this process (all threads), the least of the repeats: less
+                           // sensitive to other processes on the machine (contention shows as cpu << wall * cores)
+  double cost = 0;         // what equal time compares: min_seconds, or cpu_seconds with --time=cpu
   double relmse = 0;
   psf::Image image;
 };
@@ -132,7 +141,10 @@ Point render(psf::Runtime& rt, Bench& b, const Method& m, int spp, int repeats) 
   }
   std::sort(t.begin(), t.end());
   p.seconds = t[t.size() / 2].first;
-  p.cpu_seconds = t[t.size() / 2].second;
+  p.min_seconds = t.front().first;
+  p.cpu_seconds = t.front().second;
+  for (const auto& w : t) p.cpu_seconds = std::min(p.cpu_seconds, w.second);
+  p.cost = g_cpu_time ? p.cpu_seconds : p.min_seconds;
   p.relmse = relmse(p.image, b.reference);
   return p;
 }
@@ -183,6 +195,13 @@ int main(int argc, char** argv) {
   opt.ref_refresh = refresh != 0;
   opt.images = (bench::fs::path(PSF_BINARY_DIR) / "quality").string();
   args.take("images", opt.images);
+  if (args.take("time", s)) {
+    if (s != "wall" && s != "cpu") {
+      std::fprintf(stderr, "bench_quality: --time=%s: expected wall or cpu\n", s.c_str());
+      return 2;
+    }
+    g_cpu_time = s == "cpu";
+  }
   if (!args.done()) return 2;
   if (opt.scenes.empty())
     opt.scenes = {(bench::fs::path(PSF_SOURCE_DIR) / "scenes/cornell-box.xml").string(),
@@ -197,6 +216,8 @@ int main(int argc, char** argv) {
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
   benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
   benchmark::AddCustomContext("relMSE", "mean over pixels and channels of (x - y)^2 / (y^2 + 0.01)");
+  benchmark::AddCustomContext("equal_time", g_cpu_time ? "CPU time of the process (least of the repeats)"
+                                                       : "wall time (fastest of the repeats)");
   report("device: %s / %s, driver %s, %s, %u compute units\n", dev.platform.c_str(), dev.name.c_str(),
          dev.driver.c_str(), dev.version.c_str(), dev.compute_units);
 
@@ -259,8 +280,10 @@ int main(int argc, char** argv) {
 
   for (auto& bp : benches) {
     Bench* b = bp.get();
-    for (const Method& m : kMethods)
-      for (int spp = 1; spp <= b->max_spp; spp *= 2) {
+    // Interleaved (1 spp of every method, then 2, ...), so load from other processes
+    // on the machine falls on all methods alike.
+    for (int spp = 1; spp <= b->max_spp; spp *= 2)
+      for (const Method& m : kMethods) {
         std::string bname = "quality/" + b->name + "/" + m.name + "/spp:" + std::to_string(spp);
         benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, m, spp, bname](benchmark::State& state) {
           Point p;
@@ -271,8 +294,10 @@ int main(int argc, char** argv) {
           state.counters["spp"] = spp;
           state.counters["seconds"] = p.seconds;
           state.counters["relMSE"] = p.relmse;
+          state.counters["min_seconds"] = p.min_seconds;
           state.counters["cpu_seconds"] = p.cpu_seconds;
-          report("%s: %.3f s (CPU %.3f s), relMSE %.5g\n", bname.c_str(), p.seconds, p.cpu_seconds, p.relmse);
+          report("%s: wall %.3f s (min %.3f s), CPU %.3f s, relMSE %.5g\n", bname.c_str(), p.seconds, p.min_seconds,
+                 p.cpu_seconds, p.relmse);
           b->points[m.name][spp] = std::move(p);
         })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
       }
@@ -292,12 +317,12 @@ int main(int argc, char** argv) {
             if (!mp.count(n)) mp[n] = render(rt, *b, m, n, repeats_for(n));
             // s: the largest spp count whose wall time stays within 1.1x pt's (at
             // least 1 spp), from the time per spp at N, then refined by measuring.
-            double per_spp = mp[n].seconds / n;
-            int s = std::max(1, int(std::lround(pt.seconds / per_spp)));
+            double per_spp = mp[n].cost / n;
+            int s = std::max(1, int(std::lround(pt.cost / per_spp)));
             std::set<int> visited;
             for (int tries = 0; tries < 5 && visited.insert(s).second; ++tries) {
               if (!mp.count(s)) mp[s] = render(rt, *b, m, s, repeats_for(s));
-              double ratio = mp[s].seconds / pt.seconds;
+              double ratio = mp[s].cost / pt.cost;
               if (ratio > 1.1) s = std::min(s - 1, int(std::lround(s / ratio)));
               else if (ratio < 0.9) s = std::max(s + 1, int(std::lround(s / ratio)));
               else break;
@@ -306,14 +331,14 @@ int main(int argc, char** argv) {
             // Among every render of this method so far (the curve's included).
             int chosen = 0;
             for (const auto& [spp, q] : mp)
-              if (q.seconds <= 1.1 * pt.seconds) chosen = std::max(chosen, spp);
+              if (q.cost <= 1.1 * pt.cost) chosen = std::max(chosen, spp);
             if (chosen == 0) chosen = mp.begin()->first;  // even 1 spp takes longer than pt
             best[m.name] = mp[chosen];
           }
-          state.SetIterationTime(pt.seconds);
+          state.SetIterationTime(pt.min_seconds);
         }
         state.counters["pt_spp"] = n;
-        state.counters["pt_seconds"] = pt.seconds;
+        state.counters["pt_seconds"] = pt.min_seconds;
         state.counters["pt_relMSE"] = pt.relmse;
         state.counters["pt_cpu_seconds"] = pt.cpu_seconds;
         std::string line;
@@ -324,15 +349,16 @@ int main(int argc, char** argv) {
           std::string k = m.name;
           double gain = q.relmse > 0 ? pt.relmse / q.relmse : 0;
           state.counters[k + "_spp"] = q.spp;
-          state.counters[k + "_seconds"] = q.seconds;
+          state.counters[k + "_seconds"] = q.min_seconds;
           state.counters[k + "_relMSE"] = q.relmse;
           state.counters[k + "_cpu_seconds"] = q.cpu_seconds;
           state.counters[k + "_gain"] = gain;
-          std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s relMSE %.5g (%.2fx lower)", m.name, q.spp, q.seconds,
-                        q.relmse, gain);
+          std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s (CPU %.3f s) relMSE %.5g (%.2fx lower)", m.name, q.spp,
+                        q.min_seconds, q.cpu_seconds, q.relmse, gain);
           line += buf;
         }
-        report("%s: pt %d spp %.3f s relMSE %.5g%s\n", bname.c_str(), n, pt.seconds, pt.relmse, line.c_str());
+        report("%s: pt %d spp %.3f s (CPU %.3f s) relMSE %.5g%s\n", bname.c_str(), n, pt.min_seconds, pt.cpu_seconds,
+               pt.relmse, line.c_str());
         double g1 = state.counters["psf_gain"], g2 = state.counters["psf2_gain"];
         if (n == 4)
           report("%s: goal >= 10x lower relMSE at 4 spp: psf %s, psf2 %s\n", bname.c_str(), g1 >= 10 ? "met" : "NOT met",
@@ -341,7 +367,8 @@ int main(int argc, char** argv) {
           report("%s: goal never worse at 1024 spp: psf %s, psf2 %s\n", bname.c_str(), g1 >= 1 ? "met" : "NOT met",
                  g2 >= 1 ? "met" : "NOT met");
         if (std::find(opt.crops.begin(), opt.crops.end(), n) != opt.crops.end()) {
-          std::string png = opt.images + "/quality_" + b->name + "_" + std::to_string(n) + "spp.png";
+          std::string png = opt.images + "/quality_" + b->name + "_" + std::to_string(n) + "spp" +
+                            (g_cpu_time ? "_cputime" : "") + ".png";
           write_side_by_side(png, {&pt.image, &best["psf"].image, &best["psf2"].image, &b->reference});
           report("%s: wrote %s (pt %d spp | psf %d spp | psf2 %d spp | reference)\n", bname.c_str(), png.c_str(), n,
                  best["psf"].spp, best["psf2"].spp);

@@ -22,6 +22,10 @@ resolver, so relative paths resolve) one by one and reported in "removed_propert
 
 --variant auto tries llvm_ad_rgb, then scalar_rgb, each in a child process (an
 LLVM failure aborts the whole process, so it cannot be caught in-process).
+
+Versions: on Debian 12 (libLLVM 14 and 15) use mitsuba==3.6.4 (drjit 1.0.5).
+Mitsuba 3.9.1 (drjit 1.5) emits llvm.minimum/maximum, which LLVM 15 and 16 cannot
+select on x86 ("LLVM ERROR: Cannot select: fminimum"), and Dr.Jit needs LLVM >= 15.
 """
 import argparse
 import json

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """plot_quality.py: the convergence plot of bench_quality (relMSE against wall
-time, log-log, one line per method, one PNG per scene) from its Google Benchmark
+or CPU time, log-log, one line per method, one PNG per scene) from its Google Benchmark
 JSON; also prints the equal-time table in Markdown.
 
 Usage: plot_quality.py [bench/results/bench_quality.json] [--out docs/images]
@@ -17,15 +17,19 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("json", nargs="?", default="bench/results/bench_quality.json")
     ap.add_argument("--out", default="docs/images")
+    ap.add_argument("--time", choices=("wall", "cpu"), default="wall",
+                    help="x axis: wall time (fastest repeat) or the process's CPU time")
+    ap.add_argument("--suffix", default="", help="appended to the PNG names")
     args = ap.parse_args()
     data = json.load(open(args.json))
     curves = collections.defaultdict(lambda: collections.defaultdict(list))
     equal = collections.defaultdict(list)
     for b in data["benchmarks"]:
-        m = re.match(r"quality/([^/]+)/([^/]+)/spp:(\d+)$", b["name"])
+        m = re.match(r"quality/([^/]+)/([^/]+)/spp:(\d+)(/|$)", b["name"])
         if m and "relMSE" in b:
-            curves[m.group(1)][m.group(2)].append((b["seconds"], b["relMSE"], int(m.group(3))))
-        m = re.match(r"equal_time/([^/]+)/spp:(\d+)$", b["name"])
+            t = b.get("cpu_seconds") if args.time == "cpu" else b.get("min_seconds", b["seconds"])
+            curves[m.group(1)][m.group(2)].append((t, b["relMSE"], int(m.group(3))))
+        m = re.match(r"equal_time/([^/]+)/spp:(\d+)(/|$)", b["name"])
         if m and "pt_relMSE" in b:
             equal[m.group(1)].append(b)
 
@@ -33,6 +37,7 @@ def main():
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     os.makedirs(args.out, exist_ok=True)
     labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations"}
@@ -46,14 +51,19 @@ def main():
             for t, e, spp in pts:
                 if name == "pt" and spp in (1, 4, 16, 64, 256, 1024):
                     ax.annotate("%d spp" % spp, (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7)
-        ax.set_xlabel("wall time of the render (s)")
+        ax.set_xlabel("wall time of the render (s)" if args.time == "wall" else "CPU time of the render (s)")
         ax.set_ylabel("relMSE")
-        ax.set_title("%s: relMSE against time (%s)" % (scene, data.get("context", {}).get("psf_device", "")[-40:]),
-                     fontsize=9)
+        ctx = data.get("context", {})
+        ax.set_title("%s: relMSE against %s time (%s compute units, %s)" % (
+            scene, args.time, ctx.get("psf_compute_units", "?"), ctx.get("psf_device", "").split(" / ")[-1]),
+            fontsize=9)
+        ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()
-        path = os.path.join(args.out, "quality_convergence_%s.png" % scene)
+        path = os.path.join(args.out, "quality_convergence_%s%s.png" % (scene, args.suffix))
         fig.savefig(path)
         print("wrote", path)
 
