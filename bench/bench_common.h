@@ -8,10 +8,12 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "cl/runtime.h"
+#include "scene/scene.h"
 
 namespace bench {
 
@@ -54,6 +56,20 @@ inline void report(const char* fmt, ...) {
 }
 
 // Device time (ms) of the kernels in Runtime::stats() whose names start with one of `prefixes`.
+// The scene at `path`, or nullopt after reporting why it is skipped (absent or unreadable).
+inline std::optional<psf::Scene> load_bench_scene(const std::string& path) {
+  if (!fs::exists(path)) {
+    report("skipped %s: not found\n", path.c_str());
+    return std::nullopt;
+  }
+  try {
+    return psf::load_scene(path);
+  } catch (const std::exception& e) {
+    report("skipped %s: %s\n", path.c_str(), e.what());
+    return std::nullopt;
+  }
+}
+
 inline double kernel_ms(const std::map<std::string, psf::KernelTime>& stats, const std::vector<std::string>& prefixes) {
   double ms = 0;
   for (const auto& [name, t] : stats)

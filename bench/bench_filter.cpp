@@ -40,6 +40,7 @@
 
 #include <array>
 #include <atomic>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -282,19 +283,12 @@ int main(int argc, char** argv) {
 
   std::vector<std::unique_ptr<Bench>> benches;
   for (const std::string& path : opt.scenes) {
-    if (!bench::fs::exists(path)) {
-      report("skipped %s: not found\n", path.c_str());
-      continue;
-    }
+    std::optional<psf::Scene> scene = bench::load_bench_scene(path);
+    if (!scene) continue;
     auto b = std::make_unique<Bench>();
     b->path = path;
     b->name = bench::scene_name(path);
-    try {
-      b->scene = psf::load_scene(path);
-    } catch (const std::exception& e) {
-      report("skipped %s: %s\n", path.c_str(), e.what());
-      continue;
-    }
+    b->scene = std::move(*scene);
     b->scene.width = opt.width;
     b->scene.height = opt.height;
     report("%s: %zu triangles, %zu scene warnings\n", b->name.c_str(), b->scene.triangles.size(),

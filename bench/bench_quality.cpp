@@ -36,6 +36,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -223,19 +224,12 @@ int main(int argc, char** argv) {
 
   std::vector<std::unique_ptr<Bench>> benches;
   for (const std::string& path : opt.scenes) {
-    if (!bench::fs::exists(path)) {
-      report("skipped %s: not found\n", path.c_str());
-      continue;
-    }
+    std::optional<psf::Scene> scene = bench::load_bench_scene(path);
+    if (!scene) continue;
     auto b = std::make_unique<Bench>();
     b->path = path;
     b->name = bench::scene_name(path);
-    try {
-      b->scene = psf::load_scene(path);
-    } catch (const std::exception& e) {
-      report("skipped %s: %s\n", path.c_str(), e.what());
-      continue;
-    }
+    b->scene = std::move(*scene);
     if (!has_light(b->scene)) {
       report("skipped %s: no light psf can render (%zu loader warnings%s)\n", path.c_str(), b->scene.warnings.size(),
              b->name == "living-room" ? "; its envmap is not supported yet" : "");

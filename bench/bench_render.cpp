@@ -27,6 +27,7 @@
 #include <benchmark/benchmark.h>
 
 #include <array>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -198,19 +199,12 @@ int main(int argc, char** argv) {
 
   std::vector<std::unique_ptr<Bench>> benches;
   for (const std::string& path : opt.scenes) {
-    if (!bench::fs::exists(path)) {
-      report("skipped %s: not found\n", path.c_str());
-      continue;
-    }
+    std::optional<psf::Scene> scene = bench::load_bench_scene(path);
+    if (!scene) continue;
     auto b = std::make_unique<Bench>();
     b->path = path;
     b->name = bench::scene_name(path);
-    try {
-      b->scene = psf::load_scene(path);
-    } catch (const std::exception& e) {
-      report("skipped %s: %s\n", path.c_str(), e.what());
-      continue;
-    }
+    b->scene = std::move(*scene);
     b->spp = opt.spp > 0 ? opt.spp : default_spp(b->name);
     b->paths = uint64_t(b->scene.width) * b->scene.height * b->spp;
     report("%s: %zu triangles, %dx%d, %d spp = %llu paths, max depth %d; psf loader: %zu warnings%s\n",

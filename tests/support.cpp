@@ -1,6 +1,12 @@
 #include "support.h"
 
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
+#include <unistd.h>
 #include <filesystem>
 #include <memory>
 
@@ -28,6 +34,27 @@ std::optional<std::string> shared_dir() {
 
 std::string source_path(const std::string& relative) {
   return (std::filesystem::path(PSF_SOURCE_DIR) / relative).string();
+}
+
+PsfRun run_psf(const std::string& args, const std::string& prefix) {
+  const char* b = std::getenv("PSF_BINARY");
+  std::string cmd = prefix + (prefix.empty() ? "" : " ") + (b ? b : PSF_BINARY_DEFAULT) + " " + args + " 2>&1";
+  PsfRun r;
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) throw std::runtime_error("cannot run " + cmd);
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
+  int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
+  return r;
+}
+
+std::string temp_dir(const std::string& name) {
+  namespace fs = std::filesystem;
+  fs::path d = fs::temp_directory_path() / (name + "-" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d.string();
 }
 
 }  // namespace psf::test

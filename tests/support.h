@@ -17,4 +17,17 @@ std::optional<std::string> shared_dir();
 // Path of a file under the source tree.
 std::string source_path(const std::string& relative);
 
+// One run of the psf binary ($PSF_BINARY, else the one built beside the tests).
+struct PsfRun {
+  int status = -1;     // exit status; 128 + signal when killed (124: timeout)
+  std::string output;  // stdout and stderr together
+};
+
+// Runs `prefix psf args` through the shell (prefix: environment assignments or a
+// command such as `timeout 300`).
+PsfRun run_psf(const std::string& args, const std::string& prefix = "");
+
+// A folder of this test process under the system's temporary folder.
+std::string temp_dir(const std::string& name);
+
 }  // namespace psf::test

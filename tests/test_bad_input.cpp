@@ -26,36 +26,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int status = -1;     // exit status; 124 timeout, >= 128 killed by a signal
-  std::string output;  // stdout and stderr together
-};
-
-std::string binary() {
-  const char* b = std::getenv("PSF_BINARY");
-  return b ? b : PSF_BINARY_DEFAULT;
-}
+using Run = psf::test::PsfRun;
 
 // Runs psf with a time limit (a hang is a failure too: timeout exits 124, or
 // 128 + signal when it or psf was killed).
-Run run(const std::string& args) {
-  std::string cmd = "timeout -k 10 300 " + binary() + " " + args + " 2>&1";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  REQUIRE(p);
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + (WIFSIGNALED(st) ? WTERMSIG(st) : 0);
-  return r;
-}
+Run run(const std::string& args) { return psf::test::run_psf(args, "timeout -k 10 300"); }
 
-fs::path temp_dir() {
-  fs::path d = fs::temp_directory_path() / ("psf-bad-input-" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d;
-}
+fs::path temp_dir() { return psf::test::temp_dir("psf-bad-input"); }
 
 std::string read_file(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

@@ -21,34 +21,11 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int status = -1;     // exit status
-  std::string output;  // stdout and stderr together
-};
+using Run = psf::test::PsfRun;
 
-std::string binary() {
-  const char* b = std::getenv("PSF_BINARY");
-  return b ? b : PSF_BINARY_DEFAULT;
-}
+Run run(const std::string& args, const std::string& env = "") { return psf::test::run_psf(args, env); }
 
-Run run(const std::string& args, const std::string& env = "") {
-  std::string cmd = env + (env.empty() ? "" : " ") + binary() + " " + args + " 2>&1";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  REQUIRE(p);
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
-
-fs::path temp_dir() {
-  fs::path d = fs::temp_directory_path() / ("psf-cli-" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d;
-}
+fs::path temp_dir() { return psf::test::temp_dir("psf-cli"); }
 
 void write_file(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
 

@@ -519,17 +519,10 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
 
 TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   TempDir dir;
-  const char* bin_env = std::getenv("PSF_BINARY");
-  std::string psf_binary = bin_env ? bin_env : PSF_BINARY_DEFAULT;
-  auto run = [&](const std::string& args, std::string& output) {
-    FILE* p = popen((psf_binary + " " + args + " 2>&1").c_str(), "r");
-    REQUIRE(p);
-    char buf[4096];
-    size_t n;
-    output.clear();
-    while ((n = fread(buf, 1, sizeof buf, p)) > 0) output.append(buf, n);
-    int st = pclose(p);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  auto run = [](const std::string& args, std::string& output) {
+    psf::test::PsfRun r = psf::test::run_psf(args);
+    output = r.output;
+    return r.status;
   };
   std::string out;
   std::string ply = dir.write("mesh.ply", binary_ply(true));

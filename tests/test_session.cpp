@@ -17,30 +17,11 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int status = -1;
-  std::string output;
-};
+using Run = psf::test::PsfRun;
 
-Run psf_run(const std::string& args) {
-  const char* b = std::getenv("PSF_BINARY");
-  std::string cmd = std::string(b ? b : PSF_BINARY_DEFAULT) + " " + args + " 2>&1";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  REQUIRE(p);
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.output.append(buf.data(), n);
-  int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
+Run psf_run(const std::string& args) { return psf::test::run_psf(args); }
 
-fs::path temp_dir() {
-  fs::path d = fs::temp_directory_path() / ("psf-session-" + std::to_string(::getpid()));
-  fs::create_directories(d);
-  return d;
-}
+fs::path temp_dir() { return psf::test::temp_dir("psf-session"); }
 
 // The Cornell box at 24x24 (576 pixels) in batches of 2^10 paths: 3 spp end in a
 // partial batch, so a resumed render has to redo it.

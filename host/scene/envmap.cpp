@@ -1,10 +1,6 @@
 // Environment images (lat-long maps) for the envmap emitter, and the default sky
-// of bare mesh files. OpenEXR through OpenEXR's RGBA interface (which converts
-// half/float/uint, RGB/RGBA/luminance-chroma channels to RGBA half), everything
-// else through stb_image (Radiance .hdr as float; 8-bit images as sRGB).
-#include <ImfArray.h>
-#include <ImfRgbaFile.h>
-#include <stb_image.h>
+// of bare mesh files, read by the textures' image loader (OpenEXR, or stb_image:
+// Radiance .hdr as float, 8/16-bit images as sRGB).
 
 #include <algorithm>
 #include <cctype>
@@ -12,59 +8,25 @@
 #include <filesystem>
 
 #include "scene/formats.h"
+#include "scene/materials.h"
 
 namespace psf {
 namespace {
 
-std::string extension_of(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return ext;
-}
-
-EnvImage read_exr_rgba(const std::string& path) {
-  EnvImage img;
+// The map's texels as linear RGB (the textures' image loader, host/scene/textures.cpp).
+EnvImage read_rgb(const std::string& path) {
+  detail::ImagePixels px;
   try {
-    Imf::RgbaInputFile file(path.c_str());
-    Imath::Box2i dw = file.dataWindow();
-    img.width = dw.max.x - dw.min.x + 1;
-    img.height = dw.max.y - dw.min.y + 1;
-    if (img.width <= 0 || img.height <= 0) throw SceneError(path, 0, "empty OpenEXR data window");
-    Imf::Array2D<Imf::Rgba> px(img.height, img.width);
-    file.setFrameBuffer(&px[0][0] - dw.min.x - dw.min.y * img.width, 1, size_t(img.width));
-    file.readPixels(dw.min.y, dw.max.y);
-    img.rgb.resize(size_t(img.width) * img.height * 3);
-    for (int y = 0; y < img.height; ++y)
-      for (int x = 0; x < img.width; ++x) {
-        const Imf::Rgba& p = px[y][x];
-        float* o = &img.rgb[(size_t(y) * img.width + x) * 3];
-        o[0] = float(p.r);
-        o[1] = float(p.g);
-        o[2] = float(p.b);
-      }
-  } catch (const SceneError&) {
-    throw;
+    px = detail::load_image(path, false);
   } catch (const std::exception& e) {
-    throw SceneError(path, 0, std::string("cannot read OpenEXR environment map: ") + e.what());
+    throw SceneError(path, 0, std::string("cannot read environment map: ") + e.what());
   }
-  return img;
-}
-
-EnvImage read_stb(const std::string& path) {
   EnvImage img;
-  int channels = 0;
-  if (stbi_is_hdr(path.c_str())) {
-    float* data = stbi_loadf(path.c_str(), &img.width, &img.height, &channels, 3);
-    if (!data) throw SceneError(path, 0, std::string("cannot read environment map: ") + stbi_failure_reason());
-    img.rgb.assign(data, data + size_t(img.width) * img.height * 3);
-    stbi_image_free(data);
-  } else {
-    unsigned char* data = stbi_load(path.c_str(), &img.width, &img.height, &channels, 3);
-    if (!data) throw SceneError(path, 0, std::string("cannot read environment map: ") + stbi_failure_reason());
-    img.rgb.resize(size_t(img.width) * img.height * 3);
-    for (size_t i = 0; i < img.rgb.size(); ++i) img.rgb[i] = detail::srgb_to_linear(float(data[i]) / 255.0f);
-    stbi_image_free(data);
-  }
+  img.width = px.width;
+  img.height = px.height;
+  img.rgb.resize(size_t(img.width) * img.height * 3);
+  for (size_t i = 0; i < size_t(img.width) * img.height; ++i)
+    for (int c = 0; c < 3; ++c) img.rgb[i * 3 + c] = px.rgba[i * 4 + c];
   return img;
 }
 
@@ -72,7 +34,7 @@ EnvImage read_stb(const std::string& path) {
 
 EnvImage read_env_image(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) throw SceneError(path, 0, "environment map file not found");
-  EnvImage img = extension_of(path) == ".exr" ? read_exr_rgba(path) : read_stb(path);
+  EnvImage img = read_rgb(path);
   if (img.width < 2 || img.height < 2)
     throw SceneError(path, 0, "the environment map must be at least 2x2 texels, not " + std::to_string(img.width) +
                                   "x" + std::to_string(img.height));

@@ -97,4 +97,14 @@ double rough_reflectance(double mu, double alpha, double eta, bool beckmann);
 // transmittance table (Mitsuba 3's roughplastic).
 void finish_plastic(Material& m, float diffuse_mean, float specular_mean, TextureStore& store);
 
+// An image file's texels as linear RGBA floats, rows from the top: OpenEXR through
+// OpenEXR, everything else through stb_image (HDR as float; 8/16-bit values
+// decoded from sRGB unless `raw`). Throws std::runtime_error.
+struct ImagePixels {
+  int width = 0, height = 0;  // texels
+  bool has_alpha = false;     // the file has an alpha channel
+  std::vector<float> rgba;    // 4 floats a texel
+};
+ImagePixels load_image(const std::string& path, bool raw);
+
 }  // namespace psf::detail

@@ -28,12 +28,7 @@ std::string lower(std::string s) {
   return s;
 }
 
-// Decoded image: linear RGBA floats, rows from the top.
-struct Pixels {
-  int width = 0, height = 0;
-  bool has_alpha = false;
-  std::vector<float> rgba;
-};
+using Pixels = ImagePixels;
 
 Pixels load_exr(const std::string& path) {
   Pixels p;
@@ -113,6 +108,10 @@ float luminance(const float* c) { return 0.212671f * c[0] + 0.715160f * c[1] + 0
 
 }  // namespace
 
+ImagePixels load_image(const std::string& path, bool raw) {
+  return lower(fs::path(path).extension().string()) == ".exr" ? load_exr(path) : load_stb(path, raw);
+}
+
 std::optional<std::string> find_file_nocase(const std::string& path) {
   std::error_code ec;
   if (fs::is_regular_file(path, ec)) return path;
@@ -179,7 +178,7 @@ uint32_t TextureStore::image(const TextureDesc& d) {
   auto it = cache_.find(key.str());
   if (it != cache_.end()) return it->second;
   std::string ext = lower(fs::path(d.path).extension().string());
-  Pixels p = ext == ".exr" ? load_exr(d.path) : load_stb(d.path, d.raw);
+  Pixels p = load_image(d.path, d.raw);
   if (p.width <= 0 || p.height <= 0) throw std::runtime_error("the image is empty");
   if (d.use != TextureUse::Color) {
     for (size_t i = 0; i < p.rgba.size(); i += 4) {
