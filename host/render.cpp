@@ -188,7 +188,9 @@ uint64_t Accumulator::nonfinite() const {
 struct Renderer::Batch {
   RenderOptions o;       // the options prepare() was given
   uint32_t size = 0;     // paths per batch
-  cl::Buffer states, vertices, rays, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
+  cl::Buffer states, vertices, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
+  cl::Buffer rays[2], queue[2];  // the live paths' rays and path indices, this bounce and the next
+  cl::Buffer env_samples;        // environment light samples drawn ahead of shade (2 float4 per path)
   cl::Buffer contrib, contrib_unfiltered, alive;
   std::unique_ptr<PathSpaceFilter> filter;
   float footprint = 0;   // sqrt(dOmega / pi) of the footprint
@@ -202,7 +204,8 @@ uint32_t Renderer::batch_size() const { return batch_ ? batch_->size : 0; }
 std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs) {
   std::vector<BufferNeed> needs = {
       {"path states", sizeof(PathState)}, {"filtering vertices", sizeof(PathVertex)},
-      {"rays", sizeof(Ray)},              {"hits", sizeof(Hit)},
+      {"rays (two queues)", 2 * sizeof(Ray)}, {"hits", sizeof(Hit)},
+      {"path queues", 2 * sizeof(uint32_t)},      {"environment samples", 2 * sizeof(cl_float4)},
       {"shadow rays", sizeof(Ray)},       {"shadow hits", sizeof(Hit)},
       {"values c", sizeof(cl_float4)},    {"counts", 2 * sizeof(uint32_t)},
       {"contributions", 2 * sizeof(cl_float4)},
@@ -234,9 +237,14 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   const size_t n = b->size;
   b->states = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathState));
   b->vertices = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathVertex));
-  b->rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
+  for (int q = 0; q < 2; ++q) {
+    b->rays[q] = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
+    b->queue[q] = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
+  }
   b->hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->shadow_rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
+  const bool env_map = impl_->env.present && impl_->env.width > 0;
+  b->env_samples = rt.buffer(CL_MEM_READ_WRITE, (env_map ? n : 1) * 2 * sizeof(cl_float4));
   b->shadow_hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->values = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->filtered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
@@ -279,25 +287,34 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
   auto& states = b.states;
   auto& vertices = b.vertices;
-  auto& rays = b.rays;
   auto& hits = b.hits;
   auto& shadow_rays = b.shadow_rays;
   auto& shadow_hits = b.shadow_hits;
   auto& alive = b.alive;
 
-  rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, rays);
-  for (int depth = 0; o.max_depth < 0 || depth < o.max_depth; ++depth) {
-    s.caster->closest(rays, hits, p.batch_size);
+  // A compacted wavefront: each bounce launches only the paths still alive. The
+  // queue holds their path indices (in any order: a path's result does not depend
+  // on its slot), rays[in] their rays; shade appends the survivors to the other
+  // queue. Path states and filtering vertices stay indexed by path.
+  rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, b.rays[0], b.queue[0]);
+  uint32_t n_live = p.batch_size;
+  int in = 0;
+  const uint32_t env_presampled = s.env.present && s.env.width > 0 ? 1u : 0u;
+  for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
+    s.caster->closest(b.rays[in], hits, n_live);
     uint32_t zero = 0;
     rt.write(alive, &zero, sizeof(zero));
-    rt.launch("shade", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
-              s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, hits, rays, states, vertices, shadow_rays, alive,
-              s.tri_attribs, s.textures, s.texels);
-    s.caster->any(shadow_rays, shadow_hits, p.batch_size);
-    rt.launch("shade_shadows", p.batch_size, L, p.batch_size, shadow_hits, states, vertices);
-    uint32_t n_alive = 0;
-    rt.read(alive, &n_alive, sizeof(n_alive));
-    if (n_alive == 0) break;
+    if (env_presampled)
+      rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
+                b.queue[in], states, b.env_samples);
+    rt.launch("shade", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters, s.emitter_cdf,
+              s.tri_light_pdf, s.env, s.env_data, n_live, b.queue[in], hits, b.rays[in], states, vertices,
+              shadow_rays, alive, b.queue[1 - in], b.rays[1 - in], s.tri_attribs, s.textures, s.texels,
+              env_presampled, b.env_samples);
+    s.caster->any(shadow_rays, shadow_hits, n_live);
+    rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
+    rt.read(alive, &n_live, sizeof(n_live));
+    in = 1 - in;
   }
 
   // The tuple store, then path space filtering of the batch's c_i, then each

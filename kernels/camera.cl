@@ -4,13 +4,14 @@
  * g mod (width * height) and is that pixel's sample number g div (width * height),
  * so a path gets the same samples whatever batch, device or work-group size
  * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
- * Writes: the path's state, an empty filtering vertex and its camera ray
- * (pinhole, psf_shared.h Camera). */
+ * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole,
+ * psf_shared.h Camera) and its index into the first queue of live paths. */
 
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
 
 __kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
-                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays) {
+                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays,
+                          __global uint* queue) {
   uint j = get_global_id(0);
   if (j >= params.batch_size) return;
   ulong pixels = (ulong)params.width * (ulong)params.height;
@@ -26,6 +27,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   r.org = (float4)(camera.origin.xyz, 0.0f);
   r.dir = (float4)(normalize(dir), INFINITY);
   rays[j] = r;
+  queue[j] = j;
   PathState st;
   st.throughput = (float4)(1.0f, 1.0f, 1.0f, 0.0f);
   st.radiance = (float4)(0.0f);

@@ -100,14 +100,17 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
 }
 
-/* A world direction from the environment's distribution; *pdf its solid-angle pdf. */
-inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf) {
+/* A world direction from the environment's distribution; *pdf its solid-angle
+ * pdf, *radiance the radiance from it (the sampled texel's, scaled). */
+inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf,
+                         float3* radiance) {
   if (env.width == 0u) {
     /* Uniform over the sphere. */
     float z = 1.0f - 2.0f * u1;
     float r = sqrt(fmax(0.0f, 1.0f - z * z));
     float phi = 2.0f * PSF_ENV_PI * u2;
     *pdf = 1.0f / (4.0f * PSF_ENV_PI);
+    *radiance = env.scale.xyz;
     return (float3)(r * cos(phi), r * sin(phi), z);
   }
   __global const float* marginal = data + env_marginal_offset(env);
@@ -128,6 +131,7 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
   float theta = v * PSF_ENV_PI, phi = u * 2.0f * PSF_ENV_PI;
   float sin_theta = sin(theta);
   float3 m = (float3)(sin(phi) * sin_theta, cos(theta), -cos(phi) * sin_theta);
+  *radiance = env_texel_value(env, data, (uint2)(x, y)) * env.scale.xyz;
   *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
                           : 0.0f;
   return env_to_world(env, m);
@@ -156,11 +160,12 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
   float select = em.radiance.w;
   if (em.type == PSF_EMITTER_ENVIRONMENT) {
     float pdf;
-    float3 wi = env_sample(env, env_data, ua, ub, &pdf);
+    float3 radiance;
+    float3 wi = env_sample(env, env_data, ua, ub, &pdf, &radiance);
     if (!(pdf > 0.0f)) return ls;
     ls.wi = wi;
     ls.dist = INFINITY;
-    ls.radiance = env_radiance(env, env_data, wi);
+    ls.radiance = radiance;
     ls.pdf = select * pdf;
     return ls;
   }

@@ -3,6 +3,11 @@
  * sampling (Veach 1997, Sec. 9.2, power heuristic), Russian roulette, and the
  * record of each path's filtering vertex (Keller et al. 2016, Sec. 2).
  *
+ * The wavefront is compacted: a launch covers the `count` live paths of queue_in
+ * (path indices; work-item k owns slot k of rays_in, hits and shadow_rays), and
+ * shade appends each path that goes on to queue_out and rays_out. Path states and
+ * filtering vertices are indexed by path.
+ *
  * shade: reads each path's closest hit; adds emission reached by the BSDF-sampled
  * ray (MIS-weighted against light sampling), or for a ray that escaped the scene
  * the environment's radiance (likewise weighted, emitter.cl); at the first
@@ -11,6 +16,12 @@
  * pixel gets radiance + alpha * c; samples a light (shadow ray + pending
  * contribution) and the BSDF (next ray). Depth follows Mitsuba's max_depth: the
  * number of path segments, so max_depth 1 shows emitters only and 2 adds direct light.
+ * shade_env_samples (before shade, for scenes lit by an environment map): draws
+ * each live path's light choice and, where it is the environment, its direction,
+ * pdf and radiance. This is the part of next-event estimation that does not
+ * depend on the shading point, and the one that waits on memory (a row of the
+ * map's cdf, then a texel, at random); in a kernel of its own the processor
+ * overlaps those misses across paths, which the long shade kernel cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility. */
 
@@ -25,6 +36,34 @@ inline float power_heuristic(float a, float b) {
 
 inline float bounce_sample(__global const uint* sobol, FrameParams p, PathState st, uint offset) {
   return sample_1d(sobol, p.seed, st.pixel, st.sample, PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
+}
+
+/* shade_env_samples' record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] =
+ * (radiance, 1 if the environment was chosen, else 0). */
+__kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
+                                __global const float* emitter_cdf, Environment env, __global const float* env_data,
+                                uint count, __global const uint* queue_in, __global const PathState* states,
+                                __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  uint j = queue_in[k];
+  uint pixel = states[j].pixel, sample = states[j].sample;
+  uint dim = PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
+  float4 a = (float4)(0.0f), b = (float4)(0.0f);
+  if (params.num_emitters > 0u) {
+    float ul = sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_SELECT);
+    Emitter em = emitters[sample_cdf(emitter_cdf, params.num_emitters, ul)];
+    if (em.type == PSF_EMITTER_ENVIRONMENT) {
+      float pdf;
+      float3 radiance;
+      float3 wi = env_sample(env, env_data, sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV),
+                             sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &radiance);
+      a = (float4)(wi, pdf > 0.0f ? em.radiance.w * pdf : 0.0f);
+      b = (float4)(radiance, 1.0f);
+    }
+  }
+  env_samples[2u * k] = a;
+  env_samples[2u * k + 1u] = b;
 }
 
 /* True if a path with `segments` segments is allowed by max_depth. */
@@ -43,24 +82,27 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
                     __global const uint* tri_material, __global const Material* materials,
                     __global const Emitter* emitters, __global const float* emitter_cdf,
                     __global const float* tri_light_pdf, Environment env, __global const float* env_data,
-                    __global const Hit* hits, __global Ray* rays,
-                    __global PathState* states, __global PathVertex* vertices, __global Ray* shadow_rays,
-                    __global uint* alive_count, __global const TriAttrib* tri_attribs,
-                    __global const TextureInfo* textures, __global const half* texels) {
-  uint j = get_global_id(0);
-  if (j >= params.batch_size) return;
+                    uint count, __global const uint* queue_in, __global const Hit* hits,
+                    __global const Ray* rays_in, __global PathState* states, __global PathVertex* vertices,
+                    __global Ray* shadow_rays, __global uint* alive_count, __global uint* queue_out,
+                    __global Ray* rays_out, __global const TriAttrib* tri_attribs,
+                    __global const TextureInfo* textures, __global const half* texels, uint env_presampled,
+                    __global const float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  uint j = queue_in[k];
   PathState st = states[j];
   Ray shadow;
   shadow.org = (float4)(0.0f);
   shadow.dir = (float4)(0.0f, 0.0f, 1.0f, -1.0f);
   st.pending = (float4)(0.0f);
   st.flags &= ~PSF_PATH_VERTEX_NEW;
-  Ray ray = rays[j];
-  Hit hit = hits[j];
-  if (!(st.flags & PSF_PATH_ALIVE) || hit.prim == PSF_NO_HIT) {
+  Ray ray = rays_in[k];
+  Hit hit = hits[k];
+  if (hit.prim == PSF_NO_HIT) {
     /* An escaped ray sees the environment, MIS-weighted against its light samples
      * unless it left the camera or a delta lobe (emitter.cl). */
-    if ((st.flags & PSF_PATH_ALIVE) && env.present) {
+    if (env.present) {
       float3 d = normalize(ray.dir.xyz);
       float w = 1.0f;
       if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR))
@@ -68,9 +110,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       add_radiance(&st, st.throughput.xyz * env_radiance(env, env_data, d) * w);
     }
     st.flags &= ~PSF_PATH_ALIVE;
-    ray.dir.w = -1.0f;
-    rays[j] = ray;
-    shadow_rays[j] = shadow;
+    shadow_rays[k] = shadow;
     states[j] = st;
     return;
   }
@@ -118,10 +158,21 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
 
   /* Next-event estimation: one point on one emitter, chosen by power. */
   if (scatter && params.num_emitters > 0u) {
-    LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
-                                    bounce_sample(sobol, params, st, PSF_DIM_LIGHT_SELECT),
-                                    bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV),
-                                    bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV + 1u));
+    LightSample ls;
+    if (env_presampled && env_samples[2u * k + 1u].w != 0.0f) {
+      /* The environment, drawn by shade_env_samples with the same numbers. */
+      float4 a = env_samples[2u * k], b = env_samples[2u * k + 1u];
+      ls.wi = a.xyz;
+      ls.pdf = a.w;
+      ls.radiance = b.xyz;
+      ls.dist = INFINITY;
+      ls.delta = 0u;
+    } else {
+      ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
+                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_SELECT),
+                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV),
+                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV + 1u));
+    }
     float bsdf_pdf;
     float3 f = ls.pdf > 0.0f ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);
     float cos_s = fabs(dot(frame.n, ls.wi)); /* the BSDF decides which side scatters */
@@ -137,7 +188,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       }
     }
   }
-  shadow_rays[j] = shadow;
+  shadow_rays[k] = shadow;
 
   /* BSDF sampling for the next segment, then Russian roulette. */
   if (scatter) {
@@ -161,25 +212,24 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
       st.depth += 1u;
-      atomic_inc(alive_count);
+      uint slot = atomic_inc(alive_count);
+      queue_out[slot] = j;
+      rays_out[slot] = ray;
     } else {
       scatter = false;
     }
   }
-  if (!scatter) {
-    st.flags &= ~PSF_PATH_ALIVE;
-    ray.dir.w = -1.0f;
-  }
-  rays[j] = ray;
+  if (!scatter) st.flags &= ~PSF_PATH_ALIVE;
   states[j] = st;
 }
 
-__kernel void shade_shadows(uint count, __global const Hit* shadow_hits, __global PathState* states,
-                            __global PathVertex* vertices) {
-  uint j = get_global_id(0);
-  if (j >= count) return;
+__kernel void shade_shadows(uint count, __global const uint* queue_in, __global const Hit* shadow_hits,
+                            __global PathState* states, __global PathVertex* vertices) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  uint j = queue_in[k];
   PathState st = states[j];
-  bool visible = shadow_hits[j].prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
+  bool visible = shadow_hits[k].prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
   if (st.flags & PSF_PATH_VERTEX_NEW) vertices[j].normal.w = visible ? 1.0f : 0.0f;
   if (visible) {
     add_radiance(&st, st.pending.xyz);
