@@ -54,6 +54,17 @@ def render(args):
     path = os.path.abspath(args.scene)
     folder = os.path.dirname(path)
     src = open(path, encoding="utf-8").read()
+    original = src
+    # --width/--height: the film's integers, in a temporary copy of the scene.
+    for name, value in (("width", args.width), ("height", args.height)):
+        if value > 0:
+            film = re.search(r"<film\b.*?</film>", src, re.S)
+            if not film:
+                raise RuntimeError("no <film> to set the %s of" % name)
+            block, n = re.subn(r'(<integer\s+name="%s"\s+value=")[^"]*(")' % name, r"\g<1>%d\g<2>" % value, film.group(0))
+            if n != 1:
+                raise RuntimeError("the film has no single %s to set" % name)
+            src = src[: film.start()] + block + src[film.end():]
     mi.Thread.thread().file_resolver().prepend(folder)
     removed = []
     t0 = time.perf_counter()
@@ -62,7 +73,7 @@ def render(args):
     try:
         for _ in range(32):
             try:
-                if removed:
+                if src != original:
                     fd, tmp = tempfile.mkstemp(suffix=".xml", prefix="mitsuba3-")
                     with os.fdopen(fd, "w", encoding="utf-8") as f:
                         f.write(src)
@@ -134,6 +145,8 @@ def main():
     ap.add_argument("--threads", type=int, default=0, help="Dr.Jit worker threads (0: all cores)")
     ap.add_argument("--variant", default="auto", help="auto: llvm_ad_rgb, else scalar_rgb")
     ap.add_argument("--exr", default="", help="write the last render here")
+    ap.add_argument("--width", type=int, default=0, help="film width (0: the scene's)")
+    ap.add_argument("--height", type=int, default=0, help="film height (0: the scene's)")
     ap.add_argument("--timeout", type=float, default=1800, help="per variant, with --variant auto")
     args = ap.parse_args()
 
@@ -153,7 +166,8 @@ def main():
     tried = []
     for variant in ("llvm_ad_rgb", "scalar_rgb"):
         cmd = [sys.executable, os.path.abspath(__file__), "--variant", variant, "--scene", args.scene,
-               "--spp", str(args.spp), "--repeat", str(args.repeat), "--threads", str(args.threads)]
+               "--spp", str(args.spp), "--repeat", str(args.repeat), "--threads", str(args.threads),
+               "--width", str(args.width), "--height", str(args.height)]
         if args.exr:
             cmd += ["--exr", args.exr]
         try:
