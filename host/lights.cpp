@@ -35,26 +35,38 @@ bool is_environment(const LightDesc& l) { return l.type == LightType::Constant |
 EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height) {
   EnvDistribution d;
   const size_t w = size_t(width), h = size_t(height);
+  const size_t K = PSF_ENV_BLOCK, nb = (w + K - 1) / K;
   d.marginal.assign(h + 1, 0.0f);
-  d.conditional.assign(h * (w + 1), 0.0f);
-  std::vector<double> row_sum(h, 0.0), f(w);
+  d.blocks.assign(h * (nb + 1), 0.0f);
+  d.within_block.assign(h * nb * K, 1.0f);
+  std::vector<double> row_sum(h, 0.0), f(w), block_sum(nb);
   double total = 0.0;
   for (size_t y = 0; y < h; ++y) {
     double sin_theta = std::sin((double(y) + 0.5) / double(h) * kPi);
     double run = 0.0;
+    std::fill(block_sum.begin(), block_sum.end(), 0.0);
     for (size_t x = 0; x < w; ++x) {
       const float* t = &rgb[(y * w + x) * 3];
       f[x] = std::max(0.0, double(lum(glm::vec3(t[0], t[1], t[2])))) * sin_theta;
       run += f[x];
+      block_sum[x / K] += f[x];
     }
-    float* cdf = &d.conditional[y * (w + 1)];
+    // A zero row or block gets a uniform cdf; it is never chosen.
+    float* bc = &d.blocks[y * (nb + 1)];
     double acc = 0.0;
-    for (size_t x = 0; x < w; ++x) {
-      acc += f[x];
-      // A zero row gets a uniform cdf; it is never chosen by the marginal.
-      cdf[x + 1] = run > 0.0 ? float(acc / run) : float(double(x + 1) / double(w));
+    for (size_t b = 0; b < nb; ++b) {
+      const size_t in_block = std::min(K, w - b * K);
+      acc += run > 0.0 ? block_sum[b] : double(in_block);
+      bc[b + 1] = float(acc / (run > 0.0 ? run : double(w)));
+      float* fine = &d.within_block[(y * nb + b) * K];
+      double part = 0.0;
+      for (size_t k = 0; k < in_block; ++k) {
+        part += block_sum[b] > 0.0 ? f[b * K + k] : 1.0;
+        fine[k] = float(part / (block_sum[b] > 0.0 ? block_sum[b] : double(in_block)));
+      }
+      fine[in_block - 1] = 1.0f;
     }
-    cdf[w] = 1.0f;
+    bc[nb] = 1.0f;
     row_sum[y] = run;
     total += run;
   }
@@ -153,7 +165,9 @@ LightTable build_light_table(const Scene& scene) {
       integral = 2.0 * kPi * kPi * d.integral;
       t.env_data = env->texels;
       t.env_data.insert(t.env_data.end(), d.marginal.begin(), d.marginal.end());
-      t.env_data.insert(t.env_data.end(), d.conditional.begin(), d.conditional.end());
+      t.env_data.insert(t.env_data.end(), d.blocks.begin(), d.blocks.end());
+      t.env_data.resize((t.env_data.size() + PSF_ENV_BLOCK - 1) / PSF_ENV_BLOCK * PSF_ENV_BLOCK, 0.0f);
+      t.env_data.insert(t.env_data.end(), d.within_block.begin(), d.within_block.end());
     }
     double phi = disk * integral;
     if (phi > 0.0 && std::isfinite(phi)) {

@@ -33,11 +33,15 @@ LightTable build_light_table(const Scene& scene);
 
 // The environment's 2D piecewise-constant distribution over its texels:
 // f(x, y) = luminance(texel) * sin(theta_y), theta_y at the row's centre.
-// marginal: height + 1 entries from 0 to 1; conditional: height rows of width + 1.
-// A row whose sum is zero gets a uniform conditional cdf (it is never chosen).
+// marginal: height + 1 entries from 0 to 1. Each row's conditional in two levels
+// (psf_shared.h Environment): blocks, B + 1 entries per row with B =
+// ceil(width / PSF_ENV_BLOCK), and within_block, PSF_ENV_BLOCK upper values per
+// block (1 past the row's end). A row or block whose sum is zero gets a uniform
+// cdf (it is never chosen).
 struct EnvDistribution {
   std::vector<float> marginal;
-  std::vector<float> conditional;
+  std::vector<float> blocks;
+  std::vector<float> within_block;
   double integral = 0.0;  // sum of f times the texel's (du, dv) area: the mean of f over [0,1]^2
 };
 EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height);

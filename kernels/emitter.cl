@@ -3,7 +3,7 @@
  *
  * Reads: the emitter table (psf_shared.h Emitter; host/lights.cpp builds it and
  * its selection cdf, in proportion to each light's power), the Environment and
- * its data buffer (texels, marginal and conditional cdfs).
+ * its data buffer (texels, marginal and two-level conditional cdfs).
  *   emitter_sample(...)  -> LightSample {wi, dist, radiance, pdf, delta}: one light
  *                           chosen by the cdf, then a point or direction on it
  *   emitter_pdf_hit(...) -> solid-angle pdf of hitting an emitter triangle by chance (for MIS)
@@ -19,7 +19,8 @@
  *   environment: a lat-long map sampled with a 2D piecewise-constant distribution
  *                (Pharr, Jakob & Humphreys, PBRT 3rd ed., Sec. 13.6.7 and 14.2.4):
  *                a row from the marginal cdf of sum_x L(x, y) sin(theta_y), a
- *                texel from that row's conditional cdf, a uniform point in the
+ *                texel from that row's conditional cdf (in two levels: a block of
+ *                PSF_ENV_BLOCK texels, then a texel of it), a uniform point in the
  *                texel; pdf(omega) = p(u, v) / (2 pi^2 sin theta). A constant
  *                environment is sampled uniformly over the sphere (1 / 4pi).
  * Delta lights carry delta = 1: they cannot be hit by BSDF sampling, so their
@@ -73,10 +74,25 @@ inline float3 env_texel_value(Environment env, __global const float* data, uint2
   return (float3)(data[i], data[i + 1u], data[i + 2u]);
 }
 
-/* Offsets of the marginal cdf and of row y's conditional cdf in the data buffer. */
+/* Offsets in the data buffer (psf_shared.h Environment): the marginal cdf, row
+ * y's cdf over its blocks, and block b of row y's cdf over its texels. */
+inline uint env_blocks(Environment env) { return (env.width + PSF_ENV_BLOCK - 1u) / PSF_ENV_BLOCK; }
 inline size_t env_marginal_offset(Environment env) { return 3u * (size_t)env.width * env.height; }
-inline size_t env_conditional_offset(Environment env, uint y) {
-  return env_marginal_offset(env) + env.height + 1u + (size_t)y * (env.width + 1u);
+inline size_t env_block_cdf_offset(Environment env, uint y) {
+  return env_marginal_offset(env) + env.height + 1u + (size_t)y * (env_blocks(env) + 1u);
+}
+inline size_t env_texel_cdf_offset(Environment env, uint y, uint b) {
+  size_t start = env_block_cdf_offset(env, env.height);
+  start = (start + PSF_ENV_BLOCK - 1u) / PSF_ENV_BLOCK * PSF_ENV_BLOCK;
+  return start + ((size_t)y * env_blocks(env) + b) * PSF_ENV_BLOCK;
+}
+
+/* Probability of texel column x within row y (block, then texel in block). */
+inline float env_column_prob(Environment env, __global const float* data, uint x, uint y) {
+  uint b = x / PSF_ENV_BLOCK, k = x % PSF_ENV_BLOCK;
+  __global const float* blocks = data + env_block_cdf_offset(env, y);
+  __global const float* fine = data + env_texel_cdf_offset(env, y, b);
+  return (blocks[b + 1u] - blocks[b]) * (fine[k] - (k > 0u ? fine[k - 1u] : 0.0f));
 }
 
 /* Radiance arriving from world direction d (unit) from infinitely far away. */
@@ -95,8 +111,8 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   if (!(sin_theta > 0.0f)) return 0.0f;
   uint2 t = env_texel(env, m);
   __global const float* marginal = data + env_marginal_offset(env);
-  __global const float* row = data + env_conditional_offset(env, t.y);
-  float p_uv = (marginal[t.y + 1u] - marginal[t.y]) * (float)env.height * (row[t.x + 1u] - row[t.x]) * (float)env.width;
+  float p_uv = (marginal[t.y + 1u] - marginal[t.y]) * (float)env.height * env_column_prob(env, data, t.x, t.y) *
+               (float)env.width;
   return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
 }
 
@@ -116,16 +132,27 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
   __global const float* marginal = data + env_marginal_offset(env);
   uint y = sample_cdf(marginal + 1, env.height, u2);
   float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
-  __global const float* row = data + env_conditional_offset(env, y);
-  uint x = sample_cdf(row + 1, env.width, u1);
-  float col_lo = row[x], col_p = row[x + 1u] - col_lo;
-  if (!(row_p > 0.0f) || !(col_p > 0.0f)) {
+  /* The column: a block of the row, then a texel of the block, each by the
+   * remainder of u1 (the inversion method, so that u1's strata stay intact). */
+  uint nb = env_blocks(env);
+  __global const float* blocks = data + env_block_cdf_offset(env, y);
+  uint b = sample_cdf(blocks + 1, nb, u1);
+  float block_lo = blocks[b], block_p = blocks[b + 1u] - block_lo;
+  float ub = clamp((u1 - block_lo) / block_p, 0.0f, 1.0f);
+  __global const float* fine = data + env_texel_cdf_offset(env, y, b);
+  uint last = min(env.width - b * PSF_ENV_BLOCK, (uint)PSF_ENV_BLOCK) - 1u;
+  uint k = 0u;
+  while (k < last && fine[k] <= ub) ++k;
+  float texel_lo = k > 0u ? fine[k - 1u] : 0.0f, texel_p = fine[k] - texel_lo;
+  uint x = b * PSF_ENV_BLOCK + k;
+  float col_p = block_p * texel_p;
+  if (!(row_p > 0.0f) || !(block_p > 0.0f) || !(texel_p > 0.0f)) {
     *pdf = 0.0f;
     return (float3)(0.0f, 1.0f, 0.0f);
   }
   /* A uniform point inside the texel, by the remainder of the uniform numbers. */
   float fv = clamp((u2 - row_lo) / row_p, 0.0f, 1.0f);
-  float fu = clamp((u1 - col_lo) / col_p, 0.0f, 1.0f);
+  float fu = clamp((ub - texel_lo) / texel_p, 0.0f, 1.0f);
   float v = ((float)y + fv) / (float)env.height;
   float u = ((float)x + fu) / (float)env.width;
   float theta = v * PSF_ENV_PI, phi = u * 2.0f * PSF_ENV_PI;

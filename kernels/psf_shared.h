@@ -216,7 +216,15 @@ typedef struct {
  * to [0,1), v = acos(d.y) / pi, texel row 0 at v = 0, i.e. +y up), piecewise
  * constant per texel, or a constant radiance when width is 0. Its data buffer
  * (floats) holds the texels (width * height * 3, RGB, row-major), the marginal
- * cdf over rows (height + 1) and each row's conditional cdf (width + 1 each). */
+ * cdf over rows (height + 1), then each row's conditional distribution in two
+ * levels: a cdf over its blocks of PSF_ENV_BLOCK texels (B + 1 entries per row,
+ * B = ceil(width / PSF_ENV_BLOCK)), and, from the next multiple of
+ * PSF_ENV_BLOCK floats on, each block's own cdf (PSF_ENV_BLOCK upper values per
+ * block, row after row; 1 past the row's end). The block cdfs are small enough
+ * to stay in cache, and a block's texel cdf is one cache line: a sample reads
+ * one line of the conditional where a search over the whole row would wait on
+ * several. */
+#define PSF_ENV_BLOCK 16
 typedef struct {
   psf_float4 to_map0;   /* rows of the world-to-map rotation (the inverse of to_world) */
   psf_float4 to_map1;
