@@ -155,9 +155,10 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
   float fu = clamp((ub - texel_lo) / texel_p, 0.0f, 1.0f);
   float v = ((float)y + fv) / (float)env.height;
   float u = ((float)x + fu) / (float)env.width;
-  float theta = v * PSF_ENV_PI, phi = u * 2.0f * PSF_ENV_PI;
-  float sin_theta = sin(theta);
-  float3 m = (float3)(sin(phi) * sin_theta, cos(theta), -cos(phi) * sin_theta);
+  float cos_theta, cos_phi;
+  float sin_theta = sincos(v * PSF_ENV_PI, &cos_theta);
+  float sin_phi = sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
+  float3 m = (float3)(sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta);
   *radiance = env_texel_value(env, data, (uint2)(x, y)) * env.scale.xyz;
   *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
                           : 0.0f;
