@@ -113,7 +113,9 @@ inline float2 square_to_disk(float u1, float u2) {
     r = b;
     phi = (PSF_PI / 2.0f) - (PSF_PI / 4.0f) * (a / b);
   }
-  return (float2)(r * cos(phi), r * sin(phi));
+  float c;
+  float s = sincos(phi, &c);
+  return (float2)(r * c, r * s);
 }
 
 /* Cosine-weighted direction in the local frame (z up). */
@@ -195,12 +197,9 @@ inline float mf_G1(float3 v, float3 m, float au, float av, bool beckmann) {
 inline float3 mf_sample(float3 v, float au, float av, bool beckmann, float u1, float u2) {
   if (beckmann) {
     float phi = 2.0f * PSF_PI * u2;
-    float sp = sin(phi), cp = cos(phi);
-    if (au != av) {
-      float a = atan2(av * sp, au * cp);
-      sp = sin(a);
-      cp = cos(a);
-    }
+    float cp;
+    float sp = sincos(phi, &cp);
+    if (au != av) sp = sincos(atan2(av * sp, au * cp), &cp);
     float inv_a2 = cp * cp / (au * au) + sp * sp / (av * av);
     float tan2 = -log(1.0f - u1) / inv_a2;
     float ct = rsqrt(1.0f + tan2), st = sqrt(fmax(0.0f, 1.0f - ct * ct));
@@ -211,7 +210,9 @@ inline float3 mf_sample(float3 v, float au, float av, bool beckmann, float u1, f
   float3 t1 = lensq > 0.0f ? (float3)(-vh.y, vh.x, 0.0f) * rsqrt(lensq) : (float3)(1.0f, 0.0f, 0.0f);
   float3 t2 = cross(vh, t1);
   float r = sqrt(u1), phi = 2.0f * PSF_PI * u2;
-  float p1 = r * cos(phi), p2 = r * sin(phi);
+  float cos_phi;
+  float sin_phi = sincos(phi, &cos_phi);
+  float p1 = r * cos_phi, p2 = r * sin_phi;
   float s = 0.5f * (1.0f + vh.z);
   p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * p2;
   float3 nh = p1 * t1 + p2 * t2 + sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2)) * vh;

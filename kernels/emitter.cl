@@ -127,7 +127,9 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
     float phi = 2.0f * PSF_ENV_PI * u2;
     *pdf = 1.0f / (4.0f * PSF_ENV_PI);
     *radiance = env.scale.xyz;
-    return (float3)(r * cos(phi), r * sin(phi), z);
+    float c;
+    float s = sincos(phi, &c);
+    return (float3)(r * c, r * s, z);
   }
   __global const float* marginal = data + env_marginal_offset(env);
   uint y = sample_cdf(marginal + 1, env.height, u2);
