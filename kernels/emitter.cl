@@ -116,21 +116,11 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
 }
 
-/* A world direction from the environment's distribution; *pdf its solid-angle
- * pdf, *radiance the radiance from it (the sampled texel's, scaled). */
-inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf,
-                         float3* radiance) {
-  if (env.width == 0u) {
-    /* Uniform over the sphere. */
-    float z = 1.0f - 2.0f * u1;
-    float r = sqrt(fmax(0.0f, 1.0f - z * z));
-    float phi = 2.0f * PSF_ENV_PI * u2;
-    *pdf = 1.0f / (4.0f * PSF_ENV_PI);
-    *radiance = env.scale.xyz;
-    float c;
-    float s = sincos(phi, &c);
-    return (float3)(r * c, r * s, z);
-  }
+/* A world direction from a map's distribution (env.width > 0); *pdf its
+ * solid-angle pdf, *texel the texel it lies in (the radiance, not read here). */
+inline float3 env_sample_texel(Environment env, __global const float* data, float u1, float u2, float* pdf,
+                               uint2* texel) {
+  *texel = (uint2)(0u);
   __global const float* marginal = data + env_marginal_offset(env);
   uint y = sample_cdf(marginal + 1, env.height, u2);
   float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
@@ -161,10 +151,31 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
   float sin_theta = sincos(v * PSF_ENV_PI, &cos_theta);
   float sin_phi = sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
   float3 m = (float3)(sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta);
-  *radiance = env_texel_value(env, data, (uint2)(x, y)) * env.scale.xyz;
+  *texel = (uint2)(x, y);
   *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
                           : 0.0f;
   return env_to_world(env, m);
+}
+
+/* A world direction from the environment's distribution; *pdf its solid-angle
+ * pdf, *radiance the radiance from it (the sampled texel's, scaled). */
+inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf,
+                         float3* radiance) {
+  if (env.width == 0u) {
+    /* Uniform over the sphere. */
+    float z = 1.0f - 2.0f * u1;
+    float r = sqrt(fmax(0.0f, 1.0f - z * z));
+    float phi = 2.0f * PSF_ENV_PI * u2;
+    *pdf = 1.0f / (4.0f * PSF_ENV_PI);
+    *radiance = env.scale.xyz;
+    float c;
+    float s = sincos(phi, &c);
+    return (float3)(r * c, r * s, z);
+  }
+  uint2 texel;
+  float3 wi = env_sample_texel(env, data, u1, u2, pdf, &texel);
+  *radiance = *pdf > 0.0f ? env_texel_value(env, data, texel) * env.scale.xyz : (float3)(0.0f);
+  return wi;
 }
 
 /* --- next-event estimation ------------------------------------------------------ */

@@ -16,12 +16,14 @@
  * pixel gets radiance + alpha * c; samples a light (shadow ray + pending
  * contribution) and the BSDF (next ray). Depth follows Mitsuba's max_depth: the
  * number of path segments, so max_depth 1 shows emitters only and 2 adds direct light.
- * shade_env_samples (before shade, for scenes lit by an environment map): draws
- * each live path's light choice and, where it is the environment, its direction,
- * pdf and radiance. This is the part of next-event estimation that does not
- * depend on the shading point, and the one that waits on memory (a row of the
- * map's cdf, then a texel, at random); in a kernel of its own the processor
- * overlaps those misses across paths, which the long shade kernel cannot.
+ * shade_env_samples and shade_env_texels (before shade, for scenes lit by an
+ * environment map): draw each live path's light choice and, where it is the
+ * environment, its direction and pdf, then read the radiance of the texel it
+ * fell in. This is the part of next-event estimation that does not depend on the
+ * shading point, and the one that waits on memory: a line of the map's cdf, then
+ * a texel, both at random. In short kernels of their own, one wait each, the
+ * processor overlaps those misses across paths, which the long shade kernel
+ * cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility. */
 
@@ -38,8 +40,9 @@ inline float bounce_sample(__global const uint* sobol, FrameParams p, PathState 
   return sample_1d(sobol, p.seed, st.pixel, st.sample, PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
 }
 
-/* shade_env_samples' record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] =
- * (radiance, 1 if the environment was chosen, else 0). */
+/* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
+ * the environment was chosen, else 0); shade_env_samples leaves the texel's
+ * index (as_float) in place of the radiance for shade_env_texels. */
 __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
                                 __global const float* emitter_cdf, Environment env, __global const float* env_data,
                                 uint count, __global const uint* queue_in, __global const PathState* states,
@@ -55,15 +58,26 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
     Emitter em = emitters[sample_cdf(emitter_cdf, params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
       float pdf;
-      float3 radiance;
-      float3 wi = env_sample(env, env_data, sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV),
-                             sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &radiance);
+      uint2 t;
+      float3 wi = env_sample_texel(env, env_data, sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV),
+                                   sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &t);
       a = (float4)(wi, pdf > 0.0f ? em.radiance.w * pdf : 0.0f);
-      b = (float4)(radiance, 1.0f);
+      b = (float4)(as_float(t.y * env.width + t.x), 0.0f, 0.0f, 1.0f);
     }
   }
   env_samples[2u * k] = a;
   env_samples[2u * k + 1u] = b;
+}
+
+__kernel void shade_env_texels(Environment env, __global const float* env_data, uint count,
+                               __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  float4 b = env_samples[2u * k + 1u];
+  if (b.w == 0.0f) return;
+  uint t = as_uint(b.x);
+  float3 radiance = env_texel_value(env, env_data, (uint2)(t % env.width, t / env.width)) * env.scale.xyz;
+  env_samples[2u * k + 1u] = (float4)(radiance, 1.0f);
 }
 
 /* True if a path with `segments` segments is allowed by max_depth. */
