@@ -40,8 +40,10 @@ fs::path write_input(const std::string& name, const uint8_t* data, size_t size) 
   return p;
 }
 
+#if defined(PSF_FUZZ_RESUME)
 // The film and the state attributes make_resume_seed writes (fuzz/make_resume_seed.cpp).
 constexpr int kResumeWidth = 8, kResumeHeight = 4;
+#endif
 
 }  // namespace
 
