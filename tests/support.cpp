@@ -12,13 +12,33 @@
 
 namespace psf::test {
 
-Runtime& runtime() {
+namespace {
+std::unique_ptr<Runtime>& shared_runtime() {
   static std::unique_ptr<Runtime> rt;
+  return rt;
+}
+}  // namespace
+
+Runtime& runtime() {
+  auto& rt = shared_runtime();
   if (!rt) {
     const char* spec = std::getenv("PSF_TEST_DEVICE");
     rt = std::make_unique<Runtime>(choose_device(spec ? spec : ""));
   }
   return *rt;
+}
+
+void release_runtime() {
+  std::unique_ptr<Runtime> rt = std::move(shared_runtime());
+  if (rt) rt->finish();  // destroyed on return, or while a failure unwinds
+}
+
+bool small_sizes() {
+  static const bool small = [] {
+    const char* env = std::getenv("PSF_TEST_SMALL");
+    return env && *env && std::string(env) != "0";
+  }();
+  return small;
 }
 
 std::optional<std::string> shared_dir() {

@@ -11,6 +11,28 @@ namespace psf::test {
 // The runtime on the default device (PSF_TEST_DEVICE overrides), built on first use.
 Runtime& runtime();
 
+// Finishes and destroys the shared runtime (its kernels, program, queue and
+// context), if one was built; runtime() after this builds a new one.
+// tests/main.cpp calls it after the last test so that the OpenCL objects are
+// released before exit. Left to static destruction, the runtime's holder
+// (registered for destruction before the OpenCL implementation's lazily
+// created statics) is destroyed after them: under Oclgrind, clReleaseProgram
+// then freed corrupted memory ("corrupted double-linked list") at exit.
+void release_runtime();
+
+// True when PSF_TEST_SMALL is set to anything but "" or "0": the tests pick
+// smaller problem sizes (fewer elements, pixels, samples) so that a device
+// simulator such as Oclgrind (scripts/oclgrind sets it) finishes in minutes. The
+// tests check the same properties either way, with the same tolerances; only
+// the sizes shrink. Without it every size is the normal one.
+bool small_sizes();
+
+// `normal`, or `small` under small_sizes().
+template <class T>
+T pick(T normal, T small) {
+  return small_sizes() ? small : normal;
+}
+
 // The shared data folder ($PSF_SHARED, else ../shared beside the source tree), if present.
 std::optional<std::string> shared_dir();
 

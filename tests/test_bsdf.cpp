@@ -28,6 +28,10 @@
 //   dielectric transmission (radiance scaling) f(wi, wo) = (eta_i / eta_o)^2 f(wo, wi),
 //   eta_x the IOR on the side of x.
 // - textures: texels are halfs (relative rounding 4.9e-4): 2e-3 relative + 1e-4.
+// Under PSF_TEST_SMALL (psf::test::small_sizes(), set by scripts/oclgrind) the
+// statistical tests draw fewer samples (their bounds are in standard errors or
+// p-values, which follow the sample count) and the chi-square test integrates
+// the pdf over each bin on a coarser midpoint grid; the checks are the same.
 #include <catch2/catch.hpp>
 
 #include <unistd.h>
@@ -626,7 +630,8 @@ TEST_CASE("BSDF: sampling matches the pdf (chi-square) and weights are f cos / p
   }
   const double alpha_total = 0.01;
   const double alpha_case = 1 - std::pow(1 - alpha_total, 1.0 / cases.size());  // Sidak
-  const int kN = 100000, kCos = 16, kPhi = 32, kSubT = 32, kSubP = 16;
+  const int kN = psf::test::pick(100000, 10000), kCos = 16, kPhi = 32;
+  const int kSubT = psf::test::pick(32, 16), kSubP = psf::test::pick(16, 8);
   std::mt19937 g(11);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
   for (const Case& c : cases) {
@@ -719,7 +724,7 @@ TEST_CASE("BSDF: sampling matches the pdf (chi-square) and weights are f cos / p
 
 TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
   Rig rig;
-  const int kN = 200000;
+  const int kN = psf::test::pick(200000, 20000);
   std::mt19937 g(5);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
   // Mean weight (times the radiance scaling's inverse for refraction, so that a
@@ -858,6 +863,13 @@ TEST_CASE("BSDF: reciprocity", "[bsdf]") {
     if (a[q].z * b[q].z < 0) {  // transmission: f(b, a) = (eta_b / eta_a)^2 f(a, b)
       double eta_a = a[q].z > 0 ? 1 : p.eta.x, eta_b = b[q].z > 0 ? 1 : p.eta.x;
       scale = (eta_b / eta_a) * (eta_b / eta_a);
+      // Pairs that graze their microfacet (a direction nearly perpendicular to the
+      // generalised half-vector) sit at the critical angle, where the Fresnel
+      // term's float rounding error grows like 1e-7 / (i.h)^2: below |i.h| = 0.01
+      // float cannot meet the 1e-3 tolerance, whatever the formula (as the 0.05
+      // margin above keeps away from grazing the surface itself).
+      dvec3 h = glm::normalize(eta_a * a[q] + eta_b * b[q]);
+      if (std::min(std::abs(glm::dot(a[q], h)), std::abs(glm::dot(b[q], h))) < 0.01) continue;
     }
     dvec3 x = dvec3(fab[q]) * scale, y(fba[q]);
     if (max3(glm::abs(x - y)) > 1e-3 * std::max(max3(x), max3(y)) + 1e-6) ++bad[mat[q]];
@@ -893,7 +905,7 @@ TEST_CASE("BSDF: delta lobes (conductor, plastic coat, dielectric, thindielectri
 
   std::mt19937 g(13);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
-  const int kN = 50000;
+  const int kN = psf::test::pick(50000, 5000);
   for (double cos_o : {0.95, 0.5, 0.1, -0.3, -0.9}) {
     dvec3 wo(std::sqrt(1 - cos_o * cos_o) * std::cos(0.7), std::sqrt(1 - cos_o * cos_o) * std::sin(0.7), cos_o);
     dvec3 mirror(-wo.x, -wo.y, wo.z);

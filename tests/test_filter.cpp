@@ -1,6 +1,8 @@
 // Path space filtering stages (kernels/{cell_keys,sort,cell_ranges,filter}.cl)
 // against scalar references: std::stable_sort, a plain scan for cell ranges, and
 // a brute-force all-pairs evaluation of Keller et al. 2016, Eq. 1-2.
+// Under PSF_TEST_SMALL (psf::test::small_sizes(), set by scripts/oclgrind) the
+// same checks run on fewer tuples, pixels and samples.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -153,7 +155,11 @@ void check_same(const Reference& ref, const DeviceResult& dev) {
 TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
   auto& rt = psf::test::runtime();
   std::mt19937 rng(5);
-  for (uint32_t n : {0u, 1u, 2u, 63u, 1000u, 65537u, 300001u}) {
+  // Small keeps 65537 (257 work-items: several work-groups and a tail) and drops
+  // only 300001 (the 1024 work-item cap).
+  const std::vector<uint32_t> sizes = psf::test::pick<std::vector<uint32_t>>({0, 1, 2, 63, 1000, 65537, 300001},
+                                                                             {0, 1, 2, 63, 1000, 4097, 65537});
+  for (uint32_t n : sizes) {
     for (uint32_t bits : {1u, 4u, 13u, 22u, 32u}) {
       std::vector<uint32_t> keys(n), idx(n);
       uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
@@ -176,7 +182,7 @@ TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
 
 TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]") {
   auto& rt = psf::test::runtime();
-  std::vector<PathVertex> v = random_tuples(20001, 3, 1.0f);
+  std::vector<PathVertex> v = random_tuples(psf::test::pick(20001, 2001), 3, 1.0f);
   FilterParams p = default_params();
   p.footprint = 0.05f;
   uint32_t n = uint32_t(v.size());
@@ -280,14 +286,16 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
 
 TEST_CASE("Filter: Cornell box tuples equal the brute-force equation", "[filter]") {
   auto& rt = psf::test::runtime();
-  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "48"}});
+  const int res = psf::test::pick(48, 32);
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", std::to_string(res)}});
   psf::Renderer renderer(rt, scene);
   psf::RenderOptions o;
   o.spp = 2;
+  o.batch_log2 = psf::test::pick(20, 11);  // one batch either way; small: smaller buffers
   o.keep_last_batch = true;
   auto r = renderer.render(o);
   const auto& b = r.last_batch;
-  REQUIRE(b.vertices.size() == 48u * 48u * 2u);
+  REQUIRE(b.vertices.size() == size_t(res) * res * 2u);
   size_t with_vertex = std::count_if(b.vertices.begin(), b.vertices.end(), [](auto& t) { return t.albedo.s[3] != 0; });
   CHECK(with_vertex > b.vertices.size() * 9 / 10);
   auto dev = run_filter(b.vertices, b.values, b.params, 1);
@@ -297,11 +305,13 @@ TEST_CASE("Filter: Cornell box tuples equal the brute-force equation", "[filter]
 
 TEST_CASE("Filter: the unfiltered image of a filtered run equals --filter off bit for bit", "[filter]") {
   auto& rt = psf::test::runtime();
-  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "40"}});
+  // Small: 576 pixels, batches of 2048 paths.
+  const int res = psf::test::pick(40, 24);
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", std::to_string(res)}});
   psf::Renderer renderer(rt, scene);
   psf::RenderOptions o;
   o.spp = 6;
-  o.batch_log2 = 12;  // several batches, wrapping around the image
+  o.batch_log2 = psf::test::pick(12, 11);  // several batches, wrapping around the image
   auto filtered = renderer.render(o);
   o.filter.enabled = false;
   auto off = renderer.render(o);
@@ -312,7 +322,11 @@ TEST_CASE("Filter: the unfiltered image of a filtered run equals --filter off bi
 
 TEST_CASE("Filter: the filtered image approaches the unfiltered one as n grows", "[filter]") {
   auto& rt = psf::test::runtime();
-  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "32"}});
+  // Small: 16 x 16 pixels at 1, 8 and 64 spp (a factor 8 between the steps, r
+  // shrinking by 8^(1/4)): the filter's work grows with pixels x spp^2, and 256 spp
+  // take Oclgrind too long. Natively the ratios are then 0.50 and 0.33.
+  const int res = psf::test::pick(32, 16);
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", std::to_string(res)}});
   psf::Renderer renderer(rt, scene);
   // The mean absolute difference between the filtered and unfiltered images of
   // the same paths: bias and the noise the filter removes, both shrinking with
@@ -320,16 +334,19 @@ TEST_CASE("Filter: the filtered image approaches the unfiltered one as n grows",
   auto difference = [&](int spp) {
     psf::RenderOptions o;
     o.spp = spp;
+    o.batch_log2 = psf::test::pick(20, 14);  // one batch either way; small: smaller buffers
     o.filter.footprint_pixels = 8.0f;
     auto r = renderer.render(o);
     double sum = 0;
     for (size_t i = 0; i < r.image.rgb.size(); ++i) sum += std::fabs(r.image.rgb[i] - r.unfiltered.rgb[i]);
     return sum / r.image.rgb.size();
   };
-  double d4 = difference(4), d64 = difference(64), d1024 = difference(1024);
-  INFO("mean |filtered - unfiltered|: 4 spp " << d4 << ", 64 spp " << d64 << ", 1024 spp " << d1024);
-  CHECK(d64 < 0.7 * d4);
-  CHECK(d1024 < 0.7 * d64);
+  const int spp0 = psf::test::pick(4, 1), step = psf::test::pick(16, 8), spp1 = step * spp0, spp2 = step * spp1;
+  double d0 = difference(spp0), d1 = difference(spp1), d2 = difference(spp2);
+  INFO("mean |filtered - unfiltered|: " << spp0 << " spp " << d0 << ", " << spp1 << " spp " << d1 << ", " << spp2
+                                        << " spp " << d2);
+  CHECK(d1 < 0.7 * d0);
+  CHECK(d2 < 0.7 * d1);
 }
 
 TEST_CASE("Filter: switches itself off when no vertex has a neighbour any more", "[filter]") {
