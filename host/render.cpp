@@ -304,10 +304,11 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     s.caster->closest(b.rays[in], hits, n_live);
     uint32_t zero = 0;
     rt.write(alive, &zero, sizeof(zero));
-    if (env_presampled)
+    if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
       rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
                 b.queue[in], states, b.env_samples);
-    if (env_presampled) rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
+      rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
+    }
     rt.launch("shade", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters, s.emitter_cdf,
               s.tri_light_pdf, s.env, s.env_data, n_live, b.queue[in], hits, b.rays[in], states, vertices,
               shadow_rays, alive, b.queue[1 - in], b.rays[1 - in], s.tri_attribs, s.textures, s.texels,
