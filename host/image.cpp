@@ -52,6 +52,15 @@ void check_size(int64_t width, int64_t height) {
     throw std::runtime_error("data window " + std::to_string(width) + "x" + std::to_string(height) + " out of range");
 }
 
+// The data window of an open file, its size checked (check_size), and its size.
+Imath::Box2i data_window(const Imf::InputFile& file, int& width, int& height) {
+  Imath::Box2i dw = file.header().dataWindow();
+  check_size(int64_t(dw.max.x) - dw.min.x + 1, int64_t(dw.max.y) - dw.min.y + 1);
+  width = dw.max.x - dw.min.x + 1;
+  height = dw.max.y - dw.min.y + 1;
+  return dw;
+}
+
 }  // namespace
 
 void check_writable(const std::string& path) {
@@ -114,11 +123,8 @@ void write_exr(const std::string& path, const Image& image, const std::map<std::
 Image read_exr(const std::string& path) {
   try {
     Imf::InputFile file(path.c_str());
-    Imath::Box2i dw = file.header().dataWindow();
     Image img;
-    check_size(int64_t(dw.max.x) - dw.min.x + 1, int64_t(dw.max.y) - dw.min.y + 1);
-    img.width = dw.max.x - dw.min.x + 1;
-    img.height = dw.max.y - dw.min.y + 1;
+    Imath::Box2i dw = data_window(file, img.width, img.height);
     img.rgb.assign(size_t(img.width) * img.height * 3, 0.0f);
     char* base = reinterpret_cast<char*>(img.rgb.data()) -
                  (size_t(dw.min.x) + size_t(dw.min.y) * img.width) * 3 * sizeof(float);
@@ -138,11 +144,8 @@ Image read_exr(const std::string& path) {
 ExrFile read_exr_file(const std::string& path) {
   try {
     Imf::InputFile file(path.c_str());
-    Imath::Box2i dw = file.header().dataWindow();
     ExrFile out;
-    check_size(int64_t(dw.max.x) - dw.min.x + 1, int64_t(dw.max.y) - dw.min.y + 1);
-    out.width = dw.max.x - dw.min.x + 1;
-    out.height = dw.max.y - dw.min.y + 1;
+    Imath::Box2i dw = data_window(file, out.width, out.height);
     for (auto it = file.header().begin(); it != file.header().end(); ++it)
       if (const auto* a = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) out.attributes[it.name()] = a->value();
     Imf::FrameBuffer fb;
