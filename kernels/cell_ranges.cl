@@ -3,7 +3,12 @@
  * Reads: the sorted keys. Writes: ranges[key] = (first, one past the last) for
  * every key present, start and end side by side so a lookup touches one cache
  * line; clear_ranges empties the table first ((0, 0)). Keys of paths without a
- * vertex (>= 2^key_bits) get no range. */
+ * vertex (>= 2^key_bits) get no range.
+ *
+ * The first and the last tuple of a cell are found by different work-items, so
+ * each writes its own 32-bit word: a component store to a uint2 (ranges[k].x)
+ * may compile to a load and store of the whole pair, which loses the other
+ * work-item's word (seen with NVIDIA's OpenCL). */
 
 __kernel void clear_ranges(uint size, __global uint2* ranges) {
   uint k = get_global_id(0);
@@ -16,6 +21,7 @@ __kernel void cell_ranges(uint n, uint key_bits, __global const uint* keys, __gl
   if (i >= n) return;
   uint k = keys[i];
   if (k >= (1u << key_bits)) return;
-  if (i == 0u || keys[i - 1u] != k) ranges[k].x = i;
-  if (i + 1u == n || keys[i + 1u] != k) ranges[k].y = i + 1u;
+  __global uint* words = (__global uint*)ranges;  // ranges[k] = (words[2k], words[2k + 1])
+  if (i == 0u || keys[i - 1u] != k) words[2u * k] = i;
+  if (i + 1u == n || keys[i + 1u] != k) words[2u * k + 1u] = i + 1u;
 }

@@ -828,7 +828,9 @@ TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
           want = ref_albedo(q, wo).y;
         }
         CHECK(mean == Approx(want).margin(4 * se + 5e-3));
-        CHECK(mean <= 1.0 + 4 * se);
+        // 1e-6: a few float32 ulps at 1, the rounding of a weight that is 1 in exact
+        // arithmetic (a smooth conductor seen head-on, where se is near 0).
+        CHECK(mean <= 1.0 + 4 * se + 1e-6);
       }
     }
     // Stated bounds for GGX conductors at normal incidence.
