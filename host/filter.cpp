@@ -7,6 +7,17 @@ namespace psf {
 namespace {
 constexpr size_t kLocal = Runtime::kDefaultLocal;
 constexpr uint32_t kRadixBits = 4;
+
+// Scans data[data_offset, + total) with its block sums in scratch from scratch_offset on.
+void scan_level(Runtime& rt, cl::Buffer& data, uint32_t data_offset, uint32_t total, cl::Buffer& scratch,
+                uint32_t scratch_offset) {
+  const uint32_t blocks = (total + PSF_SCAN_BLOCK - 1) / PSF_SCAN_BLOCK;
+  rt.launch("radix_scan_blocks", size_t(blocks) * PSF_SCAN_LOCAL, PSF_SCAN_LOCAL, data, data_offset, total, scratch,
+            scratch_offset);
+  if (blocks == 1) return;
+  scan_level(rt, scratch, scratch_offset, blocks, scratch, scratch_offset + blocks);
+  rt.launch("radix_scan_add", total, kLocal, data, data_offset, total, scratch, scratch_offset);
+}
 }  // namespace
 
 uint32_t filter_key_bits(uint32_t count) {
@@ -15,19 +26,41 @@ uint32_t filter_key_bits(uint32_t count) {
   return bits;
 }
 
+size_t scan_scratch_entries(uint32_t total) {
+  size_t entries = 0;
+  for (size_t t = total; t > PSF_SCAN_BLOCK; t = (t + PSF_SCAN_BLOCK - 1) / PSF_SCAN_BLOCK)
+    entries += (t + PSF_SCAN_BLOCK - 1) / PSF_SCAN_BLOCK;
+  return entries + 1;  // the last level's single block sum
+}
+
+void exclusive_scan(Runtime& rt, cl::Buffer& data, uint32_t total, cl::Buffer& scratch) {
+  // Scan each block in place, then the block sums (the next level, recursively),
+  // then add each block's offset back.
+  if (total > 0) scan_level(rt, data, 0, total, scratch, 0);
+}
+
+uint32_t radix_chunk(const Runtime& rt, uint32_t n) {
+  // GPUs: short chunks, so that enough work-items run; at most 65536 of them.
+  if (rt.device().type == "GPU") return std::max(16u, (n + 65535) / 65536);
+  // CPUs: chunks of at least 256 pairs per work-item; at most 1024 work-items.
+  const uint32_t items = std::max(1u, std::min(1024u, (n + 255) / 256));
+  return (n + items - 1) / items;
+}
+
 // Each pass swaps the buffer handles, so `keys`/`values` name the result.
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits) {
+                uint32_t n, uint32_t bits, uint32_t chunk) {
   if (n <= 1 || bits == 0) return;
-  // Chunks of at least 256 pairs per work-item; at most 1024 work-items.
-  const uint32_t items = std::max(1u, std::min(1024u, (n + 255) / 256));
-  const uint32_t chunk = (n + items - 1) / items;
-  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * 16 * items);
+  if (chunk == 0) chunk = radix_chunk(rt, n);
+  const uint32_t items = (n + chunk - 1) / chunk;
+  const uint32_t table = 16 * items;  // digit-major counts, then their scan
+  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * table);
+  cl::Buffer scratch = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * scan_scratch_entries(table));
   uint32_t passes = (bits + kRadixBits - 1) / kRadixBits;
   for (uint32_t pass = 0; pass < passes; ++pass) {
     uint32_t shift = pass * kRadixBits;
     rt.launch("radix_count", items, kLocal, keys, n, shift, items, chunk, counts);
-    rt.launch("radix_scan", 1, 1, counts, 16 * items);
+    exclusive_scan(rt, counts, table, scratch);
     rt.launch("radix_scatter", items, kLocal, keys, values, n, shift, items, chunk, counts, tmp_keys, tmp_values);
     std::swap(keys, tmp_keys);
     std::swap(values, tmp_values);

@@ -27,8 +27,18 @@ uint32_t filter_key_bits(uint32_t count);
 // Sorts `n` (key, value) pairs by the low `bits` bits of the keys, stably, using
 // `tmp_keys`/`tmp_values` of the same size; the handles are swapped as it goes,
 // so afterwards `keys` and `values` name the buffers holding the sorted pairs.
+// Each work-item sorts a chunk of `chunk` pairs; 0 picks radix_chunk's.
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits);
+                uint32_t n, uint32_t bits, uint32_t chunk = 0);
+
+// The pairs per work-item radix_sort uses on this device for `n` pairs: a few
+// hundred on CPUs (a work-item is a loop there), 16 on GPUs.
+uint32_t radix_chunk(const Runtime& rt, uint32_t n);
+
+// Replaces data[0, total) by its exclusive prefix sum, using `scratch` of at
+// least scan_scratch_entries(total) uints.
+void exclusive_scan(Runtime& rt, cl::Buffer& data, uint32_t total, cl::Buffer& scratch);
+size_t scan_scratch_entries(uint32_t total);
 
 class PathSpaceFilter {
  public:

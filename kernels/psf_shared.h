@@ -37,6 +37,11 @@ typedef cl_uint psf_uint;
 #define PSF_DIM_RR 5           /* Russian roulette */
 #define PSF_DIM_BSDF_LOBE 6    /* BSDF lobe choice (reflection or transmission, specular or diffuse) */
 
+/* Radix sort (sort.cl): the scan of the digit counts runs in blocks of
+ * PSF_SCAN_BLOCK entries, each by one work-group of PSF_SCAN_LOCAL work-items. */
+#define PSF_SCAN_LOCAL 256u
+#define PSF_SCAN_BLOCK 1024u
+
 #define PSF_NO_HIT 0xFFFFFFFFu
 /* Bit of BvhTriPack.prim marking an alpha-tested triangle (a mask material):
  * raycast.cl's masked kernels test its opacity; hits report the prim without it. */

@@ -2,10 +2,12 @@
  * 4 bits a pass over only the bits the keys use (count, scan, scatter).
  *
  * Each of `items` work-items owns a contiguous chunk of the input: radix_count
- * counts its digits, radix_scan turns the digit-major table counts[d * items + t]
- * into exclusive offsets, radix_scatter moves its chunk in input order to those
- * offsets. Serial chunks make every pass stable without barriers, which suits
- * CPU devices (PoCL); the single-work-item scan is over 16 * items entries. */
+ * counts its digits, radix_scan_blocks and radix_scan_add turn the digit-major
+ * table counts[d * items + t] into exclusive offsets, radix_scatter moves its
+ * chunk in input order to those offsets. Serial chunks make every pass stable
+ * without barriers. The host picks the chunk: long ones on CPU devices (PoCL),
+ * where a work-item is a loop, 16 pairs on GPUs, where the table of 16 * items
+ * counts is then as long as the input and the scan must be parallel. */
 
 #define PSF_RADIX_BITS 4u
 #define PSF_RADIX_BINS 16u
@@ -21,14 +23,47 @@ __kernel void radix_count(__global const uint* keys, uint n, uint shift, uint it
   for (uint d = 0u; d < PSF_RADIX_BINS; ++d) counts[d * items + t] = c[d];
 }
 
-__kernel void radix_scan(__global uint* counts, uint total) {
-  if (get_global_id(0) != 0) return;
-  uint sum = 0u;
-  for (uint i = 0u; i < total; ++i) {
-    uint c = counts[i];
-    counts[i] = sum;
-    sum += c;
+#define PSF_SCAN_PER_ITEM (PSF_SCAN_BLOCK / PSF_SCAN_LOCAL)
+
+/* Exclusive scan of each block of PSF_SCAN_BLOCK entries of data[0, total), in
+ * place, by one work-group of PSF_SCAN_LOCAL; the block's sum goes to
+ * sums[group]. Scanning `sums` the same way and adding it back (radix_scan_add)
+ * gives the scan of the whole array. The offsets let the levels share a buffer. */
+__kernel __attribute__((reqd_work_group_size(PSF_SCAN_LOCAL, 1, 1))) void radix_scan_blocks(
+    __global uint* data, uint data_offset, uint total, __global uint* sums, uint sums_offset) {
+  __local uint part[PSF_SCAN_LOCAL];
+  data += data_offset;
+  sums += sums_offset;
+  uint l = get_local_id(0), g = get_group_id(0);
+  uint base = g * PSF_SCAN_BLOCK + l * PSF_SCAN_PER_ITEM;
+  uint v[PSF_SCAN_PER_ITEM];
+  uint own = 0u;
+  for (uint k = 0u; k < PSF_SCAN_PER_ITEM; ++k) {
+    v[k] = base + k < total ? data[base + k] : 0u;
+    own += v[k];
   }
+  part[l] = own;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  for (uint off = 1u; off < PSF_SCAN_LOCAL; off <<= 1) {  // inclusive scan of the work-items' sums
+    uint add = l >= off ? part[l - off] : 0u;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    part[l] += add;
+    barrier(CLK_LOCAL_MEM_FENCE);
+  }
+  uint run = part[l] - own;
+  for (uint k = 0u; k < PSF_SCAN_PER_ITEM; ++k) {
+    if (base + k < total) data[base + k] = run;
+    run += v[k];
+  }
+  if (l == PSF_SCAN_LOCAL - 1u) sums[g] = part[l];
+}
+
+/* data[i] += offsets[i / PSF_SCAN_BLOCK]: the scanned block sums, added back. */
+__kernel void radix_scan_add(__global uint* data, uint data_offset, uint total, __global const uint* offsets,
+                             uint offsets_offset) {
+  uint i = get_global_id(0);
+  if (i >= total) return;
+  data[data_offset + i] += offsets[offsets_offset + i / PSF_SCAN_BLOCK];
 }
 
 __kernel void radix_scatter(__global const uint* keys_in, __global const uint* values_in, uint n, uint shift,

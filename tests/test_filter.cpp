@@ -152,30 +152,54 @@ void check_same(const Reference& ref, const DeviceResult& dev) {
 
 }  // namespace
 
+TEST_CASE("Sort: the scan of the digit counts equals std::exclusive_scan", "[filter]") {
+  auto& rt = psf::test::runtime();
+  std::mt19937 rng(11);
+  // One block, a block and a tail, and (normal sizes) three levels of block sums.
+  const std::vector<uint32_t> sizes = psf::test::pick<std::vector<uint32_t>>(
+      {1, 2, 255, 1023, 1024, 1025, 4096 + 7, 1048576 + 1029}, {1, 2, 255, 1023, 1024, 1025, 4096 + 7});
+  for (uint32_t n : sizes) {
+    std::vector<uint32_t> v(n), ref(n);
+    for (auto& x : v) x = rng() % 17;  // digit counts: small, zeros among them
+    std::exclusive_scan(v.begin(), v.end(), ref.begin(), 0u);
+    cl::Buffer data = rt.upload(v, CL_MEM_READ_WRITE);
+    cl::Buffer scratch = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * psf::scan_scratch_entries(n));
+    psf::exclusive_scan(rt, data, n, scratch);
+    auto got = rt.download<uint32_t>(data, n);
+    INFO("n " << n);
+    size_t wrong = 0;
+    for (uint32_t i = 0; i < n; ++i) wrong += got[i] != ref[i];
+    CHECK(wrong == 0);
+  }
+}
+
 TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
   auto& rt = psf::test::runtime();
   std::mt19937 rng(5);
   // Small keeps 65537 (257 work-items: several work-groups and a tail) and drops
-  // only 300001 (the 1024 work-item cap).
+  // only 300001 (the 1024 work-item cap). Chunk 0 is this device's choice
+  // (radix_chunk), 16 what GPUs use.
   const std::vector<uint32_t> sizes = psf::test::pick<std::vector<uint32_t>>({0, 1, 2, 63, 1000, 65537, 300001},
                                                                              {0, 1, 2, 63, 1000, 4097, 65537});
   for (uint32_t n : sizes) {
     for (uint32_t bits : {1u, 4u, 13u, 22u, 32u}) {
-      std::vector<uint32_t> keys(n), idx(n);
-      uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
-      for (auto& k : keys) k = uint32_t(rng() & mask);
-      std::iota(idx.begin(), idx.end(), 0u);
-      std::vector<std::pair<uint32_t, uint32_t>> ref(n);
-      for (uint32_t i = 0; i < n; ++i) ref[i] = {keys[i], i};
-      std::stable_sort(ref.begin(), ref.end(), [](auto& a, auto& b) { return a.first < b.first; });
-      cl::Buffer kb = rt.upload(keys, CL_MEM_READ_WRITE), vb = rt.upload(idx, CL_MEM_READ_WRITE);
-      cl::Buffer tk = rt.buffer(CL_MEM_READ_WRITE, n * 4), tv = rt.buffer(CL_MEM_READ_WRITE, n * 4);
-      psf::radix_sort(rt, kb, vb, tk, tv, n, bits);
-      auto sk = rt.download<uint32_t>(kb, n), sv = rt.download<uint32_t>(vb, n);
-      INFO("n " << n << " bits " << bits);
-      size_t wrong = 0;
-      for (uint32_t i = 0; i < n; ++i) wrong += sk[i] != ref[i].first || sv[i] != ref[i].second;
-      CHECK(wrong == 0);
+      for (uint32_t chunk : {0u, 16u}) {
+        std::vector<uint32_t> keys(n), idx(n);
+        uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
+        for (auto& k : keys) k = uint32_t(rng() & mask);
+        std::iota(idx.begin(), idx.end(), 0u);
+        std::vector<std::pair<uint32_t, uint32_t>> ref(n);
+        for (uint32_t i = 0; i < n; ++i) ref[i] = {keys[i], i};
+        std::stable_sort(ref.begin(), ref.end(), [](auto& a, auto& b) { return a.first < b.first; });
+        cl::Buffer kb = rt.upload(keys, CL_MEM_READ_WRITE), vb = rt.upload(idx, CL_MEM_READ_WRITE);
+        cl::Buffer tk = rt.buffer(CL_MEM_READ_WRITE, n * 4), tv = rt.buffer(CL_MEM_READ_WRITE, n * 4);
+        psf::radix_sort(rt, kb, vb, tk, tv, n, bits, chunk);
+        auto sk = rt.download<uint32_t>(kb, n), sv = rt.download<uint32_t>(vb, n);
+        INFO("n " << n << " bits " << bits << " chunk " << chunk);
+        size_t wrong = 0;
+        for (uint32_t i = 0; i < n; ++i) wrong += sk[i] != ref[i].first || sv[i] != ref[i].second;
+        CHECK(wrong == 0);
+      }
     }
   }
 }
