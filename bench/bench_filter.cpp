@@ -14,8 +14,8 @@
 // nanoflann_radius/<scene>: nanoflann 1.4 kd-tree (leaf size 10) over the valid
 //   vertices (albedo.w != 0), then one radius query per valid vertex with its own
 //   r_i = (r0 > 0 ? r0 : d_i footprint) n_scale (as kernels/cell_keys.cl), unsorted
-//   results, over as many std::threads as the device has compute units (chunks of
-//   1024 queries from an atomic counter). Timed: build + queries, wall clock; one
+//   results, over as many std::threads as the device has compute units (on a GPU
+//   device: as the machine has cores; chunks of 1024 queries from an atomic counter). Timed: build + queries, wall clock; one
 //   warm-up, --nf_trials timed.
 // psf_filter/<scene>/cells8 and /cells27: PathSpaceFilter::run over the same
 //   tuples (1 iteration; --iterations), one warm-up, --trials timed; device time =
@@ -259,7 +259,9 @@ int main(int argc, char** argv) {
 
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
-  const unsigned threads = std::max(1u, dev.compute_units);
+  // The peer's threads: as many as the device has compute units on a CPU device
+  // (the same cores); on a GPU, every core of this machine.
+  const unsigned threads = std::max(1u, dev.type == "CPU" ? dev.compute_units : std::thread::hardware_concurrency());
   const uint64_t paths = uint64_t(opt.width) * opt.height * opt.spp;
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");

@@ -20,7 +20,11 @@
 //   install mitsuba==3.6.4 numpy).
 // Ratio printed: psf paths/s / Mitsuba paths/s (goal >= 1), both medians.
 //
+// On a GPU device the peer is Mitsuba's cuda_ad_rgb variant (--peer_variant=NAME
+// picks another).
+//
 // Usage: bench_render [benchmark flags] [--scene=PATH ...] [--spp=N] [--trials=N] [--no_filtered=1]
+//                     [--peer_variant=NAME]
 // Without --scene: the living-room (1 spp, its 1280x720 film) and Mitsuba's cbox
 // (4 spp, 500x500) from $PSF_SHARED (else ../shared beside the source tree) and
 // scenes/cornell-box.xml (16 spp, 256x256); absent ones are skipped.
@@ -161,6 +165,8 @@ int main(int argc, char** argv) {
   args.take_number("trials", opt.trials);
   int no_filtered = 0;
   args.take_number("no_filtered", no_filtered);
+  std::string peer_variant;  // Mitsuba 3 variant; default: auto on CPUs, cuda_ad_rgb on GPUs
+  args.take("peer_variant", peer_variant);
   opt.filtered = !no_filtered;
   if (!args.done()) return 2;
   opt.trials = std::max(1, opt.trials);
@@ -171,7 +177,11 @@ int main(int argc, char** argv) {
 
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
-  const unsigned threads = std::max(1u, dev.compute_units);
+  // The peer: on a CPU device, as many Dr.Jit threads as it has compute units and
+  // Mitsuba's CPU variants; on a GPU, Mitsuba's CUDA variant (and every core).
+  const bool gpu = dev.type == "GPU";
+  const unsigned threads = gpu ? 0u : std::max(1u, dev.compute_units);
+  if (peer_variant.empty()) peer_variant = gpu ? "cuda_ad_rgb" : "auto";
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
   benchmark::AddCustomContext("psf_build_options", "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH));
@@ -190,7 +200,8 @@ int main(int argc, char** argv) {
   if (have_mitsuba) {
     while (!version.empty() && (version.back() == '\n' || version.back() == ' ')) version.pop_back();
     report("peer: Mitsuba 3 (%s) via %s\n", version.c_str(), python.c_str());
-    benchmark::AddCustomContext("peer", "Mitsuba 3 (" + version + "), " + std::to_string(threads) + " threads");
+    benchmark::AddCustomContext("peer", "Mitsuba 3 (" + version + "), " + peer_variant +
+                                            (gpu ? "" : ", " + std::to_string(threads) + " threads"));
   } else {
     report("peer skipped: `import mitsuba` fails with %s (python3 -m venv build/venv && build/venv/bin/pip "
            "install mitsuba==3.6.4 numpy, or set PSF_PYTHON)\n",
@@ -221,11 +232,11 @@ int main(int argc, char** argv) {
   for (auto& bp : benches) {
     Bench* b = bp.get();
     if (have_mitsuba) {
-      benchmark::RegisterBenchmark(("mitsuba3_render/" + b->name).c_str(), [b, &opt, python, script,
+      benchmark::RegisterBenchmark(("mitsuba3_render/" + b->name).c_str(), [b, &opt, python, script, peer_variant,
                                                                              threads](benchmark::State& state) {
         std::string cmd = quote(python) + " " + quote(script) + " --scene " + quote(b->path) + " --spp " +
                           std::to_string(b->spp) + " --repeat " + std::to_string(opt.trials) + " --threads " +
-                          std::to_string(threads);
+                          std::to_string(threads) + " --variant " + quote(peer_variant);
         auto [out, status] = run_command(cmd);
         std::string line;
         for (std::stringstream in(out); std::getline(in, line);)

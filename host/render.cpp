@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 
 #include "bvh.h"
 #include "lights.h"
@@ -105,7 +106,7 @@ void Accumulator::add(const BatchImages& b) {
       sums[p * 4 + 3] += c.s[3];
     }
   };
-  add_to(filtered, bad_filtered, b.filtered);
+  add_to(filtered, bad_filtered, b.filtered.empty() ? b.unfiltered : b.filtered);
   add_to(unfiltered, bad_unfiltered, b.unfiltered);
   if (!aov.empty()) {
     uint64_t p = b.first % pixels;
@@ -194,6 +195,23 @@ struct Renderer::Batch {
   cl::Buffer contrib, contrib_unfiltered, alive;
   std::unique_ptr<PathSpaceFilter> filter;
   float footprint = 0;   // sqrt(dOmega / pi) of the footprint
+  std::mutex spare_mu;   // recycle() runs on the thread that accumulates
+  std::vector<std::vector<cl_float4>> spare;  // download vectors handed back by recycle()
+
+  // n contributions from `buf`, into a recycled vector where there is one.
+  std::vector<cl_float4> download(Runtime& rt, const cl::Buffer& buf, size_t n) {
+    std::vector<cl_float4> v;
+    {
+      std::lock_guard<std::mutex> lock(spare_mu);
+      if (!spare.empty()) {
+        v = std::move(spare.back());
+        spare.pop_back();
+      }
+    }
+    v.resize(n);
+    rt.read(buf, v.data(), n * sizeof(cl_float4));
+    return v;
+  }
 };
 
 Renderer::Renderer(Runtime& rt, const Scene& scene) : impl_(std::make_unique<Impl>(rt, scene)) {}
@@ -340,13 +358,19 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
     rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.filtered, b.counts, b.contrib);
-    out.filtered = rt.download<cl_float4>(b.contrib, p.batch_size);
+    out.filtered = b.download(rt, b.contrib, p.batch_size);
   }
-  out.unfiltered = rt.download<cl_float4>(b.contrib_unfiltered, p.batch_size);
-  if (!filtering) out.filtered = out.unfiltered;
+  out.unfiltered = b.download(rt, b.contrib_unfiltered, p.batch_size);
   if (o.aovs) out.vertices = rt.download<PathVertex>(vertices, p.batch_size);
   rt.finish();
   return out;
+}
+
+void Renderer::recycle(BatchImages&& done) {
+  if (!batch_) return;
+  std::lock_guard<std::mutex> lock(batch_->spare_mu);
+  for (auto* v : {&done.filtered, &done.unfiltered})
+    if (v->capacity() >= batch_->size && batch_->spare.size() < 8) batch_->spare.push_back(std::move(*v));
 }
 
 RenderResult Renderer::render(const RenderOptions& o) {
@@ -375,6 +399,7 @@ RenderResult Renderer::render(const RenderOptions& o) {
       r.last_batch.vertices = rt.download<PathVertex>(batch_->vertices, b.unfiltered.size());
       r.last_batch.values = rt.download<cl_float4>(batch_->values, b.unfiltered.size());
     }
+    recycle(std::move(b));
   }
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.paths = total;

@@ -30,7 +30,8 @@ struct RenderOptions {
 struct BatchImages {
   uint64_t index = 0;                 // batch number
   uint64_t first = 0;                 // global index of its first path
-  std::vector<cl_float4> filtered;    // per path: prefix + alpha c-bar, w: tuples averaged
+  std::vector<cl_float4> filtered;    // per path: prefix + alpha c-bar, w: tuples averaged; empty
+                                      // when the batch was not filtered: the same as `unfiltered`
   std::vector<cl_float4> unfiltered;  // per path: prefix + alpha c, w: 1
   std::vector<PathVertex> vertices;   // with RenderOptions::aovs: the filtering vertices
   uint32_t max_count = 0;             // largest number of tuples averaged (0: not filtered)
@@ -93,6 +94,9 @@ class Renderer {
   // Traces batch `index` of a render of `total` paths (its paths are index * 2^m up
   // to the next multiple or total), filters it when `filtering`, and returns its sums.
   BatchImages trace_batch(uint64_t index, uint64_t total, bool filtering);
+  // Takes a batch's vectors back once it is added, so that later batches download
+  // into memory already paged in (a fresh 16 MiB vector costs more than the copy).
+  void recycle(BatchImages&& batch);
   uint32_t batch_size() const;
   Runtime& runtime();
 

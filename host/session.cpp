@@ -352,7 +352,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
     }
     // A batch filtered on a device that had not yet heard of the switch-off is
     // added unfiltered, so the image does not depend on the devices' timing.
-    if (filter_off) img.filtered = img.unfiltered;
+    if (filter_off) img.filtered.clear();  // empty: add the unfiltered contributions
     if (img.unfiltered.size() < batch && !state_saved) {  // the last, partial batch
       state = acc;
       state_saved = true;
@@ -369,6 +369,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
         std::cerr << (bar ? "\n" : "") << "psf: path space filtering switched itself off after " << acc.paths
                   << " paths: no vertex had a neighbour any more\n";
     }
+    renderers[(img.index - first_batch) % D]->recycle(std::move(img));
     double t = elapsed();
     if (bar) {
       double done_frac = time_only ? std::min(1.0, t / o.time_limit)
