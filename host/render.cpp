@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <thread>
 
 #include "bvh.h"
 #include "lights.h"
@@ -94,35 +95,46 @@ void Accumulator::reset(int w, int h, bool aovs) {
 void Accumulator::add(const BatchImages& b) {
   if (b.index != next_batch) throw std::logic_error("batches must be accumulated in order");
   const uint64_t pixels = uint64_t(width) * height;
-  auto add_to = [&](std::vector<float>& sums, std::vector<uint32_t>& bad, const std::vector<cl_float4>& v) {
-    uint64_t p = b.first % pixels;
-    for (size_t j = 0; j < v.size(); ++j, p = (p + 1 == pixels ? 0 : p + 1)) {
-      const cl_float4& c = v[j];
-      if (std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2])) {
-        for (int k = 0; k < 3; ++k) sums[p * 4 + k] += c.s[k];
-      } else {
-        bad[p] += 1;
+  const uint64_t n = b.unfiltered.size(), offset = b.first % pixels;
+  const std::vector<cl_float4>& f = b.filtered.empty() ? b.unfiltered : b.filtered;
+  auto add_one = [](float* sums, uint32_t& bad, const cl_float4& c) {
+    if (std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2])) {
+      for (int k = 0; k < 3; ++k) sums[k] += c.s[k];
+    } else {
+      bad += 1;
+    }
+    sums[3] += c.s[3];
+  };
+  // Path j belongs to pixel (first + j) mod pixels. Threads take disjoint pixel
+  // ranges and add each pixel's paths in path order: the sums are the same, bit
+  // for bit, as one thread adding the paths in order.
+  auto add_pixels = [&](uint64_t p0, uint64_t p1) {
+    for (uint64_t round = 0; round * pixels < n + pixels; ++round) {
+      for (uint64_t p = p0; p < p1; ++p) {
+        uint64_t j = (p + pixels - offset) % pixels + round * pixels;
+        if (j >= n) continue;
+        add_one(&filtered[p * 4], bad_filtered[p], f[j]);
+        add_one(&unfiltered[p * 4], bad_unfiltered[p], b.unfiltered[j]);
+        if (aov.empty() || j >= b.vertices.size()) continue;
+        const PathVertex& v = b.vertices[j];
+        if (v.albedo.s[3] == 0.0f) continue;
+        float* a = &aov[p * 8];  // albedo rgb, depth, normal xyz, vertices
+        for (int k = 0; k < 3; ++k) {
+          a[k] += v.albedo.s[k];
+          a[4 + k] += v.normal.s[k];
+        }
+        a[3] += v.position.s[3];
+        a[7] += 1.0f;
       }
-      sums[p * 4 + 3] += c.s[3];
     }
   };
-  add_to(filtered, bad_filtered, b.filtered.empty() ? b.unfiltered : b.filtered);
-  add_to(unfiltered, bad_unfiltered, b.unfiltered);
-  if (!aov.empty()) {
-    uint64_t p = b.first % pixels;
-    for (size_t j = 0; j < b.vertices.size(); ++j, p = (p + 1 == pixels ? 0 : p + 1)) {
-      const PathVertex& v = b.vertices[j];
-      if (v.albedo.s[3] == 0.0f) continue;
-      float* a = &aov[p * 8];  // albedo rgb, depth, normal xyz, vertices
-      for (int k = 0; k < 3; ++k) {
-        a[k] += v.albedo.s[k];
-        a[4 + k] += v.normal.s[k];
-      }
-      a[3] += v.position.s[3];
-      a[7] += 1.0f;
-    }
-  }
-  paths += b.unfiltered.size();
+  const uint64_t threads =
+      std::max<uint64_t>(1, std::min<uint64_t>({std::thread::hardware_concurrency(), 8, n >> 16, pixels >> 10}));
+  std::vector<std::thread> pool;
+  for (uint64_t t = 1; t < threads; ++t) pool.emplace_back(add_pixels, pixels * t / threads, pixels * (t + 1) / threads);
+  add_pixels(0, pixels / threads);
+  for (auto& t : pool) t.join();
+  paths += n;
   next_batch += 1;
 }
 
