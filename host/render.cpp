@@ -332,8 +332,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   const uint32_t env_presampled = s.env.present && s.env.width > 0 ? 1u : 0u;
   for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
     s.caster->closest(b.rays[in], hits, n_live);
-    uint32_t zero = 0;
-    rt.write(alive, &zero, sizeof(zero));
+    rt.zero(alive, sizeof(uint32_t));
     if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
       rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
                 b.queue[in], states, b.env_samples);

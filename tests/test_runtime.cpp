@@ -75,3 +75,12 @@ TEST_CASE("Runtime: includes are expanded once from the embedded sources", "[run
   CHECK(src.find("#define PSF_SHARED_H", first + 1) == std::string::npos);
   CHECK_THROWS(psf::expand_kernel_source("no_such_file.cl"));
 }
+
+TEST_CASE("Runtime: zero clears the bytes asked for, in queue order", "[runtime]") {
+  auto& rt = psf::test::runtime();
+  std::vector<uint32_t> v(37, 0xABCDu);
+  cl::Buffer b = rt.upload(v, CL_MEM_READ_WRITE);
+  rt.zero(b, 5 * sizeof(uint32_t));  // queued after the upload, before the download
+  auto got = rt.download<uint32_t>(b, v.size());
+  for (size_t i = 0; i < v.size(); ++i) CHECK(got[i] == (i < 5 ? 0u : 0xABCDu));
+}

@@ -263,6 +263,14 @@ void Runtime::write(const cl::Buffer& buf, const void* src, size_t bytes, size_t
   }
 }
 
+void Runtime::zero(const cl::Buffer& buf, size_t bytes) {
+  try {
+    queue_.enqueueFillBuffer(buf, cl_uint(0), 0, bytes);
+  } catch (const cl::Error& e) {
+    throw ClError(e.err(), "clEnqueueFillBuffer(" + std::to_string(bytes) + " bytes)");
+  }
+}
+
 void Runtime::enqueue(const std::string& name, cl::Kernel& k, size_t global, size_t local) {
   if (global == 0) return;
   local = std::max<size_t>(1, std::min(local, device_.max_work_group));

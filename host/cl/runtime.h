@@ -94,6 +94,9 @@ class Runtime {
   }
   void read(const cl::Buffer& buf, void* dst, size_t bytes, size_t offset = 0);
   void write(const cl::Buffer& buf, const void* src, size_t bytes, size_t offset = 0);
+  // Sets `bytes` (a multiple of 4) of `buf` to zero without waiting: queued behind
+  // the kernels before it and ahead of those after it.
+  void zero(const cl::Buffer& buf, size_t bytes);
 
   // Sets the arguments in order and enqueues `name` over `global` work-items,
   // rounded up to a multiple of `local` (kernels guard their tail).
