@@ -1,6 +1,6 @@
 // bench_raycast: closest-hit ray casting throughput of kernels/raycast.cl on
 // incoherent diffuse rays, against Embree 3 (rtcIntersect1) on the same rays with
-// as many threads as the OpenCL device has compute units.
+// as many threads as the OpenCL device has compute units (every core when it is a GPU).
 //
 // Rays: 2^21 (--rays_log2) area-uniform points on the scene's triangles, offset
 // along the geometric normal by 1e-5 of the scene's bounding-box diagonal, with
@@ -251,7 +251,9 @@ int main(int argc, char** argv) {
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
   const std::string build_options = "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH);
-  const unsigned threads = std::max(1u, dev.compute_units);
+  // Embree's threads: as many as the device has compute units on a CPU device (the
+  // same cores); on a GPU, every core of this machine.
+  const unsigned threads = std::max(1u, dev.type == "CPU" ? dev.compute_units : std::thread::hardware_concurrency());
   const size_t num_rays = size_t(1) << opt.rays_log2;
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
