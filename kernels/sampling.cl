@@ -56,16 +56,23 @@ inline uint nested_uniform_scramble(uint x, uint seed) {
   return reverse_bits32(x);
 }
 
+/* The part of the scrambling seed that every dimension of one pixel's sequence
+ * shares: a kernel that draws many dimensions for one pixel computes it once. */
+inline uint pixel_seed(uint seed, uint pixel) { return psf_hash_combine(psf_hash(seed), pixel); }
+
 /* Scrambling seed of one dimension of one pixel's sequence. */
-inline uint sobol_seed(uint seed, uint pixel, uint dim) {
-  return psf_hash_combine(psf_hash_combine(psf_hash(seed), pixel), dim);
+inline uint sobol_seed(uint seed, uint pixel, uint dim) { return psf_hash_combine(pixel_seed(seed, pixel), dim); }
+
+/* sample_bits for the pixel whose pixel_seed is `key`. */
+inline uint sample_bits_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
+  uint s = psf_hash_combine(key, dim);
+  if (dim < PSF_SOBOL_DIMS) return nested_uniform_scramble(sobol_unscrambled(sobol, index, dim), s);
+  return psf_hash_combine(psf_hash_combine(s, index), 0x51ed270bu);
 }
 
 /* 32-bit value of dimension `dim` of sample `index` of `pixel`, scrambled. */
 inline uint sample_bits(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
-  if (dim < PSF_SOBOL_DIMS)
-    return nested_uniform_scramble(sobol_unscrambled(sobol, index, dim), sobol_seed(seed, pixel, dim));
-  return psf_hash_combine(psf_hash_combine(sobol_seed(seed, pixel, dim), index), 0x51ed270bu);
+  return sample_bits_keyed(sobol, pixel_seed(seed, pixel), index, dim);
 }
 
 /* Uniform float in [0, 1): the top 24 bits. */
@@ -73,6 +80,10 @@ inline float bits_to_float(uint x) { return (float)(x >> 8) * (1.0f / 16777216.0
 
 inline float sample_1d(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
   return bits_to_float(sample_bits(sobol, seed, pixel, index, dim));
+}
+
+inline float sample_1d_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
+  return bits_to_float(sample_bits_keyed(sobol, key, index, dim));
 }
 
 /* Writes `dims` dimensions of the points first..first+count-1 (row per point):

@@ -36,8 +36,9 @@ inline float power_heuristic(float a, float b) {
   return (a2 + b2) > 0.0f ? a2 / (a2 + b2) : 0.0f;
 }
 
-inline float bounce_sample(__global const uint* sobol, FrameParams p, PathState st, uint offset) {
-  return sample_1d(sobol, p.seed, st.pixel, st.sample, PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
+/* Dimension `offset` of this bounce of path `st`; key = pixel_seed(seed, st.pixel). */
+inline float bounce_sample(__global const uint* sobol, uint key, PathState st, uint offset) {
+  return sample_1d_keyed(sobol, key, st.sample, PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
 }
 
 /* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
@@ -54,13 +55,14 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
   uint dim = PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
   if (params.num_emitters > 0u) {
-    float ul = sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_SELECT);
+    const uint key = pixel_seed(params.seed, pixel);
+    float ul = sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_SELECT);
     Emitter em = emitters[sample_cdf(emitter_cdf, params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
       float pdf;
       uint2 t;
-      float3 wi = env_sample_texel(env, env_data, sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV),
-                                   sample_1d(sobol, params.seed, pixel, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &t);
+      float3 wi = env_sample_texel(env, env_data, sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV),
+                                   sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &t);
       a = (float4)(wi, pdf > 0.0f ? em.radiance.w * pdf : 0.0f);
       b = (float4)(as_float(t.y * env.width + t.x), 0.0f, 0.0f, 1.0f);
     }
@@ -106,6 +108,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   if (k >= count) return;
   uint j = queue_in[k];
   PathState st = states[j];
+  const uint key = pixel_seed(params.seed, st.pixel);  /* bounce_sample's */
   Ray shadow;
   shadow.org = (float4)(0.0f);
   shadow.dir = (float4)(0.0f, 0.0f, 1.0f, -1.0f);
@@ -183,9 +186,9 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       ls.delta = 0u;
     } else {
       ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
-                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_SELECT),
-                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV),
-                          bounce_sample(sobol, params, st, PSF_DIM_LIGHT_UV + 1u));
+                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_SELECT),
+                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV),
+                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV + 1u));
     }
     float bsdf_pdf;
     float3 f = ls.pdf > 0.0f ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);
@@ -206,15 +209,15 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
 
   /* BSDF sampling for the next segment, then Russian roulette. */
   if (scatter) {
-    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV),
-                                bounce_sample(sobol, params, st, PSF_DIM_BSDF_UV + 1u),
-                                bsdf_chooses_lobe(m) ? bounce_sample(sobol, params, st, PSF_DIM_BSDF_LOBE) : 0.5f);
+    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(sobol, key, st, PSF_DIM_BSDF_UV),
+                                bounce_sample(sobol, key, st, PSF_DIM_BSDF_UV + 1u),
+                                bsdf_chooses_lobe(m) ? bounce_sample(sobol, key, st, PSF_DIM_BSDF_LOBE) : 0.5f);
     beta *= bs.weight;
     if (segments >= params.rr_depth) {
       /* Survival by the throughput since the filtering vertex: any probability
        * keeps the estimate unbiased, and this one does not depend on alpha. */
       float q = fmin(max3(beta), 0.95f);
-      if (bounce_sample(sobol, params, st, PSF_DIM_RR) >= q) scatter = false;
+      if (bounce_sample(sobol, key, st, PSF_DIM_RR) >= q) scatter = false;
       else beta /= q;
     }
     if (scatter && max3(bs.weight) > 0.0f) {
