@@ -94,19 +94,17 @@ inline void add_radiance(PathState* st, float3 c) {
 /* A ray origin off the surface, on the side of `n`. */
 inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * fmax(1.0f, max3(fabs(p))); }
 
-__kernel void shade(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
-                    __global const uint* tri_material, __global const Material* materials,
-                    __global const Emitter* emitters, __global const float* emitter_cdf,
-                    __global const float* tri_light_pdf, Environment env, __global const float* env_data,
-                    uint count, __global const uint* queue_in, __global const Hit* hits,
-                    __global const Ray* rays_in, __global PathState* states, __global PathVertex* vertices,
-                    __global Ray* shadow_rays, __global uint* alive_count, __global uint* queue_out,
-                    __global Ray* rays_out, __global const TriAttrib* tri_attribs,
-                    __global const TextureInfo* textures, __global const half* texels, uint env_presampled,
-                    __global const float4* env_samples) {
-  uint k = get_global_id(0);
-  if (k >= count) return;
-  uint j = queue_in[k];
+/* Shades slot k (path j = queue_in[k]): updates its state, writes its shadow ray,
+ * and returns whether it goes on, with its next ray in *next. */
+inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* sobol,
+                       __global const float4* tri_pos, __global const uint* tri_material,
+                       __global const Material* materials, __global const Emitter* emitters,
+                       __global const float* emitter_cdf, __global const float* tri_light_pdf, Environment env,
+                       __global const float* env_data, __global const Hit* hits, __global const Ray* rays_in,
+                       __global PathState* states, __global PathVertex* vertices, __global Ray* shadow_rays,
+                       __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
+                       __global const half* texels, uint env_presampled, __global const float4* env_samples,
+                       Ray* next) {
   PathState st = states[j];
   const uint key = pixel_seed(params.seed, st.pixel);  /* bounce_sample's */
   Ray shadow;
@@ -129,7 +127,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
     st.flags &= ~PSF_PATH_ALIVE;
     shadow_rays[k] = shadow;
     states[j] = st;
-    return;
+    return false;
   }
   float3 p0 = tri_pos[3u * hit.prim].xyz, p1 = tri_pos[3u * hit.prim + 1u].xyz, p2 = tri_pos[3u * hit.prim + 2u].xyz;
   float3 ng = cross(p1 - p0, p2 - p0);
@@ -229,15 +227,48 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
       st.depth += 1u;
-      uint slot = atomic_inc(alive_count);
-      queue_out[slot] = j;
-      rays_out[slot] = ray;
+      *next = ray;
     } else {
       scatter = false;
     }
   }
   if (!scatter) st.flags &= ~PSF_PATH_ALIVE;
   states[j] = st;
+  return scatter;
+}
+
+/* Survivors are appended to queue_out and rays_out with one global atomic per
+ * work-group: slots within the group from a local counter, the group's base from
+ * alive_count (a global atomic per path contends for one cache line across every
+ * core). Every work-item reaches the barriers, so the tail is masked, not
+ * returned from. */
+__kernel void shade(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
+                    __global const uint* tri_material, __global const Material* materials,
+                    __global const Emitter* emitters, __global const float* emitter_cdf,
+                    __global const float* tri_light_pdf, Environment env, __global const float* env_data,
+                    uint count, __global const uint* queue_in, __global const Hit* hits,
+                    __global const Ray* rays_in, __global PathState* states, __global PathVertex* vertices,
+                    __global Ray* shadow_rays, __global uint* alive_count, __global uint* queue_out,
+                    __global Ray* rays_out, __global const TriAttrib* tri_attribs,
+                    __global const TextureInfo* textures, __global const half* texels, uint env_presampled,
+                    __global const float4* env_samples) {
+  __local uint group_count, group_base;
+  uint k = get_global_id(0), l = get_local_id(0);
+  uint j = k < count ? queue_in[k] : 0u;
+  Ray next;
+  bool go = k < count && shade_path(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
+                                    tri_light_pdf, env, env_data, hits, rays_in, states, vertices, shadow_rays,
+                                    tri_attribs, textures, texels, env_presampled, env_samples, &next);
+  if (l == 0u) group_count = 0u;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  uint slot = go ? atomic_inc(&group_count) : 0u;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  if (l == 0u) group_base = group_count > 0u ? atomic_add(alive_count, group_count) : 0u;
+  barrier(CLK_LOCAL_MEM_FENCE);
+  if (go) {
+    queue_out[group_base + slot] = j;
+    rays_out[group_base + slot] = next;
+  }
 }
 
 __kernel void shade_shadows(uint count, __global const uint* queue_in, __global const Hit* shadow_hits,
