@@ -114,7 +114,7 @@ inline float2 square_to_disk(float u1, float u2) {
     phi = (PSF_PI / 2.0f) - (PSF_PI / 4.0f) * (a / b);
   }
   float c;
-  float s = sincos(phi, &c);
+  float s = psf_sincos(phi, &c);
   return (float2)(r * c, r * s);
 }
 
@@ -198,8 +198,8 @@ inline float3 mf_sample(float3 v, float au, float av, bool beckmann, float u1, f
   if (beckmann) {
     float phi = 2.0f * PSF_PI * u2;
     float cp;
-    float sp = sincos(phi, &cp);
-    if (au != av) sp = sincos(atan2(av * sp, au * cp), &cp);
+    float sp = psf_sincos(phi, &cp);
+    if (au != av) sp = psf_sincos(atan2(av * sp, au * cp), &cp);
     float inv_a2 = cp * cp / (au * au) + sp * sp / (av * av);
     float tan2 = -log(1.0f - u1) / inv_a2;
     float ct = rsqrt(1.0f + tan2), st = sqrt(fmax(0.0f, 1.0f - ct * ct));
@@ -211,7 +211,7 @@ inline float3 mf_sample(float3 v, float au, float av, bool beckmann, float u1, f
   float3 t2 = cross(vh, t1);
   float r = sqrt(u1), phi = 2.0f * PSF_PI * u2;
   float cos_phi;
-  float sin_phi = sincos(phi, &cos_phi);
+  float sin_phi = psf_sincos(phi, &cos_phi);
   float p1 = r * cos_phi, p2 = r * sin_phi;
   float s = 0.5f * (1.0f + vh.z);
   p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * p2;

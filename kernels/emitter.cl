@@ -148,8 +148,8 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
   float v = ((float)y + fv) / (float)env.height;
   float u = ((float)x + fu) / (float)env.width;
   float cos_theta, cos_phi;
-  float sin_theta = sincos(v * PSF_ENV_PI, &cos_theta);
-  float sin_phi = sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
+  float sin_theta = psf_sincos(v * PSF_ENV_PI, &cos_theta);
+  float sin_phi = psf_sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
   float3 m = (float3)(sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta);
   *texel = (uint2)(x, y);
   *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
@@ -169,7 +169,7 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
     *pdf = 1.0f / (4.0f * PSF_ENV_PI);
     *radiance = env.scale.xyz;
     float c;
-    float s = sincos(phi, &c);
+    float s = psf_sincos(phi, &c);
     return (float3)(r * c, r * s, z);
   }
   uint2 texel;

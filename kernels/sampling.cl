@@ -75,6 +75,29 @@ inline uint sample_bits(__global const uint* sobol, uint seed, uint pixel, uint 
   return sample_bits_keyed(sobol, pixel_seed(seed, pixel), index, dim);
 }
 
+/* sin(x), and cos(x) in *c, for |x| <= 8192 (the warps use |x| <= 2 pi): Cody and
+ * Waite's reduction by pi/2 in three parts, then Cephes' minimax polynomials on
+ * [-pi/4, pi/4] (about 1 ulp), with selects instead of branches. The built-in
+ * sincos reduces every argument as if it could be huge, which PoCL spends more
+ * time on than on the polynomials. */
+inline float psf_sincos(float x, float* c) {
+  float ax = fabs(x);
+  int j = (int)(ax * 1.27323954473516f); /* 4 / pi */
+  j += j & 1;
+  float y = (float)j;
+  float z = ((ax - y * 0.78515625f) - y * 2.4187564849853515625e-4f) - y * 3.77489497744594108e-8f;
+  float zz = z * z;
+  float s = ((-1.9515295891e-4f * zz + 8.3321608736e-3f) * zz - 1.6666654611e-1f) * zz * z + z;
+  float co = ((2.443315711809948e-5f * zz - 1.388731625493765e-3f) * zz + 4.166664568298827e-2f) * zz * zz -
+             0.5f * zz + 1.0f;
+  int q = (j >> 1) & 3; /* x = q pi/2 + z */
+  float sv = (q & 1) ? co : s, cv = (q & 1) ? s : co;
+  sv = (q & 2) ? -sv : sv;
+  cv = ((q + 1) & 2) ? -cv : cv;
+  *c = cv;
+  return x < 0.0f ? -sv : sv;
+}
+
 /* Uniform float in [0, 1): the top 24 bits. */
 inline float bits_to_float(uint x) { return (float)(x >> 8) * (1.0f / 16777216.0f); }
 
@@ -97,4 +120,13 @@ __kernel void sobol_points(__global const uint* sobol, uint first, uint count, u
                       : sobol_unscrambled(sobol, first + i, d);
     out[i * dims + d] = x;
   }
+}
+
+/* psf_sincos of each x (tests): out[i] = (sin, cos). */
+__kernel void sincos_values(__global const float* x, uint count, __global float2* out) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  float c;
+  float s = psf_sincos(x[i], &c);
+  out[i] = (float2)(s, c);
 }
