@@ -36,13 +36,17 @@ typedef struct {
   uint delta;      /* 1: a delta light (no MIS) */
 } LightSample;
 
-/* Index of the first of n cdf entries > u (the last entry is 1). */
+/* Index of the first of n cdf entries > u (the last entry is 1; n - 1 if none
+ * is). A bisection without branches: the answer lies in [lo, lo + len), each
+ * step keeps the half holding it by a select, and the number of steps depends
+ * on n alone, so a processor does not mispredict half of them (it did, and the
+ * environment's searches were a fifth of the living room's time on PoCL). */
 inline uint sample_cdf(__global const float* cdf, uint n, float u) {
-  uint lo = 0u, hi = n - 1u;
-  while (lo < hi) {
-    uint mid = (lo + hi) >> 1;
-    if (cdf[mid] > u) hi = mid;
-    else lo = mid + 1u;
+  uint lo = 0u, len = n;
+  while (len > 1u) {
+    uint h = len >> 1;
+    lo = cdf[lo + h - 1u] > u ? lo : lo + h;
+    len -= h;
   }
   return lo;
 }
@@ -133,8 +137,8 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
   float ub = clamp((u1 - block_lo) / block_p, 0.0f, 1.0f);
   __global const float* fine = data + env_texel_cdf_offset(env, y, b);
   uint last = min(env.width - b * PSF_ENV_BLOCK, (uint)PSF_ENV_BLOCK) - 1u;
-  uint k = 0u;
-  while (k < last && fine[k] <= ub) ++k;
+  uint k = 0u; /* the first of the block's texels whose cdf exceeds ub: count those at or below */
+  for (uint i = 0u; i < PSF_ENV_BLOCK - 1u; ++i) k += i < last && fine[i] <= ub ? 1u : 0u;
   float texel_lo = k > 0u ? fine[k - 1u] : 0.0f, texel_p = fine[k] - texel_lo;
   uint x = b * PSF_ENV_BLOCK + k;
   float col_p = block_p * texel_p;
