@@ -114,14 +114,15 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   rt_.launch("gather_tuples", n, kLocal, n, indices_, tuples_, values, sorted_position_, sorted_x_, sorted_y_,
              sorted_z_, sorted_normal_, sorted_albedo_, values_a_);
 
-  // Averaging, each iteration over the previous one's result (Fig. 2 of the paper).
-  uint32_t zero = 0;
-  rt_.write(max_count_, &zero, sizeof(zero));
+  // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
+  // every iteration averages the same tuples, so the counts are those of any.
   for (int it = 0; it < std::max(iterations, 1); ++it) {
     rt_.launch("filter", n, kLocal, p, sorted_position_, sorted_x_, sorted_y_, sorted_z_, sorted_normal_,
-               sorted_albedo_, values_a_, ranges_, values_b_, sorted_counts_, max_count_);
+               sorted_albedo_, values_a_, ranges_, values_b_, sorted_counts_);
     std::swap(values_a_, values_b_);
   }
+  rt_.zero(max_count_, sizeof(uint32_t));
+  rt_.launch("filter_max_count", (n + PSF_MAX_COUNT_CHUNK - 1) / PSF_MAX_COUNT_CHUNK, kLocal, n, sorted_counts_, max_count_);
   rt_.launch("scatter_values", n, kLocal, n, indices_, values_a_, sorted_counts_, filtered, counts);
   uint32_t max_count = 0;
   rt_.read(max_count_, &max_count, sizeof(max_count));

@@ -41,6 +41,8 @@ typedef cl_uint psf_uint;
  * PSF_SCAN_BLOCK entries, each by one work-group of PSF_SCAN_LOCAL work-items. */
 #define PSF_SCAN_LOCAL 256u
 #define PSF_SCAN_BLOCK 1024u
+/* filter.cl's filter_max_count: counts per work-item. */
+#define PSF_MAX_COUNT_CHUNK 256u
 
 #define PSF_NO_HIT 0xFFFFFFFFu
 /* Bit of BvhTriPack.prim marking an alpha-tested triangle (a mask material):
