@@ -78,6 +78,7 @@ class RayCaster {
   const cl::Buffer& nodes() const { return nodes_; }
   const cl::Buffer& packs() const { return packs_; }
   int depth() const { return depth_; }
+  bool masked() const { return masked_; }  // enable_alpha was called
 
   // Work-group size of the launches.
   size_t local_size = 64;

@@ -60,6 +60,7 @@ struct RenderArgs {
   std::string memory_budget;           // --memory-budget
   std::string resume;                  // --resume EXR
   int batch_log2 = 20;                 // --batch-log2
+  std::string path_kernels = "auto";   // --path-kernels
 };
 
 int run_render(const RenderArgs& a) {
@@ -131,6 +132,7 @@ int run_render(const RenderArgs& a) {
   psf::RenderOptions opt;
   opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
   opt.seed = a.seed;
+  opt.per_path = a.path_kernels == "per-path" ? 1 : a.path_kernels == "wavefront" ? 0 : -1;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.filter = a.fopt;
   opt.filter.enabled = a.filter == "psf";
@@ -259,6 +261,10 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   render->add_option("--memory-budget", ra.memory_budget, "Device memory for the batch buffers, e.g. 256M, 2G");
   render->add_option("--batch-log2", ra.batch_log2, "Largest batch: 2^N paths (20)")->check(CLI::Range(6, 26));
+  render->add_option("--path-kernels", ra.path_kernels,
+                     "wavefront: a kernel per stage over the live paths; per-path: each path in one work-item; "
+                     "auto: per-path on CPU devices for scenes without an environment map (the same image)")
+      ->check(CLI::IsMember({"auto", "wavefront", "per-path"}));
   render->add_option("--resume", ra.resume, "Continue the render saved in this EXR (same scene and options) to --spp")
       ->check(CLI::ExistingFile);
   render->add_flag("--stats", ra.stats, "Print device time per kernel");

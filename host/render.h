@@ -19,6 +19,9 @@ struct RenderOptions {
   int max_depth = -1;        // path segments, Mitsuba's convention; -1 unbounded
   int rr_depth = 5;          // Russian roulette from this many segments on
   int batch_log2 = 20;       // paths per batch: 2^batch_log2 (capped by device memory)
+  int per_path = -1;         // 1: each path in one work-item (trace_paths); 0: the wavefront; -1: per path
+                             // on CPU devices for scenes without an environment map, else the wavefront.
+                             // The image is the same either way.
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
   bool keep_last_batch = false;  // return the last batch's tuples (tests)
   bool aovs = false;         // also accumulate albedo, normal and depth of the filtering vertices

@@ -44,13 +44,10 @@ inline float bounce_sample(__global const uint* sobol, uint key, PathState st, u
 /* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
  * the environment was chosen, else 0); shade_env_samples leaves the texel's
  * index (as_float) in place of the radiance for shade_env_texels. */
-__kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
-                                __global const float* emitter_cdf, Environment env, __global const float* env_data,
-                                uint count, __global const uint* queue_in, __global const PathState* states,
-                                __global float4* env_samples) {
-  uint k = get_global_id(0);
-  if (k >= count) return;
-  uint j = queue_in[k];
+inline void env_sample_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
+                            __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
+                            __global const float* env_data, __global const PathState* states,
+                            __global float4* env_samples) {
   uint pixel = states[j].pixel, sample = states[j].sample;
   uint dim = PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
@@ -71,15 +68,28 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
   env_samples[2u * k + 1u] = b;
 }
 
-__kernel void shade_env_texels(Environment env, __global const float* env_data, uint count,
-                               __global float4* env_samples) {
+__kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
+                                __global const float* emitter_cdf, Environment env, __global const float* env_data,
+                                uint count, __global const uint* queue_in, __global const PathState* states,
+                                __global float4* env_samples) {
   uint k = get_global_id(0);
   if (k >= count) return;
+  env_sample_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+}
+
+inline void env_texel_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
   float4 b = env_samples[2u * k + 1u];
   if (b.w == 0.0f) return;
   uint t = as_uint(b.x);
   float3 radiance = env_texel_value(env, env_data, (uint2)(t % env.width, t / env.width)) * env.scale.xyz;
   env_samples[2u * k + 1u] = (float4)(radiance, 1.0f);
+}
+
+__kernel void shade_env_texels(Environment env, __global const float* env_data, uint count,
+                               __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  env_texel_slot(k, env, env_data, env_samples);
 }
 
 /* True if a path with `segments` segments is allowed by max_depth. */
@@ -271,11 +281,8 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   }
 }
 
-__kernel void shade_shadows(uint count, __global const uint* queue_in, __global const Hit* shadow_hits,
-                            __global PathState* states, __global PathVertex* vertices) {
-  uint k = get_global_id(0);
-  if (k >= count) return;
-  uint j = queue_in[k];
+inline void shadow_slot(uint k, uint j, __global const Hit* shadow_hits, __global PathState* states,
+                        __global PathVertex* vertices) {
   PathState st = states[j];
   bool visible = shadow_hits[k].prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
   if (st.flags & PSF_PATH_VERTEX_NEW) vertices[j].normal.w = visible ? 1.0f : 0.0f;
@@ -283,5 +290,49 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
     add_radiance(&st, st.pending.xyz);
     st.pending = (float4)(0.0f);
     states[j] = st;
+  }
+}
+
+__kernel void shade_shadows(uint count, __global const uint* queue_in, __global const Hit* shadow_hits,
+                            __global PathState* states, __global PathVertex* vertices) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  shadow_slot(k, queue_in[k], shadow_hits, states, vertices);
+}
+
+/* trace_paths: the whole path of each of the batch's paths in one work-item, for
+ * CPU devices: the same stages as the wavefront (closest hit, environment
+ * samples, shade, shadow ray, shadow test) in the same order on the path's own
+ * slot (k = j), so its state, rays and hits stay in the core's cache from one
+ * bounce to the next instead of streaming through memory at every bounce; the
+ * result is the same, bit for bit. On a GPU the paths' different lengths would
+ * idle most lanes, so GPUs keep the wavefront. */
+__kernel void trace_paths(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
+                          __global const uint* tri_material, __global const Material* materials,
+                          __global const Emitter* emitters, __global const float* emitter_cdf,
+                          __global const float* tri_light_pdf, Environment env, __global const float* env_data,
+                          __global const BvhNode* nodes, __global const BvhTriPack* packs, uint masked,
+                          __global Ray* rays, __global Hit* hits, __global PathState* states,
+                          __global PathVertex* vertices, __global Ray* shadow_rays, __global Hit* shadow_hits,
+                          __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
+                          __global const half* texels, uint env_presampled, __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= params.batch_size) return;
+  AlphaScene as = {tri_material, materials, tri_attribs, textures, texels};
+  const AlphaScene* alpha = masked ? &as : 0;
+  for (uint depth = 0u; (int)params.max_depth < 0 || depth < params.max_depth; ++depth) {
+    hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
+    if (env_presampled) {
+      env_sample_slot(k, k, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+      env_texel_slot(k, env, env_data, env_samples);
+    }
+    Ray next;
+    bool go = shade_path(k, k, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf,
+                         env, env_data, hits, rays, states, vertices, shadow_rays, tri_attribs, textures, texels,
+                         env_presampled, env_samples, &next);
+    shadow_hits[k] = intersect_any_hit_alpha(nodes, packs, shadow_rays[k], alpha);
+    shadow_slot(k, k, shadow_hits, states, vertices);
+    if (!go) break;
+    rays[k] = next;
   }
 }

@@ -117,10 +117,17 @@ TEST_CASE("CLI: render writes an OpenEXR and a PNG, deterministically per seed",
   REQUIRE(ra.status == 0);
   CHECK(ra.output.empty());
   CHECK(fs::exists(dir / "a.png"));
-  Run rb = run("render " + (dir / "tiny.xml").string() + " --spp 4 --seed 1 --quiet --stats -o " + b.string());
+  // b: the wavefront's kernels by name; a (auto: per path on a CPU device) must
+  // be the same image.
+  Run rb = run("render " + (dir / "tiny.xml").string() +
+               " --spp 4 --seed 1 --quiet --stats --path-kernels wavefront -o " + b.string());
   REQUIRE(rb.status == 0);
   for (const char* k : {"camera_rays", "raycast_closest", "raycast_any", "shade", "accumulate"})
     CHECK(rb.output.find(k) != std::string::npos);
+  Run rd = run("render " + (dir / "tiny.xml").string() + " --spp 1 --quiet --stats --path-kernels per-path -o " +
+               (dir / "d.exr").string());
+  REQUIRE(rd.status == 0);
+  CHECK(rd.output.find("trace_paths") != std::string::npos);
   Run rc = run("render " + (dir / "tiny.xml").string() + " --spp 4 --seed 2 -q -o " + c.string() + " --width 12");
   REQUIRE(rc.status == 0);
 
