@@ -699,10 +699,10 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
   std::vector<std::pair<std::string, psf::Scene>> scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("envmap floor", envmap_floor());
-  if (auto shared = psf::test::shared_dir())
+  if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
     scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
   else
-    WARN("../shared not found (set PSF_SHARED): the living room is left out");
+    WARN("the living room is left out (../shared not found, or PSF_TEST_SMALL)");
   for (auto& [name, s] : scenes) {
     INFO(name);
     s.width = std::min(s.width, 64);
