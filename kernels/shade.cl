@@ -25,7 +25,10 @@
  * processor overlaps those misses across paths, which the long shade kernel
  * cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
- * records the filtering vertex's light-sample visibility. */
+ * records the filtering vertex's light-sample visibility.
+ * trace_paths (CPU devices): all of the above for one path per work-item, bounce
+ * after bounce, from the same inline functions (env_sample_slot, env_texel_slot,
+ * shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
 
