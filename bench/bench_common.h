@@ -10,6 +10,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cl/runtime.h"
@@ -31,6 +32,12 @@ inline Timing summarize(std::vector<double> s) {
   t.min_s = s.front();
   t.median_s = s.size() % 2 ? s[s.size() / 2] : 0.5 * (s[s.size() / 2 - 1] + s[s.size() / 2]);
   return t;
+}
+
+// Threads for a CPU peer (Embree, nanoflann): the device's compute units when psf
+// runs on the CPU (the same cores), else every core of this machine.
+inline unsigned peer_threads(const psf::DeviceInfo& dev) {
+  return std::max(1u, dev.type == "CPU" ? dev.compute_units : std::thread::hardware_concurrency());
 }
 
 // A file of the shared data folder: $PSF_SHARED, else ../shared beside the source tree.

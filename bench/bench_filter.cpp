@@ -259,9 +259,7 @@ int main(int argc, char** argv) {
 
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
-  // The peer's threads: as many as the device has compute units on a CPU device
-  // (the same cores); on a GPU, every core of this machine.
-  const unsigned threads = std::max(1u, dev.type == "CPU" ? dev.compute_units : std::thread::hardware_concurrency());
+  const unsigned threads = bench::peer_threads(dev);
   const uint64_t paths = uint64_t(opt.width) * opt.height * opt.spp;
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");

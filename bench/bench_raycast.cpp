@@ -36,6 +36,7 @@
 #include <embree3/rtcore.h>
 #endif
 
+#include "bench_common.h"
 #include "bvh.h"
 #include "cl/runtime.h"
 #include "scene/scene.h"
@@ -51,18 +52,8 @@ struct Options {
   int trials = 7;                   // timed launches per scene
 };
 
-struct Timing {
-  double min_s = 0, median_s = 0;  // over the trials
-};
-
-Timing summarize(std::vector<double> s) {
-  std::sort(s.begin(), s.end());
-  Timing t;
-  if (s.empty()) return t;
-  t.min_s = s.front();
-  t.median_s = s.size() % 2 ? s[s.size() / 2] : 0.5 * (s[s.size() / 2 - 1] + s[s.size() / 2]);
-  return t;
-}
+using bench::summarize;
+using bench::Timing;
 
 // A scene prepared for the benchmark: geometry, BVH and rays, and the results.
 struct Bench {
@@ -251,9 +242,7 @@ int main(int argc, char** argv) {
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
   const std::string build_options = "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH);
-  // Embree's threads: as many as the device has compute units on a CPU device (the
-  // same cores); on a GPU, every core of this machine.
-  const unsigned threads = std::max(1u, dev.type == "CPU" ? dev.compute_units : std::thread::hardware_concurrency());
+  const unsigned threads = bench::peer_threads(dev);
   const size_t num_rays = size_t(1) << opt.rays_log2;
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");

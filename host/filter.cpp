@@ -122,7 +122,8 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
     std::swap(values_a_, values_b_);
   }
   rt_.zero(max_count_, sizeof(uint32_t));
-  rt_.launch("filter_max_count", (n + PSF_MAX_COUNT_CHUNK - 1) / PSF_MAX_COUNT_CHUNK, kLocal, n, sorted_counts_, max_count_);
+  const uint32_t count_items = (n + PSF_MAX_COUNT_CHUNK - 1) / PSF_MAX_COUNT_CHUNK;
+  rt_.launch("filter_max_count", count_items, kLocal, n, sorted_counts_, max_count_);
   rt_.launch("scatter_values", n, kLocal, n, indices_, values_a_, sorted_counts_, filtered, counts);
   uint32_t max_count = 0;
   rt_.read(max_count_, &max_count, sizeof(max_count));

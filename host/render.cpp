@@ -140,6 +140,10 @@ void Accumulator::add(const BatchImages& b) {
 
 namespace {
 
+// Whether the scene's environment is a map whose light samples the wavefront draws
+// in kernels of their own (shade_env_samples, shade_env_texels).
+bool env_map_sampled(const Environment& env) { return env.present && env.width > 0; }
+
 // Paths of pixel i among the first `paths` paths of a render: i, i + pixels, ...
 uint64_t pixel_paths(uint64_t i, uint64_t pixels, uint64_t paths) {
   return paths / pixels + (i < paths % pixels ? 1 : 0);
@@ -273,7 +277,7 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   }
   b->hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->shadow_rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
-  const bool env_map = impl_->env.present && impl_->env.width > 0;
+  const bool env_map = env_map_sampled(impl_->env);
   b->env_samples = rt.buffer(CL_MEM_READ_WRITE, (env_map ? n : 1) * 2 * sizeof(cl_float4));
   b->shadow_hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->values = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
@@ -322,45 +326,44 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   auto& shadow_hits = b.shadow_hits;
   auto& alive = b.alive;
 
-  // A compacted wavefront: each bounce launches only the paths still alive. The
-  // queue holds their path indices (in any order: a path's result does not depend
-  // on its slot), rays[in] their rays; shade appends the survivors to the other
-  // queue. Path states and filtering vertices stay indexed by path.
   rt.launch("camera_rays", p.batch_size, L, p, s.camera, s.sobol, states, vertices, b.rays[0], b.queue[0]);
-  uint32_t n_live = p.batch_size;
-  int in = 0;
-  const uint32_t env_presampled = s.env.present && s.env.width > 0 ? 1u : 0u;
+  const uint32_t env_presampled = env_map_sampled(s.env) ? 1u : 0u;
   // On CPU devices each path runs whole in one work-item (kernels/shade.cl,
   // trace_paths): its state stays in the core's cache between bounces. Not for
   // scenes lit by an environment map: there the wavefront's short sampling
   // kernels overlap the map's cache misses across paths, which one long kernel
   // per path cannot (PoCL, living room: 35 % slower per path; Cornell boxes:
   // 8-13 % faster).
-  const bool per_path =
-      o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
+  const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
   if (per_path) {
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
               s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
               cl_uint(s.caster->masked() ? 1 : 0), b.rays[0], hits, states, vertices, shadow_rays, shadow_hits,
               s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples);
-    n_live = 0;
-  }
-  for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
-    s.caster->closest(b.rays[in], hits, n_live);
-    rt.zero(alive, sizeof(uint32_t));
-    if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
-      rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
-                b.queue[in], states, b.env_samples);
-      rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
+  } else {
+    // A compacted wavefront: each bounce launches only the paths still alive. The
+    // queue holds their path indices (in any order: a path's result does not
+    // depend on its slot), rays[in] their rays; shade appends the survivors to the
+    // other queue. Path states and filtering vertices stay indexed by path.
+    uint32_t n_live = p.batch_size;
+    int in = 0;
+    for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
+      s.caster->closest(b.rays[in], hits, n_live);
+      rt.zero(alive, sizeof(uint32_t));
+      if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
+        rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
+                  b.queue[in], states, b.env_samples);
+        rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
+      }
+      rt.launch("shade", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters, s.emitter_cdf,
+                s.tri_light_pdf, s.env, s.env_data, n_live, b.queue[in], hits, b.rays[in], states, vertices,
+                shadow_rays, alive, b.queue[1 - in], b.rays[1 - in], s.tri_attribs, s.textures, s.texels,
+                env_presampled, b.env_samples);
+      s.caster->any(shadow_rays, shadow_hits, n_live);
+      rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
+      rt.read(alive, &n_live, sizeof(n_live));
+      in = 1 - in;
     }
-    rt.launch("shade", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters, s.emitter_cdf,
-              s.tri_light_pdf, s.env, s.env_data, n_live, b.queue[in], hits, b.rays[in], states, vertices,
-              shadow_rays, alive, b.queue[1 - in], b.rays[1 - in], s.tri_attribs, s.textures, s.texels,
-              env_presampled, b.env_samples);
-    s.caster->any(shadow_rays, shadow_hits, n_live);
-    rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
-    rt.read(alive, &n_live, sizeof(n_live));
-    in = 1 - in;
   }
 
   // The tuple store, then path space filtering of the batch's c_i, then each

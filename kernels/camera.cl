@@ -18,8 +18,9 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   ulong g = frame_first_path(params) + (ulong)j;
   uint pixel = (uint)(g % pixels);
   uint sample = (uint)(g / pixels);
-  float u = sample_1d(sobol, params.seed, pixel, sample, PSF_DIM_PIXEL);
-  float v = sample_1d(sobol, params.seed, pixel, sample, PSF_DIM_PIXEL + 1);
+  const uint key = pixel_seed(params.seed, pixel);
+  float u = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
+  float v = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL + 1);
   float s = ((float)(pixel % params.width) + u) / (float)params.width;
   float t = ((float)(pixel / params.width) + v) / (float)params.height;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;

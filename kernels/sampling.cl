@@ -60,10 +60,8 @@ inline uint nested_uniform_scramble(uint x, uint seed) {
  * shares: a kernel that draws many dimensions for one pixel computes it once. */
 inline uint pixel_seed(uint seed, uint pixel) { return psf_hash_combine(psf_hash(seed), pixel); }
 
-/* Scrambling seed of one dimension of one pixel's sequence. */
-inline uint sobol_seed(uint seed, uint pixel, uint dim) { return psf_hash_combine(pixel_seed(seed, pixel), dim); }
-
-/* sample_bits for the pixel whose pixel_seed is `key`. */
+/* sample_bits for the pixel whose pixel_seed is `key`; the dimension's scrambling
+ * seed is hash_combine(key, dim). */
 inline uint sample_bits_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
   uint s = psf_hash_combine(key, dim);
   if (dim < PSF_SOBOL_DIMS) return nested_uniform_scramble(sobol_unscrambled(sobol, index, dim), s);
@@ -101,12 +99,12 @@ inline float psf_sincos(float x, float* c) {
 /* Uniform float in [0, 1): the top 24 bits. */
 inline float bits_to_float(uint x) { return (float)(x >> 8) * (1.0f / 16777216.0f); }
 
-inline float sample_1d(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
-  return bits_to_float(sample_bits(sobol, seed, pixel, index, dim));
-}
-
 inline float sample_1d_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
   return bits_to_float(sample_bits_keyed(sobol, key, index, dim));
+}
+
+inline float sample_1d(__global const uint* sobol, uint seed, uint pixel, uint index, uint dim) {
+  return sample_1d_keyed(sobol, pixel_seed(seed, pixel), index, dim);
 }
 
 /* Writes `dims` dimensions of the points first..first+count-1 (row per point):
