@@ -68,32 +68,33 @@ void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& t
 }
 
 size_t PathSpaceFilter::bytes_per_tuple() {
-  // tuples (unsorted, and sorted as 3 float4 + x, y, z), keys and indices (2x each),
-  // values (2x), counts, ranges (2 uints for each of up to 4 cells per tuple).
-  return 2 * sizeof(FilterTuple) + 3 * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 4 * sizeof(float) +
+  // sorted tuples (PSF_SORTED_FIELDS arrays), keys and indices
+  // (2x each), values (2x, as r, g, b arrays), counts, ranges (2 uints for each
+  // of up to 4 cells per tuple). The arrays' padding is per batch, not per tuple.
+  return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
          sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
 }
 
-PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity) : rt_(rt), capacity_(capacity) {
+PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity)
+    : rt_(rt), capacity_(capacity), stride_(std::max(capacity, 1u) + PSF_SORTED_PAD) {
   size_t n = std::max(capacity, 1u);
   size_t cells = size_t(1) << filter_key_bits(capacity);
-  tuples_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(FilterTuple));
-  sorted_position_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
-  // Padded: filter.cl reads eight candidates at a time past a cell's end.
-  sorted_x_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
-  sorted_y_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
-  sorted_z_ = rt.buffer(CL_MEM_READ_WRITE, (n + 8) * sizeof(float));
-  sorted_normal_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
-  sorted_albedo_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  sorted_ = rt.buffer(CL_MEM_READ_WRITE, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
+  radii_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float2));
   keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   tmp_keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   tmp_indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
-  values_a_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
-  values_b_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
+  values_a_ = rt.buffer(CL_MEM_READ_WRITE, 3 * size_t(stride_) * sizeof(float));
+  values_b_ = rt.buffer(CL_MEM_READ_WRITE, 3 * size_t(stride_) * sizeof(float));
   sorted_counts_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   ranges_ = rt.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint2));
   max_count_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+  valid_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+  // The arrays' padding is read (and ignored) by filter.cl: give it values.
+  rt.zero(sorted_, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
+  rt.zero(values_a_, 3 * size_t(stride_) * sizeof(float));
+  rt.zero(values_b_, 3 * size_t(stride_) * sizeof(float));
 }
 
 uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const cl::Buffer& vertices,
@@ -107,24 +108,25 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
 
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
-  rt_.launch("cell_keys", n, kLocal, p, vertices, tuples_, keys_, indices_);
+  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_, radii_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
   rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
-  rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_);
-  rt_.launch("gather_tuples", n, kLocal, n, indices_, tuples_, values, sorted_position_, sorted_x_, sorted_y_,
-             sorted_z_, sorted_normal_, sorted_albedo_, values_a_);
+  rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
+  const uint32_t gather_items = (n + PSF_GATHER_LANES - 1) / PSF_GATHER_LANES;
+  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, indices_, vertices, radii_, values, valid_, sorted_,
+             values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
   // every iteration averages the same tuples, so the counts are those of any.
   for (int it = 0; it < std::max(iterations, 1); ++it) {
-    rt_.launch("filter", n, kLocal, p, sorted_position_, sorted_x_, sorted_y_, sorted_z_, sorted_normal_,
-               sorted_albedo_, values_a_, ranges_, values_b_, sorted_counts_);
+    rt_.launch("filter", n, kLocal, p, stride_, valid_, sorted_, values_a_, ranges_, values_b_, sorted_counts_);
     std::swap(values_a_, values_b_);
   }
   rt_.zero(max_count_, sizeof(uint32_t));
   const uint32_t count_items = (n + PSF_MAX_COUNT_CHUNK - 1) / PSF_MAX_COUNT_CHUNK;
-  rt_.launch("filter_max_count", count_items, kLocal, n, sorted_counts_, max_count_);
-  rt_.launch("scatter_values", n, kLocal, n, indices_, values_a_, sorted_counts_, filtered, counts);
+  rt_.launch("filter_max_count", count_items, kLocal, n, valid_, sorted_counts_, max_count_);
+  rt_.launch("scatter_values", n, kLocal, n, stride_, indices_, valid_, values_a_, sorted_counts_, values, filtered,
+             counts);
   uint32_t max_count = 0;
   rt_.read(max_count_, &max_count, sizeof(max_count));
   return max_count;

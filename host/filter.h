@@ -55,6 +55,7 @@ class PathSpaceFilter {
   const cl::Buffer& sorted_keys() const { return keys_; }
   const cl::Buffer& sorted_indices() const { return indices_; }
   const cl::Buffer& cell_ranges() const { return ranges_; }  // cl_uint2 (first, end) per key
+  const cl::Buffer& valid_count() const { return valid_; }   // uint: tuples with a vertex
 
   // Bytes of device memory per tuple of capacity (for batch sizing).
   static size_t bytes_per_tuple();
@@ -62,9 +63,10 @@ class PathSpaceFilter {
  private:
   Runtime& rt_;
   uint32_t capacity_;
-  cl::Buffer tuples_, sorted_position_, sorted_x_, sorted_y_, sorted_z_, sorted_normal_, sorted_albedo_;
+  uint32_t stride_;  // floats between two fields of sorted_ (capacity + padding)
+  cl::Buffer radii_, sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
-  cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_;
+  cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;
 };
 
 }  // namespace psf

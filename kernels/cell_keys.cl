@@ -1,8 +1,9 @@
 /* cell_keys.cl: the first stage of the neighbour search (Keller et al. 2016,
  * Sec. 2.2; sorted-cell search as in SPH codes).
  *
- * Reads: each path's filtering vertex. Writes: its query radius and grid level
- * into a FilterTuple, and the key of its cell with the path index, to be sorted.
+ * Reads: each path's filtering vertex. Writes: the key of its cell with the path
+ * index, to be sorted, and in path order its query radius with its tag (2 level +
+ * light-sample visibility, an int's bits) for gather_tuples (tuples.cl).
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
  * of a few pixels at the camera path length d_i) or a global r0. Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
@@ -14,15 +15,20 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-/* ceil(log2(r)) for r > 0, exactly (no rounding of log2). */
+/* ceil(log2(r)) for a normal float r > 0, exactly (no rounding of log2): with
+ * r = m 2^e, m in [0.5, 1), from the exponent bits; e - 1 where m = 0.5. */
 inline int grid_level(float r) {
-  int e;
-  float m = frexp(r, &e); /* r = m 2^e, m in [0.5, 1) */
-  return m == 0.5f ? e - 1 : e;
+  uint b = as_uint(r);
+  int e = (int)((b >> 23) & 0xFFu) - 126;
+  return (b & 0x7FFFFFu) == 0u ? e - 1 : e;
 }
 
+/* 2^e exactly, from the exponent bits where 2^e is a normal float (PoCL's
+ * ldexp multiplies in a loop). */
+inline float pow2i(int e) { return e >= -126 && e <= 127 ? as_float((e + 127) << 23) : ldexp(1.0f, e); }
+
 /* Edge length of the cells of a level. */
-inline float cell_size(int level, uint cells27) { return ldexp(1.0f, cells27 ? level : level + 1); }
+inline float cell_size(int level, uint cells27) { return pow2i(cells27 ? level : level + 1); }
 
 inline int3 cell_of(float3 x, float size) {
   float inv = 1.0f / size; /* exact: size is a power of two */
@@ -53,27 +59,28 @@ inline uint cell_key(int level, int3 c, uint key_bits) {
   return (morton ^ psf_hash((uint)level)) & ((1u << key_bits) - 1u);
 }
 
-__kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __global FilterTuple* tuples,
-                        __global uint* keys, __global uint* indices) {
+/* The query radius of a path's filtering vertex, 0 for a path without one. */
+inline float vertex_radius(FilterParams p, float4 position, float4 albedo) {
+  if (albedo.w == 0.0f) return 0.0f;
+  float r0 = p.r0 > 0.0f ? p.r0 : position.w * p.footprint;
+  return r0 * p.n_scale;
+}
+
+inline int vertex_level(float r) { return grid_level(fmax(r, 1e-30f)); }
+
+__kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __global uint* keys,
+                        __global uint* indices, __global float2* radii) {
   uint i = get_global_id(0);
   if (i >= p.count) return;
-  PathVertex v = vertices[i];
-  FilterTuple t;
-  t.normal = v.normal;
-  t.albedo = v.albedo;
+  float4 x = vertices[i].position, n = vertices[i].normal, a = vertices[i].albedo;
   indices[i] = i;
-  if (v.albedo.w == 0.0f) {
-    t.position = (float4)(v.position.xyz, 0.0f);
-    t.albedo.w = 0.0f;
-    tuples[i] = t;
+  float r = vertex_radius(p, x, a);
+  if (r == 0.0f) {
     keys[i] = 1u << p.key_bits;
+    radii[i] = (float2)(0.0f, as_float(0));
     return;
   }
-  float r0 = p.r0 > 0.0f ? p.r0 : v.position.w * p.footprint;
-  float r = r0 * p.n_scale;
-  int level = grid_level(fmax(r, 1e-30f));
-  t.position = (float4)(v.position.xyz, r);
-  t.albedo.w = (float)level;
-  tuples[i] = t;
-  keys[i] = cell_key(level, cell_of(v.position.xyz, cell_size(level, p.cells27)), p.key_bits);
+  int level = vertex_level(r);
+  keys[i] = cell_key(level, cell_of(x.xyz, cell_size(level, p.cells27)), p.key_bits);
+  radii[i] = (float2)(r, as_float(2 * level + (n.w != 0.0f ? 1 : 0)));
 }

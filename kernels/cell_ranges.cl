@@ -3,7 +3,8 @@
  * Reads: the sorted keys. Writes: ranges[key] = (first, one past the last) for
  * every key present, start and end side by side so a lookup touches one cache
  * line; clear_ranges empties the table first ((0, 0)). Keys of paths without a
- * vertex (>= 2^key_bits) get no range.
+ * vertex (>= 2^key_bits) get no range; they sort behind all others, and *valid
+ * is set to the number of tuples before them (the later stages stop there).
  *
  * The first and the last tuple of a cell are found by different work-items, so
  * each writes its own 32-bit word: a component store to a uint2 (ranges[k].x)
@@ -16,11 +17,16 @@ __kernel void clear_ranges(uint size, __global uint2* ranges) {
   ranges[k] = (uint2)(0u, 0u);
 }
 
-__kernel void cell_ranges(uint n, uint key_bits, __global const uint* keys, __global uint2* ranges) {
+__kernel void cell_ranges(uint n, uint key_bits, __global const uint* keys, __global uint2* ranges,
+                          __global uint* valid) {
   uint i = get_global_id(0);
   if (i >= n) return;
-  uint k = keys[i];
-  if (k >= (1u << key_bits)) return;
+  uint k = keys[i], cells = 1u << key_bits;
+  if (k >= cells) { /* one work-item writes *valid: the first without a vertex, or the last */
+    if (i == 0u || keys[i - 1u] < cells) *valid = i;
+    return;
+  }
+  if (i + 1u == n) *valid = n;
   __global uint* words = (__global uint*)ranges;  // ranges[k] = (words[2k], words[2k + 1])
   if (i == 0u || keys[i - 1u] != k) words[2u * k] = i;
   if (i + 1u == n || keys[i + 1u] != k) words[2u * k + 1u] = i + 1u;

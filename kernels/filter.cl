@@ -8,66 +8,100 @@
  * equal light-sample visibility, and the same grid level (cell_keys.cl). The
  * centre tuple always counts, so the average is never empty; a non-finite c_j
  * of a neighbour is left out (the centre's own is kept and counted by accumulate).
- * Reads: tuples (positions, normals, albedos) and values in cell order, the cell ranges. Writes, in cell
- * order: c-bar_i and the number of tuples averaged; filter_max_count then finds
- * the batch's largest count.
+ * Reads: the tuples' fields and values in cell order (tuples.cl), the cell
+ * ranges. Writes, in cell order: c-bar_i and the number of tuples averaged;
+ * filter_max_count then finds the batch's largest count.
  * Neighbour cells whose keys collide are visited once. */
 
 #pragma OPENCL FP_CONTRACT OFF
 
-/* Candidates are scanned PSF_FILTER_LANES at a time: their coordinates are read
- * as vectors from the sorted x, y, z arrays (padded by PSF_FILTER_LANES entries)
- * and tested against the ball at once; the few inside get the scalar tests. */
+/* Candidates are tested PSF_FILTER_LANES at a time, without branches: each field
+ * is read as a vector from its sorted array (padded past the batch's end), and
+ * the lanes that pass the ball and similarity tests are added under a mask into
+ * per-lane sums, combined in a fixed order at the end. (Testing the ball first
+ * and the few candidates inside it one by one cost a mispredicted branch per
+ * candidate; on CPUs that was most of this kernel's time.) The host picks the
+ * variant by device kind (host/cl/runtime.cpp): CPUs 8 lanes, GPUs 2 lanes with
+ * PSF_FILTER_SKIP. */
+#ifndef PSF_FILTER_LANES
 #define PSF_FILTER_LANES 8
+#endif
+/* 1: skip the similarity tests of a vector with no candidate in the ball. A
+ * mispredicted branch on CPUs (slower there); on GPUs it saves the loads. */
+#ifndef PSF_FILTER_SKIP
+#define PSF_FILTER_SKIP 0
+#endif
+#define PSF_CAT_(a, b) a##b
+#define PSF_CAT(a, b) PSF_CAT_(a, b)
+#define floatL PSF_CAT(float, PSF_FILTER_LANES)
+#define intL PSF_CAT(int, PSF_FILTER_LANES)
+#define vloadL PSF_CAT(vload, PSF_FILTER_LANES)
+#define as_intL PSF_CAT(as_int, PSF_FILTER_LANES)
+#if PSF_FILTER_LANES == 2
+#define PSF_FILTER_LANE_INDEX ((int2)(0, 1))
+#elif PSF_FILTER_LANES == 4
+#define PSF_FILTER_LANE_INDEX ((int4)(0, 1, 2, 3))
+#elif PSF_FILTER_LANES == 8
+#define PSF_FILTER_LANE_INDEX ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#elif PSF_FILTER_LANES == 16
+#define PSF_FILTER_LANE_INDEX ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#else
+#error "PSF_FILTER_LANES must be 2, 4, 8 or 16"
+#endif
+/* Sums of the lanes, pairwise in a fixed order. */
+inline float filter_sum2(float2 v) { return v.s0 + v.s1; }
+inline float filter_sum4(float4 v) { return filter_sum2(v.lo) + filter_sum2(v.hi); }
+inline float filter_sum8(float8 v) { return filter_sum4(v.lo) + filter_sum4(v.hi); }
+inline float filter_sum16(float16 v) { return filter_sum8(v.lo) + filter_sum8(v.hi); }
+inline int filter_isum2(int2 v) { return v.s0 + v.s1; }
+inline int filter_isum4(int4 v) { return filter_isum2(v.lo) + filter_isum2(v.hi); }
+inline int filter_isum8(int8 v) { return filter_isum4(v.lo) + filter_isum4(v.hi); }
+inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.hi); }
+#define filter_lane_sum PSF_CAT(filter_sum, PSF_FILTER_LANES)
+#define filter_lane_isum PSF_CAT(filter_isum, PSF_FILTER_LANES)
 
-inline void filter_candidate(uint i, uint j, int level, float4 ni, float4 ai, float normal_cos, float albedo_tol,
-                             __global const float4* normals, __global const float4* albedos,
-                             __global const float4* values, float3* sum, uint* n) {
-  float4 nj = normals[j], aj = albedos[j];
-  float3 da = aj.xyz - ai.xyz;
-  bool similar = (int)aj.w == level && nj.x * ni.x + nj.y * ni.y + nj.z * ni.z >= normal_cos &&
-                 da.x * da.x + da.y * da.y + da.z * da.z <= albedo_tol * albedo_tol && nj.w == ni.w;
-  float3 cj = values[j].xyz;
-  bool finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z);
-  if (j == i || (similar && finite)) { /* a NaN/Inf neighbour never spreads */
-    *sum += cj;
-    *n += 1u;
-  }
-}
-
-__kernel void filter(FilterParams p, __global const float4* positions, __global const float* xs,
-                     __global const float* ys, __global const float* zs, __global const float4* normals,
-                     __global const float4* albedos, __global const float4* values, __global const uint2* ranges,
-                     __global float4* filtered, __global uint* counts) {
+/* sorted: the PSF_SORTED_* fields of the tuples in cell order, `stride` floats
+ * apart; values and filtered: r, g, b arrays `stride` apart. */
+__kernel void filter(FilterParams p, uint stride, __global const uint* valid, __global const float* sorted,
+                     __global const float* values, __global const uint2* ranges, __global float* filtered,
+                     __global uint* counts) {
   uint i = get_global_id(0);
-  if (i >= p.count) return;
-  float4 xi = positions[i];
-  float r = xi.w;
-  if (!(r > 0.0f)) { /* no filtering vertex */
-    filtered[i] = values[i];
-    counts[i] = 1u;
-    return;
-  }
-  float4 ni = normals[i], ai = albedos[i];
-  int level = (int)ai.w;
-  float3 x = xi.xyz;
+  if (i >= *valid) return; /* tuples with a vertex come first in cell order (cell_ranges.cl) */
+  __global const float* xs = sorted + PSF_SORTED_X * stride;
+  __global const float* ys = sorted + PSF_SORTED_Y * stride;
+  __global const float* zs = sorted + PSF_SORTED_Z * stride;
+  __global const float* nxs = sorted + PSF_SORTED_NX * stride;
+  __global const float* nys = sorted + PSF_SORTED_NY * stride;
+  __global const float* nzs = sorted + PSF_SORTED_NZ * stride;
+  __global const float* ars = sorted + PSF_SORTED_AR * stride;
+  __global const float* ags = sorted + PSF_SORTED_AG * stride;
+  __global const float* abs_ = sorted + PSF_SORTED_AB * stride;
+  __global const float* tags = sorted + PSF_SORTED_TAG * stride;
+  __global const float* vr = values;
+  __global const float* vg = values + stride;
+  __global const float* vb = values + 2 * stride;
+  float r = sorted[PSF_SORTED_R * stride + i];
+  float3 x = (float3)(xs[i], ys[i], zs[i]);
+  float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
+  float3 ai = (float3)(ars[i], ags[i], abs_[i]);
+  int tag = as_int(tags[i]);
+  int level = tag >> 1; /* tag = 2 level + visibility */
   float size = cell_size(level, p.cells27);
   int3 c = cell_of(x, size);
   /* The cells that can hold points within r: c, and along each axis the
    * neighbour across a face nearer to x than r (with a margin for rounding:
    * visiting a cell too many never changes the result). Cells of size >= r (27)
    * or >= 2r (8) make that at most 3 or 2 cells per axis. */
-  float3 below = x - convert_float3(c) * size;        /* distance to the lower face */
-  float3 above = convert_float3(c + (int3)(1)) * size - x;  /* to the upper face */
+  float3 below = x - convert_float3(c) * size;             /* distance to the lower face */
+  float3 above = convert_float3(c + (int3)(1)) * size - x; /* to the upper face */
   float reach = r * 1.0001f;
   int3 lo = c - (int3)(below.x < reach ? 1 : 0, below.y < reach ? 1 : 0, below.z < reach ? 1 : 0);
   int3 hi = c + (int3)(above.x < reach ? 1 : 0, above.y < reach ? 1 : 0, above.z < reach ? 1 : 0);
-  float r2 = r * r;
-  float3 sum = (float3)(0.0f);
-  uint n = 0u;
+  float r2 = r * r, tol2 = p.albedo_tol * p.albedo_tol;
+  floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
+  intL taken = (intL)(0);
   uint seen[27];
   uint nseen = 0u;
-  const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
   for (int cz = lo.z; cz <= hi.z; ++cz)
     for (int cy = lo.y; cy <= hi.y; ++cy)
       for (int cx = lo.x; cx <= hi.x; ++cx) {
@@ -79,39 +113,53 @@ __kernel void filter(FilterParams p, __global const float4* positions, __global 
         if (dup) continue;
         seen[nseen++] = key;
         for (uint j = range.x; j < range.y; j += PSF_FILTER_LANES) {
-          float8 dx = vload8(0, xs + j) - (float8)(x.x);
-          float8 dy = vload8(0, ys + j) - (float8)(x.y);
-          float8 dz = vload8(0, zs + j) - (float8)(x.z);
-          int8 in = (dx * dx + dy * dy + dz * dz < (float8)(r2)) | ((int8)(j) + lane == (int8)(i));
-          in &= ((int8)(j) + lane) < (int8)(range.y);
-          /* The lanes inside as a bit mask, visited lowest first. */
-          int8 bits = in & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
-          int4 b4 = bits.lo | bits.hi;
-          int2 b2 = b4.lo | b4.hi;
-          uint mask = (uint)(b2.x | b2.y);
-          while (mask != 0u) {
-            uint k = 31u - clz(mask & (0u - mask));
-            mask &= mask - 1u;
-            filter_candidate(i, j + k, level, ni, ai, p.normal_cos, p.albedo_tol, normals, albedos, values, &sum, &n);
-          }
+          intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;
+          floatL dx = vloadL(0, xs + j) - (floatL)(x.x);
+          floatL dy = vloadL(0, ys + j) - (floatL)(x.y);
+          floatL dz = vloadL(0, zs + j) - (floatL)(x.z);
+          intL in = dx * dx + dy * dy + dz * dz < (floatL)(r2);
+#if PSF_FILTER_SKIP
+          if (!any(in | (idx == (intL)((int)i)))) continue;
+#endif
+          floatL dot = vloadL(0, nxs + j) * ni.x + vloadL(0, nys + j) * ni.y + vloadL(0, nzs + j) * ni.z;
+          floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);
+          floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);
+          floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);
+          intL similar = (as_intL(vloadL(0, tags + j)) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
+                         (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));
+          floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
+          /* A NaN/Inf neighbour never spreads; the centre always counts. */
+          intL finite = isfinite(cr) & isfinite(cg) & isfinite(cb);
+          intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar & finite));
+          sr += select((floatL)(0.0f), cr, take);
+          sg += select((floatL)(0.0f), cg, take);
+          sb += select((floatL)(0.0f), cb, take);
+          taken -= take; /* take is -1 where true */
         }
       }
+  uint n = (uint)filter_lane_isum(taken);
+  float3 sum = (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb));
   if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
-    sum = values[i].xyz;
+    sum = (float3)(vr[i], vg[i], vb[i]);
     n = 1u;
   }
-  filtered[i] = (float4)(sum / (float)n, 0.0f);
+  float3 mean = sum / (float)n;
+  filtered[i] = mean.x;
+  filtered[stride + i] = mean.y;
+  filtered[2 * stride + i] = mean.z;
   counts[i] = n;
 }
 
-/* The largest of counts[0, n) into *max_count (zero before the launch): each
+/* The largest count of the n tuples into *max_count (zero before the launch):
+ * counts[0, *valid), and 1 for each tuple without a vertex. Each
  * work-item takes the largest of PSF_MAX_COUNT_CHUNK consecutive counts, then one
  * atomic_max. An atomic per tuple in the filter kernel contended for one cache
  * line across the cores: a tenth of that kernel's time on PoCL. */
-__kernel void filter_max_count(uint n, __global const uint* counts, __global uint* max_count) {
+__kernel void filter_max_count(uint n, __global const uint* valid, __global const uint* counts,
+                               __global uint* max_count) {
   uint begin = get_global_id(0) * PSF_MAX_COUNT_CHUNK;
   if (begin >= n) return;
-  uint end = min(n, begin + PSF_MAX_COUNT_CHUNK), m = 0u;
-  for (uint i = begin; i < end; ++i) m = max(m, counts[i]);
+  uint end = min(n, begin + PSF_MAX_COUNT_CHUNK), v = min(end, *valid), m = v < end ? 1u : 0u;
+  for (uint i = begin; i < v; ++i) m = max(m, counts[i]);
   atomic_max(max_count, m);
 }

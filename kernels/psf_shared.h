@@ -301,12 +301,30 @@ typedef struct {
   psf_uint cells27;  /* 1: cells of size r searched 3x3x3; 0: cells of size 2r searched 2x2x2 */
 } FilterParams;
 
-/* A tuple of the batch in cell order (tuples.cl gathers them for locality);
- * the values c_j being averaged live in a separate float4 array. */
-typedef struct {
-  psf_float4 position; /* xyz x_j; w: query radius r_j */
-  psf_float4 normal;   /* xyz n_j; w: light-sample visibility */
-  psf_float4 albedo;   /* xyz albedo_j; w: level of the cell grid (an integer, as float) */
-} FilterTuple;
+/* The tuples of a batch in cell order: gather_tuples (tuples.cl) copies each
+ * path's filtering vertex (PathVertex) with its query radius and grid level
+ * into separate arrays, the PSF_SORTED_* fields of one float buffer, `stride`
+ * floats apart, which filter.cl reads PSF_FILTER_LANES candidates at a time;
+ * the values c_j being averaged are three more such arrays (r, g, b). */
+/* Fields of the sorted tuples, each an array of `stride` floats. */
+#define PSF_SORTED_X 0
+#define PSF_SORTED_Y 1
+#define PSF_SORTED_Z 2
+#define PSF_SORTED_NX 3
+#define PSF_SORTED_NY 4
+#define PSF_SORTED_NZ 5
+#define PSF_SORTED_AR 6 /* albedo */
+#define PSF_SORTED_AG 7
+#define PSF_SORTED_AB 8
+#define PSF_SORTED_TAG 9 /* an int's bits: 2 level + light-sample visibility (0 or 1) */
+#define PSF_SORTED_R 10  /* query radius; 0: no filtering vertex */
+#define PSF_SORTED_FIELDS 11
+
+/* Arrays end PSF_SORTED_PAD entries past the batch: filter.cl reads up to
+ * PSF_FILTER_LANES - 1 candidates past a cell's end (and ignores them). */
+#define PSF_SORTED_PAD 16
+
+/* Tuples per work-item of gather_tuples (tuples.cl). */
+#define PSF_GATHER_LANES 8u
 
 #endif /* PSF_SHARED_H */

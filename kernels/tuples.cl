@@ -3,10 +3,12 @@
  * store_tuples: c_i of every path (the radiance scattered at its filtering vertex
  * towards the camera, relative to alpha_i) into a compact array in path order.
  * gather_tuples: tuples and values in sorted (cell) order, so the filter reads
- * neighbours from contiguous memory; positions apart from the other fields, as
- * most candidates are rejected by their distance alone (x, y, z also as separate
- * arrays, which filter.cl reads eight candidates at a time). scatter_values: filtered values and
- * neighbour counts back to path order. */
+ * neighbours from contiguous memory, each field as its own array (PSF_SORTED_*
+ * fields of `stride` floats; values: r, g, b arrays), which filter.cl reads
+ * PSF_FILTER_LANES candidates at a time. Only the tuples with a filtering vertex
+ * (the first *valid of the sorted order) are gathered and filtered. scatter_values:
+ * filtered values and neighbour counts back to path order, the others' own values
+ * with a count of 1. */
 
 __kernel void store_tuples(uint count, __global const PathState* states, __global float4* values) {
   uint i = get_global_id(0);
@@ -14,29 +16,78 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
   values[i] = (float4)(states[i].vertex_radiance.xyz, 0.0f);
 }
 
-__kernel void gather_tuples(uint count, __global const uint* order, __global const FilterTuple* tuples,
-                            __global const float4* values, __global float4* sorted_position,
-                            __global float* sorted_x, __global float* sorted_y, __global float* sorted_z,
-                            __global float4* sorted_normal, __global float4* sorted_albedo,
-                            __global float4* sorted_values) {
-  uint i = get_global_id(0);
-  if (i >= count) return;
-  uint j = order[i];
-  FilterTuple t = tuples[j];
-  sorted_position[i] = t.position;
-  sorted_x[i] = t.position.x;
-  sorted_y[i] = t.position.y;
-  sorted_z[i] = t.position.z;
-  sorted_normal[i] = t.normal;
-  sorted_albedo[i] = t.albedo;
-  sorted_values[i] = values[j];
+/* Each work-item gathers PSF_GATHER_LANES consecutive tuples of the sorted order
+ * and stores each field as one vector: one scalar store per field and tuple
+ * filled the store buffer and stalled the random reads behind it. Lanes past
+ * the valid tuples repeat the last into the arrays' padding (PSF_SORTED_PAD). */
+#if PSF_GATHER_LANES != 8
+#error "gather_tuples is written for PSF_GATHER_LANES == 8"
+#endif
+#define PSF_GATHER_LANE(k)                                                               \
+  {                                                                                      \
+    uint j = order[min(i0 + k##u, last)];                                                \
+    float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
+    float2 rj = radii[j];                                                                \
+    float4 cj = values[j];                                                               \
+    x.s##k = xj.x;                                                                       \
+    y.s##k = xj.y;                                                                       \
+    z.s##k = xj.z;                                                                       \
+    nx.s##k = nj.x;                                                                      \
+    ny.s##k = nj.y;                                                                      \
+    nz.s##k = nj.z;                                                                      \
+    ar.s##k = aj.x;                                                                      \
+    ag.s##k = aj.y;                                                                      \
+    ab.s##k = aj.z;                                                                      \
+    r.s##k = rj.x;                                                                       \
+    tag.s##k = rj.y;                                                                     \
+    cr.s##k = cj.x;                                                                      \
+    cg.s##k = cj.y;                                                                      \
+    cb.s##k = cj.z;                                                                      \
+  }
+
+__kernel void gather_tuples(FilterParams p, uint stride, __global const uint* order,
+                            __global const PathVertex* vertices, __global const float2* radii,
+                            __global const float4* values, __global const uint* valid, __global float* sorted,
+                            __global float* sorted_values) {
+  uint i0 = get_global_id(0) * PSF_GATHER_LANES, v = *valid;
+  if (i0 >= v) return; /* tuples without a vertex are not filtered (scatter_values) */
+  uint last = v - 1u;
+  float8 x, y, z, nx, ny, nz, ar, ag, ab, r, tag, cr, cg, cb;
+  PSF_GATHER_LANE(0)
+  PSF_GATHER_LANE(1)
+  PSF_GATHER_LANE(2)
+  PSF_GATHER_LANE(3)
+  PSF_GATHER_LANE(4)
+  PSF_GATHER_LANE(5)
+  PSF_GATHER_LANE(6)
+  PSF_GATHER_LANE(7)
+  vstore8(x, 0, sorted + PSF_SORTED_X * stride + i0);
+  vstore8(y, 0, sorted + PSF_SORTED_Y * stride + i0);
+  vstore8(z, 0, sorted + PSF_SORTED_Z * stride + i0);
+  vstore8(nx, 0, sorted + PSF_SORTED_NX * stride + i0);
+  vstore8(ny, 0, sorted + PSF_SORTED_NY * stride + i0);
+  vstore8(nz, 0, sorted + PSF_SORTED_NZ * stride + i0);
+  vstore8(ar, 0, sorted + PSF_SORTED_AR * stride + i0);
+  vstore8(ag, 0, sorted + PSF_SORTED_AG * stride + i0);
+  vstore8(ab, 0, sorted + PSF_SORTED_AB * stride + i0);
+  vstore8(tag, 0, sorted + PSF_SORTED_TAG * stride + i0);
+  vstore8(r, 0, sorted + PSF_SORTED_R * stride + i0);
+  vstore8(cr, 0, sorted_values + i0);
+  vstore8(cg, 0, sorted_values + stride + i0);
+  vstore8(cb, 0, sorted_values + 2 * stride + i0);
 }
 
-__kernel void scatter_values(uint count, __global const uint* order, __global const float4* sorted_values,
-                             __global const uint* sorted_counts, __global float4* values, __global uint* counts) {
+__kernel void scatter_values(uint count, uint stride, __global const uint* order, __global const uint* valid,
+                             __global const float* sorted_values, __global const uint* sorted_counts,
+                             __global const float4* unfiltered, __global float4* values, __global uint* counts) {
   uint i = get_global_id(0);
   if (i >= count) return;
   uint j = order[i];
-  values[j] = sorted_values[i];
+  if (i >= *valid) { /* no filtering vertex: its own value */
+    values[j] = unfiltered[j];
+    counts[j] = 1u;
+    return;
+  }
+  values[j] = (float4)(sorted_values[i], sorted_values[stride + i], sorted_values[2 * stride + i], 0.0f);
   counts[j] = sorted_counts[i];
 }

@@ -82,8 +82,7 @@ struct DeviceResult {
 };
 
 DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
-                        int iterations) {
-  auto& rt = psf::test::runtime();
+                        int iterations, psf::Runtime& rt = psf::test::runtime()) {
   uint32_t n = uint32_t(v.size());
   psf::PathSpaceFilter filter(rt, n);
   cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
@@ -243,6 +242,7 @@ TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]")
   CHECK(end == ref_end);
   size_t expect_invalid = std::count_if(v.begin(), v.end(), [](auto& t) { return t.albedo.s[3] == 0.0f; });
   CHECK(invalid == expect_invalid);
+  CHECK(rt.download<uint32_t>(filter.valid_count(), 1)[0] == n - invalid);
 }
 
 TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation", "[filter]") {
@@ -305,6 +305,38 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     auto v = random_tuples(2500, 29, 1.0f);
     auto c = random_values(2500, 30);
     check_same(brute_force(v, c, p, 2), run_filter(v, c, p, 2));
+  }
+}
+
+// The filter kernel's variant that the test device does not use by default
+// (Runtime: CPUs 8 lanes without branches, GPUs 2 lanes skipping empty vectors).
+TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force equation", "[filter]") {
+  auto& shared = psf::test::runtime();
+  const bool gpu = shared.device().type == "GPU";
+  psf::Runtime rt(shared.device(), gpu ? "-DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0"
+                                       : "-DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1");
+  FilterParams p = default_params();
+  for (bool cells27 : {false, true}) {
+    p.cells27 = cells27;
+    for (auto [n, extent, footprint] : {std::tuple{3001, 1.0f, 0.02f}, std::tuple{777, 0.2f, 0.01f},
+                                        std::tuple{1, 1.0f, 0.02f}}) {
+      INFO("n " << n << " extent " << extent << " cells27 " << cells27);
+      auto v = random_tuples(n, 31 + n, extent);
+      auto c = random_values(n, 32 + n);
+      for (size_t i = 0; i < c.size(); i += 53) c[i].s[2] = std::nanf("");
+      p.footprint = footprint;
+      auto dev = run_filter(v, c, p, 2, rt);
+      auto ref = brute_force(v, c, p, 2);
+      size_t wrong = 0;
+      for (size_t i = 0; i < c.size(); ++i) {
+        bool own_finite = std::isfinite(c[i].s[0]) && std::isfinite(c[i].s[1]) && std::isfinite(c[i].s[2]);
+        if (dev.counts[i] != ref.counts[i]) ++wrong;
+        for (int k = 0; k < 3 && own_finite; ++k)
+          if (std::fabs(ref.values[i].s[k] - dev.values[i].s[k]) > 1e-5f * std::max(1.0f, std::fabs(ref.values[i].s[k])))
+            ++wrong;
+      }
+      CHECK(wrong == 0);
+    }
   }
 }
 
