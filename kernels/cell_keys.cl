@@ -2,8 +2,8 @@
  * Sec. 2.2; sorted-cell search as in SPH codes).
  *
  * Reads: each path's filtering vertex. Writes: the key of its cell with the path
- * index, to be sorted, and in path order its query radius with its tag (2 level +
- * light-sample visibility, an int's bits) for gather_tuples (tuples.cl).
+ * index, to be sorted, and in path order its query radius with its tag (4 level +
+ * 2 light-sample visibility, an int's bits) for gather_tuples (tuples.cl).
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
  * of a few pixels at the camera path length d_i) or a global r0. Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
@@ -82,5 +82,5 @@ __kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __g
   }
   int level = vertex_level(r);
   keys[i] = cell_key(level, cell_of(x.xyz, cell_size(level, p.cells27)), p.key_bits);
-  radii[i] = (float2)(r, as_float(2 * level + (n.w != 0.0f ? 1 : 0)));
+  radii[i] = (float2)(r, as_float(4 * level + (n.w != 0.0f ? 2 : 0)));
 }

@@ -84,8 +84,13 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
   float3 x = (float3)(xs[i], ys[i], zs[i]);
   float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
   float3 ai = (float3)(ars[i], ags[i], abs_[i]);
-  int tag = as_int(tags[i]);
-  int level = tag >> 1; /* tag = 2 level + visibility */
+  /* tag = 4 level + 2 visibility + finite: a neighbour must match the centre's
+   * level and visibility and have a finite c_j (a NaN/Inf never spreads; the
+   * centre's own always counts). Finiteness is that of the values gathered:
+   * later iterations' averages are finite wherever those were (barring a sum
+   * that overflows). */
+  int tag = as_int(tags[i]) | 1;
+  int level = tag >> 2;
   float size = cell_size(level, p.cells27);
   int3 c = cell_of(x, size);
   /* The cells that can hold points within r: c, and along each axis the
@@ -128,9 +133,7 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
           intL similar = (as_intL(vloadL(0, tags + j)) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
                          (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));
           floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
-          /* A NaN/Inf neighbour never spreads; the centre always counts. */
-          intL finite = isfinite(cr) & isfinite(cg) & isfinite(cb);
-          intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar & finite));
+          intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar));
           sr += select((floatL)(0.0f), cr, take);
           sg += select((floatL)(0.0f), cg, take);
           sb += select((floatL)(0.0f), cb, take);

@@ -19,7 +19,8 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
 /* Each work-item gathers PSF_GATHER_LANES consecutive tuples of the sorted order
  * and stores each field as one vector: one scalar store per field and tuple
  * filled the store buffer and stalled the random reads behind it. Lanes past
- * the valid tuples repeat the last into the arrays' padding (PSF_SORTED_PAD). */
+ * the valid tuples repeat the last into the arrays' padding (PSF_SORTED_PAD).
+ * The tag gains a bit for a finite c_j (filter.cl). */
 #if PSF_GATHER_LANES != 8
 #error "gather_tuples is written for PSF_GATHER_LANES == 8"
 #endif
@@ -29,6 +30,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
     float2 rj = radii[j];                                                                \
     float4 cj = values[j];                                                               \
+    int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     x.s##k = xj.x;                                                                       \
     y.s##k = xj.y;                                                                       \
     z.s##k = xj.z;                                                                       \
@@ -39,7 +41,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     ag.s##k = aj.y;                                                                      \
     ab.s##k = aj.z;                                                                      \
     r.s##k = rj.x;                                                                       \
-    tag.s##k = rj.y;                                                                     \
+    tag.s##k = as_float(as_int(rj.y) | finite);                                          \
     cr.s##k = cj.x;                                                                      \
     cg.s##k = cj.y;                                                                      \
     cb.s##k = cj.z;                                                                      \
