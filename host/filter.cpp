@@ -75,8 +75,13 @@ size_t PathSpaceFilter::bytes_per_tuple() {
          sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
 }
 
-PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity)
-    : rt_(rt), capacity_(capacity), stride_(std::max(capacity, 1u) + PSF_SORTED_PAD) {
+PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes)
+    : rt_(rt),
+      capacity_(capacity),
+      stride_(std::max(capacity, 1u) + PSF_SORTED_PAD),
+      gather_lanes_(gather_lanes ? gather_lanes : rt.device().type == "GPU" ? 1 : PSF_GATHER_LANES) {
+  if (gather_lanes_ != 1 && gather_lanes_ != PSF_GATHER_LANES)
+    throw std::invalid_argument("PathSpaceFilter: gather_tuples takes 1 or PSF_GATHER_LANES tuples per work-item");
   size_t n = std::max(capacity, 1u);
   size_t cells = size_t(1) << filter_key_bits(capacity);
   sorted_ = rt.buffer(CL_MEM_READ_WRITE, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
@@ -112,9 +117,9 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
   rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
-  const uint32_t gather_items = (n + PSF_GATHER_LANES - 1) / PSF_GATHER_LANES;
-  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, indices_, vertices, radii_, values, valid_, sorted_,
-             values_a_);
+  const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
+  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, radii_, values, valid_,
+             sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
   // every iteration averages the same tuples, so the counts are those of any.

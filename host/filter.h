@@ -42,8 +42,10 @@ size_t scan_scratch_entries(uint32_t total);
 
 class PathSpaceFilter {
  public:
-  // Buffers for batches of up to `capacity` tuples.
-  PathSpaceFilter(Runtime& rt, uint32_t capacity);
+  // Buffers for batches of up to `capacity` tuples. gather_lanes: tuples per
+  // work-item of gather_tuples, 1 or PSF_GATHER_LANES; 0 picks by device kind
+  // (1 on GPUs, PSF_GATHER_LANES on CPUs).
+  PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes = 0);
 
   // Filters `params.count` tuples: `vertices` (PathVertex, path order) and their
   // values c (float4, path order) into `filtered` (c-bar, path order) and `counts`
@@ -63,7 +65,8 @@ class PathSpaceFilter {
  private:
   Runtime& rt_;
   uint32_t capacity_;
-  uint32_t stride_;  // floats between two fields of sorted_ (capacity + padding)
+  uint32_t stride_;        // floats between two fields of sorted_ (capacity + padding)
+  uint32_t gather_lanes_;  // tuples per work-item of gather_tuples
   cl::Buffer radii_, sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;

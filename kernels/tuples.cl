@@ -16,9 +16,10 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
   values[i] = (float4)(states[i].vertex_radiance.xyz, 0.0f);
 }
 
-/* Each work-item gathers PSF_GATHER_LANES consecutive tuples of the sorted order
- * and stores each field as one vector: one scalar store per field and tuple
- * filled the store buffer and stalled the random reads behind it. Lanes past
+/* On CPUs (lanes == PSF_GATHER_LANES) each work-item gathers that many consecutive
+ * tuples of the sorted order and stores each field as one vector: one scalar
+ * store per field and tuple filled the store buffer and stalled the random reads
+ * behind it. On GPUs (lanes == 1) each work-item gathers one. Lanes past
  * the valid tuples repeat the last into the arrays' padding (PSF_SORTED_PAD).
  * The tag gains a bit for a finite c_j (filter.cl). */
 #if PSF_GATHER_LANES != 8
@@ -47,11 +48,36 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     cb.s##k = cj.z;                                                                      \
   }
 
-__kernel void gather_tuples(FilterParams p, uint stride, __global const uint* order,
+__kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global const uint* order,
                             __global const PathVertex* vertices, __global const float2* radii,
                             __global const float4* values, __global const uint* valid, __global float* sorted,
                             __global float* sorted_values) {
-  uint i0 = get_global_id(0) * PSF_GATHER_LANES, v = *valid;
+  uint v = *valid;
+  if (lanes == 1u) { /* one tuple per work-item (GPUs: neighbouring work-items' stores coalesce) */
+    uint i = get_global_id(0);
+    if (i >= v) return;
+    uint j = order[i];
+    float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo;
+    float2 rj = radii[j];
+    float4 cj = values[j];
+    int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
+    sorted[PSF_SORTED_X * stride + i] = xj.x;
+    sorted[PSF_SORTED_Y * stride + i] = xj.y;
+    sorted[PSF_SORTED_Z * stride + i] = xj.z;
+    sorted[PSF_SORTED_NX * stride + i] = nj.x;
+    sorted[PSF_SORTED_NY * stride + i] = nj.y;
+    sorted[PSF_SORTED_NZ * stride + i] = nj.z;
+    sorted[PSF_SORTED_AR * stride + i] = aj.x;
+    sorted[PSF_SORTED_AG * stride + i] = aj.y;
+    sorted[PSF_SORTED_AB * stride + i] = aj.z;
+    sorted[PSF_SORTED_TAG * stride + i] = as_float(as_int(rj.y) | finite);
+    sorted[PSF_SORTED_R * stride + i] = rj.x;
+    sorted_values[i] = cj.x;
+    sorted_values[stride + i] = cj.y;
+    sorted_values[2 * stride + i] = cj.z;
+    return;
+  }
+  uint i0 = get_global_id(0) * PSF_GATHER_LANES;
   if (i0 >= v) return; /* tuples without a vertex are not filtered (scatter_values) */
   uint last = v - 1u;
   float8 x, y, z, nx, ny, nz, ar, ag, ab, r, tag, cr, cg, cb;

@@ -82,9 +82,9 @@ struct DeviceResult {
 };
 
 DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
-                        int iterations, psf::Runtime& rt = psf::test::runtime()) {
+                        int iterations, psf::Runtime& rt = psf::test::runtime(), uint32_t gather_lanes = 0) {
   uint32_t n = uint32_t(v.size());
-  psf::PathSpaceFilter filter(rt, n);
+  psf::PathSpaceFilter filter(rt, n, gather_lanes);
   cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
   cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(cl_float4));
   cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(uint32_t));
@@ -308,8 +308,9 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
   }
 }
 
-// The filter kernel's variant that the test device does not use by default
-// (Runtime: CPUs 8 lanes without branches, GPUs 2 lanes skipping empty vectors).
+// The filter's variant that the test device does not use by default (Runtime:
+// CPUs 8 lanes without branches, GPUs 2 lanes skipping empty vectors; gather_tuples:
+// CPUs 8 tuples per work-item, GPUs 1).
 TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force equation", "[filter]") {
   auto& shared = psf::test::runtime();
   const bool gpu = shared.device().type == "GPU";
@@ -325,7 +326,7 @@ TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force
       auto c = random_values(n, 32 + n);
       for (size_t i = 0; i < c.size(); i += 53) c[i].s[2] = std::nanf("");
       p.footprint = footprint;
-      auto dev = run_filter(v, c, p, 2, rt);
+      auto dev = run_filter(v, c, p, 2, rt, gpu ? PSF_GATHER_LANES : 1);
       auto ref = brute_force(v, c, p, 2);
       size_t wrong = 0;
       for (size_t i = 0; i < c.size(); ++i) {
