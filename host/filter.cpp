@@ -68,10 +68,11 @@ void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& t
 }
 
 size_t PathSpaceFilter::bytes_per_tuple() {
-  // sorted tuples (PSF_SORTED_FIELDS arrays), keys and indices
-  // (2x each), values (2x, as r, g, b arrays), counts, ranges (2 uints for each
-  // of up to 4 cells per tuple). The arrays' padding is per batch, not per tuple.
-  return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
+  // radius and tag per path (cell_keys), sorted tuples (PSF_SORTED_FIELDS
+  // arrays), keys and indices (2x each), values (2x, as r, g, b arrays), counts,
+  // ranges (2 uints for each of up to 4 cells per tuple). The arrays' padding is
+  // per batch, not per tuple.
+  return 2 * sizeof(float) + PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
          sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
 }
 
@@ -118,7 +119,7 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
   const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
-  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, radii_, values, valid_,
+  rt_.launch("gather_tuples", gather_items, kLocal, stride_, gather_lanes_, indices_, vertices, radii_, values, valid_,
              sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);

@@ -3,7 +3,8 @@
  *
  * Reads: each path's filtering vertex. Writes: the key of its cell with the path
  * index, to be sorted, and in path order its query radius with its tag (4 level +
- * 2 light-sample visibility, an int's bits) for gather_tuples (tuples.cl).
+ * 2 light-sample visibility, an int's bits) for gather_tuples (tuples.cl); the
+ * visibility is 0 or 1 (shade.cl), and any nonzero value counts as 1.
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
  * of a few pixels at the camera path length d_i) or a global r0. Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells

@@ -321,7 +321,8 @@ typedef struct {
 #define PSF_SORTED_FIELDS 11
 
 /* Arrays end PSF_SORTED_PAD entries past the batch: filter.cl reads up to
- * PSF_FILTER_LANES - 1 candidates past a cell's end (and ignores them). */
+ * PSF_FILTER_LANES - 1 candidates past a cell's end (and ignores them), and
+ * gather_tuples writes up to PSF_GATHER_LANES - 1 past the last valid tuple. */
 #define PSF_SORTED_PAD 16
 
 /* Tuples per work-item of gather_tuples (tuples.cl). */

@@ -20,8 +20,9 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
  * tuples of the sorted order and stores each field as one vector: one scalar
  * store per field and tuple filled the store buffer and stalled the random reads
  * behind it. On GPUs (lanes == 1) each work-item gathers one. Lanes past
- * the valid tuples repeat the last into the arrays' padding (PSF_SORTED_PAD).
- * The tag gains a bit for a finite c_j (filter.cl). */
+ * the valid tuples repeat the last one into the slots after it (those of tuples
+ * without a vertex, or the arrays' padding, PSF_SORTED_PAD), which the filter
+ * reads only in masked lanes. The tag gains a bit for a finite c_j (filter.cl). */
 #if PSF_GATHER_LANES != 8
 #error "gather_tuples is written for PSF_GATHER_LANES == 8"
 #endif
@@ -48,7 +49,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     cb.s##k = cj.z;                                                                      \
   }
 
-__kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global const uint* order,
+__kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
                             __global const PathVertex* vertices, __global const float2* radii,
                             __global const float4* values, __global const uint* valid, __global float* sorted,
                             __global float* sorted_values) {

@@ -301,6 +301,38 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
       }
     }
   }
+  SECTION("no path has a filtering vertex") {
+    auto v = random_tuples(700, 41, 1.0f);
+    for (auto& t : v) t.albedo.s[3] = 0.0f;
+    auto c = random_values(700, 42);
+    auto dev = run_filter(v, c, p, 2);
+    check_same(brute_force(v, c, p, 2), dev);
+    CHECK(dev.max_count == 1);
+  }
+  SECTION("positive grid levels (radii of 0.5 to 2.5)") {
+    auto v = random_tuples(2000, 43, 40.0f);
+    auto c = random_values(2000, 44);
+    p.footprint = 0.5f;
+    check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
+  }
+  SECTION("one filter, a batch and then a smaller one (the last batch of a render)") {
+    auto& rt = psf::test::runtime();
+    psf::PathSpaceFilter filter(rt, 3000);
+    for (uint32_t n : {3000u, 1234u}) {
+      INFO("n " << n);
+      auto v = random_tuples(n, 45 + n, 1.0f);
+      auto c = random_values(n, 46 + n);
+      cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
+      cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4)), counts = rt.buffer(CL_MEM_READ_WRITE, n * 4);
+      FilterParams q = p;
+      q.count = n;
+      DeviceResult dev;
+      dev.max_count = filter.run(q, 2, vb, cb, out, counts);
+      dev.values = rt.download<cl_float4>(out, n);
+      dev.counts = rt.download<uint32_t>(counts, n);
+      check_same(brute_force(v, c, q, 2), dev);
+    }
+  }
   SECTION("two iterations average the averages") {
     auto v = random_tuples(2500, 29, 1.0f);
     auto c = random_values(2500, 30);
@@ -337,6 +369,7 @@ TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force
             ++wrong;
       }
       CHECK(wrong == 0);
+      CHECK(dev.max_count == *std::max_element(ref.counts.begin(), ref.counts.end()));
     }
   }
 }
