@@ -86,7 +86,7 @@ PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather
   size_t n = std::max(capacity, 1u);
   size_t cells = size_t(1) << filter_key_bits(capacity);
   sorted_ = rt.buffer(CL_MEM_READ_WRITE, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
-  radii_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float2));
+  radius_tags_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int2));
   keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   tmp_keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
@@ -114,13 +114,13 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
 
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
-  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_, radii_);
+  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_, radius_tags_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
   rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
   const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
-  rt_.launch("gather_tuples", gather_items, kLocal, stride_, gather_lanes_, indices_, vertices, radii_, values, valid_,
-             sorted_, values_a_);
+  rt_.launch("gather_tuples", gather_items, kLocal, stride_, gather_lanes_, indices_, vertices, radius_tags_, values,
+             valid_, sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
   // every iteration averages the same tuples, so the counts are those of any.

@@ -2,8 +2,8 @@
  * Sec. 2.2; sorted-cell search as in SPH codes).
  *
  * Reads: each path's filtering vertex. Writes: the key of its cell with the path
- * index, to be sorted, and in path order its query radius with its tag (4 level +
- * 2 light-sample visibility, an int's bits) for gather_tuples (tuples.cl); the
+ * index, to be sorted, and in path order its query radius (a float's bits) and
+ * its tag (4 level + 2 light-sample visibility) for gather_tuples (tuples.cl); the
  * visibility is 0 or 1 (shade.cl), and any nonzero value counts as 1.
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
  * of a few pixels at the camera path length d_i) or a global r0. Vertices are
@@ -70,7 +70,7 @@ inline float vertex_radius(FilterParams p, float4 position, float4 albedo) {
 inline int vertex_level(float r) { return grid_level(fmax(r, 1e-30f)); }
 
 __kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __global uint* keys,
-                        __global uint* indices, __global float2* radii) {
+                        __global uint* indices, __global int2* radius_tags) {
   uint i = get_global_id(0);
   if (i >= p.count) return;
   float4 x = vertices[i].position, n = vertices[i].normal, a = vertices[i].albedo;
@@ -78,10 +78,10 @@ __kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __g
   float r = vertex_radius(p, x, a);
   if (r == 0.0f) {
     keys[i] = 1u << p.key_bits;
-    radii[i] = (float2)(0.0f, as_float(0));
+    radius_tags[i] = (int2)(0, 0);
     return;
   }
   int level = vertex_level(r);
   keys[i] = cell_key(level, cell_of(x.xyz, cell_size(level, p.cells27)), p.key_bits);
-  radii[i] = (float2)(r, as_float(4 * level + (n.w != 0.0f ? 2 : 0)));
+  radius_tags[i] = (int2)(as_int(r), 4 * level + (n.w != 0.0f ? 2 : 0));
 }

@@ -36,7 +36,6 @@
 #define floatL PSF_CAT(float, PSF_FILTER_LANES)
 #define intL PSF_CAT(int, PSF_FILTER_LANES)
 #define vloadL PSF_CAT(vload, PSF_FILTER_LANES)
-#define as_intL PSF_CAT(as_int, PSF_FILTER_LANES)
 #if PSF_FILTER_LANES == 2
 #define PSF_FILTER_LANE_INDEX ((int2)(0, 1))
 #elif PSF_FILTER_LANES == 4
@@ -76,7 +75,7 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
   __global const float* ars = sorted + PSF_SORTED_AR * stride;
   __global const float* ags = sorted + PSF_SORTED_AG * stride;
   __global const float* abs_ = sorted + PSF_SORTED_AB * stride;
-  __global const float* tags = sorted + PSF_SORTED_TAG * stride;
+  __global const int* tags = (__global const int*)(sorted + PSF_SORTED_TAG * stride); /* an int field */
   __global const float* vr = values;
   __global const float* vg = values + stride;
   __global const float* vb = values + 2 * stride;
@@ -89,7 +88,7 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
    * centre's own always counts). Finiteness is that of the values gathered:
    * later iterations' averages are finite wherever those were (barring a sum
    * that overflows). */
-  int tag = as_int(tags[i]) | 1;
+  int tag = tags[i] | 1;
   int level = tag >> 2;
   float size = cell_size(level, p.cells27);
   int3 c = cell_of(x, size);
@@ -130,7 +129,7 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
           floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);
           floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);
           floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);
-          intL similar = (as_intL(vloadL(0, tags + j)) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
+          intL similar = (vloadL(0, tags + j) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
                          (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));
           floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
           intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar));

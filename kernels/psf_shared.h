@@ -316,7 +316,7 @@ typedef struct {
 #define PSF_SORTED_AR 6 /* albedo */
 #define PSF_SORTED_AG 7
 #define PSF_SORTED_AB 8
-#define PSF_SORTED_TAG 9 /* an int's bits: 4 level + 2 light-sample visibility + 1 if c_j is finite */
+#define PSF_SORTED_TAG 9 /* int (read through an int pointer): 4 level + 2 visibility + 1 if c_j is finite */
 #define PSF_SORTED_R 10  /* query radius; 0: no filtering vertex */
 #define PSF_SORTED_FIELDS 11
 

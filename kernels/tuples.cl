@@ -30,7 +30,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
   {                                                                                      \
     uint j = order[min(i0 + k##u, last)];                                                \
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
-    float2 rj = radii[j];                                                                \
+    int2 rt = radius_tags[j];                                                            \
     float4 cj = values[j];                                                               \
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     x.s##k = xj.x;                                                                       \
@@ -42,24 +42,25 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     ar.s##k = aj.x;                                                                      \
     ag.s##k = aj.y;                                                                      \
     ab.s##k = aj.z;                                                                      \
-    r.s##k = rj.x;                                                                       \
-    tag.s##k = as_float(as_int(rj.y) | finite);                                          \
+    r.s##k = as_float(rt.x);                                                             \
+    tag.s##k = rt.y | finite;                                                            \
     cr.s##k = cj.x;                                                                      \
     cg.s##k = cj.y;                                                                      \
     cb.s##k = cj.z;                                                                      \
   }
 
 __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
-                            __global const PathVertex* vertices, __global const float2* radii,
+                            __global const PathVertex* vertices, __global const int2* radius_tags,
                             __global const float4* values, __global const uint* valid, __global float* sorted,
                             __global float* sorted_values) {
   uint v = *valid;
+  __global int* sorted_tags = (__global int*)(sorted + PSF_SORTED_TAG * stride); /* an int field */
   if (lanes == 1u) { /* one tuple per work-item (GPUs: neighbouring work-items' stores coalesce) */
     uint i = get_global_id(0);
     if (i >= v) return;
     uint j = order[i];
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo;
-    float2 rj = radii[j];
+    int2 rt = radius_tags[j];
     float4 cj = values[j];
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
     sorted[PSF_SORTED_X * stride + i] = xj.x;
@@ -71,8 +72,8 @@ __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
     sorted[PSF_SORTED_AR * stride + i] = aj.x;
     sorted[PSF_SORTED_AG * stride + i] = aj.y;
     sorted[PSF_SORTED_AB * stride + i] = aj.z;
-    sorted[PSF_SORTED_TAG * stride + i] = as_float(as_int(rj.y) | finite);
-    sorted[PSF_SORTED_R * stride + i] = rj.x;
+    sorted_tags[i] = rt.y | finite;
+    sorted[PSF_SORTED_R * stride + i] = as_float(rt.x);
     sorted_values[i] = cj.x;
     sorted_values[stride + i] = cj.y;
     sorted_values[2 * stride + i] = cj.z;
@@ -81,7 +82,8 @@ __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
   uint i0 = get_global_id(0) * PSF_GATHER_LANES;
   if (i0 >= v) return; /* tuples without a vertex are not filtered (scatter_values) */
   uint last = v - 1u;
-  float8 x, y, z, nx, ny, nz, ar, ag, ab, r, tag, cr, cg, cb;
+  float8 x, y, z, nx, ny, nz, ar, ag, ab, r, cr, cg, cb;
+  int8 tag;
   PSF_GATHER_LANE(0)
   PSF_GATHER_LANE(1)
   PSF_GATHER_LANE(2)
@@ -99,7 +101,7 @@ __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
   vstore8(ar, 0, sorted + PSF_SORTED_AR * stride + i0);
   vstore8(ag, 0, sorted + PSF_SORTED_AG * stride + i0);
   vstore8(ab, 0, sorted + PSF_SORTED_AB * stride + i0);
-  vstore8(tag, 0, sorted + PSF_SORTED_TAG * stride + i0);
+  vstore8(tag, 0, sorted_tags + i0);
   vstore8(r, 0, sorted + PSF_SORTED_R * stride + i0);
   vstore8(cr, 0, sorted_values + i0);
   vstore8(cg, 0, sorted_values + stride + i0);
