@@ -104,6 +104,9 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
   float r2 = r * r, tol2 = p.albedo_tol * p.albedo_tol;
   floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
   intL taken = (intL)(0);
+  /* Neighbouring cells share a key only where it has fewer than 2 bits per
+   * axis (cell_key: tiny batches); only then are repeats looked for. */
+  const bool repeats = min(p.key_bits / 3u, 10u) < 2u;
   uint seen[27];
   uint nseen = 0u;
   for (int cz = lo.z; cz <= hi.z; ++cz)
@@ -112,10 +115,12 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
         uint key = cell_key(level, (int3)(cx, cy, cz), p.key_bits);
         uint2 range = ranges[key];
         if (range.x >= range.y) continue;
-        bool dup = false;
-        for (uint s = 0u; s < nseen; ++s) dup = dup || seen[s] == key;
-        if (dup) continue;
-        seen[nseen++] = key;
+        if (repeats) {
+          bool dup = false;
+          for (uint s = 0u; s < nseen; ++s) dup = dup || seen[s] == key;
+          if (dup) continue;
+          seen[nseen++] = key;
+        }
         for (uint j = range.x; j < range.y; j += PSF_FILTER_LANES) {
           intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;
           floatL dx = vloadL(0, xs + j) - (floatL)(x.x);

@@ -250,8 +250,11 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
     SECTION(cells27 ? "27 cells of size r" : "8 cells of size 2r") {
       FilterParams p = default_params();
       p.cells27 = cells27;
+      // n = 6: keys of 4 bits, so neighbouring cells share keys (cell_key) and the
+      // filter must visit each shared one once.
       for (auto [n, extent, footprint] : {std::tuple{3001, 1.0f, 0.02f}, std::tuple{777, 0.2f, 0.01f},
-                                          std::tuple{1, 1.0f, 0.02f}, std::tuple{64, 1.0f, 0.02f}}) {
+                                          std::tuple{1, 1.0f, 0.02f}, std::tuple{64, 1.0f, 0.02f},
+                                          std::tuple{6, 0.05f, 0.02f}}) {
         INFO("n " << n << " extent " << extent);
         auto v = random_tuples(n, 11 + n, extent);
         auto c = random_values(n, 12 + n);
