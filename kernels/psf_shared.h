@@ -305,8 +305,8 @@ typedef struct {
  * path's filtering vertex (PathVertex) with its query radius and grid level
  * into separate arrays, the PSF_SORTED_* fields of one float buffer, `stride`
  * floats apart, which filter.cl reads PSF_FILTER_LANES candidates at a time;
- * the values c_j being averaged are three more such arrays (r, g, b). */
-/* Fields of the sorted tuples, each an array of `stride` floats. */
+ * the values c_j being averaged are three more such arrays (r, g, b). Only the
+ * tuples with a filtering vertex are gathered; they come first in cell order. */
 #define PSF_SORTED_X 0
 #define PSF_SORTED_Y 1
 #define PSF_SORTED_Z 2
@@ -317,7 +317,7 @@ typedef struct {
 #define PSF_SORTED_AG 7
 #define PSF_SORTED_AB 8
 #define PSF_SORTED_TAG 9 /* int (read through an int pointer): 4 level + 2 visibility + 1 if c_j is finite */
-#define PSF_SORTED_R 10  /* query radius; 0: no filtering vertex */
+#define PSF_SORTED_R 10  /* query radius r_j */
 #define PSF_SORTED_FIELDS 11
 
 /* Arrays end PSF_SORTED_PAD entries past the batch: filter.cl reads up to

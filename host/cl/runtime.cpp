@@ -217,7 +217,8 @@ Runtime::Runtime(const DeviceInfo& device, const std::string& extra_options) : d
   // CPUs test 8 candidates at a time without branches, GPUs 2 at a time,
   // skipping the similarity tests where none lies in the ball.
   if (extra_options.find("PSF_FILTER_LANES") == std::string::npos)
-    options += device_.type == "GPU" ? " -DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1" : " -DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0";
+    options += device_.type == "GPU" ? " -DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1"
+                                     : " -DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0";
   if (!extra_options.empty()) options += " " + extra_options;
   auto t0 = std::chrono::steady_clock::now();
   program_ = cl::Program(context_, source);
