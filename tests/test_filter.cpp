@@ -81,10 +81,10 @@ struct DeviceResult {
   uint32_t max_count = 0;
 };
 
-DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
-                        int iterations, psf::Runtime& rt = psf::test::runtime(), uint32_t gather_lanes = 0) {
+// Runs `filter` (of capacity >= v.size()) on the tuples and downloads its results.
+DeviceResult run_with(psf::Runtime& rt, psf::PathSpaceFilter& filter, const std::vector<PathVertex>& v,
+                      const std::vector<cl_float4>& c, FilterParams p, int iterations) {
   uint32_t n = uint32_t(v.size());
-  psf::PathSpaceFilter filter(rt, n, gather_lanes);
   cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
   cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(cl_float4));
   cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, std::max<size_t>(n, 1) * sizeof(uint32_t));
@@ -94,6 +94,12 @@ DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_f
   d.values = rt.download<cl_float4>(out, n);
   d.counts = rt.download<uint32_t>(counts, n);
   return d;
+}
+
+DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
+                        int iterations, psf::Runtime& rt = psf::test::runtime(), uint32_t gather_lanes = 0) {
+  psf::PathSpaceFilter filter(rt, uint32_t(v.size()), gather_lanes);
+  return run_with(rt, filter, v, c, p, iterations);
 }
 
 // Tuples scattered over a few planes (so normals repeat), with some albedo and
@@ -325,15 +331,7 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
       INFO("n " << n);
       auto v = random_tuples(n, 45 + n, 1.0f);
       auto c = random_values(n, 46 + n);
-      cl::Buffer vb = rt.upload(v), cb = rt.upload(c);
-      cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4)), counts = rt.buffer(CL_MEM_READ_WRITE, n * 4);
-      FilterParams q = p;
-      q.count = n;
-      DeviceResult dev;
-      dev.max_count = filter.run(q, 2, vb, cb, out, counts);
-      dev.values = rt.download<cl_float4>(out, n);
-      dev.counts = rt.download<uint32_t>(counts, n);
-      check_same(brute_force(v, c, q, 2), dev);
+      check_same(brute_force(v, c, p, 2), run_with(rt, filter, v, c, p, 2));
     }
   }
   SECTION("two iterations average the averages") {
