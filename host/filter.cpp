@@ -1,12 +1,13 @@
 #include "filter.h"
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
 namespace psf {
 
 namespace {
 constexpr size_t kLocal = Runtime::kDefaultLocal;
-constexpr uint32_t kRadixBits = 4;
 
 // Scans data[data_offset, + total) with its block sums in scratch from scratch_offset on.
 void scan_level(Runtime& rt, cl::Buffer& data, uint32_t data_offset, uint32_t total, cl::Buffer& scratch,
@@ -39,29 +40,44 @@ void exclusive_scan(Runtime& rt, cl::Buffer& data, uint32_t total, cl::Buffer& s
   if (total > 0) scan_level(rt, data, 0, total, scratch, 0);
 }
 
-uint32_t radix_chunk(const Runtime& rt, uint32_t n) {
+uint32_t radix_digit_bits(const Runtime& rt) { return rt.device().type == "GPU" ? 4 : 8; }
+
+uint32_t radix_chunk(const Runtime& rt, uint32_t n, uint32_t digit_bits) {
   // GPUs: short chunks, so that enough work-items run; at most 65536 of them.
   if (rt.device().type == "GPU") return std::max(16u, (n + 65535) / 65536);
-  // CPUs: chunks of at least 256 pairs per work-item; at most 1024 work-items.
-  const uint32_t items = std::max(1u, std::min(1024u, (n + 255) / 256));
+  // CPUs: chunks of at least 16 pairs per digit value (256 pairs for 4-bit
+  // digits, 4096 for 8-bit ones), so that the table of counts stays a small part
+  // of the input; at most 1024 work-items.
+  const uint32_t least = 16u << digit_bits;
+  const uint32_t items = std::max(1u, std::min(1024u, (n + least - 1) / least));
   return (n + items - 1) / items;
 }
 
 // Each pass swaps the buffer handles, so `keys`/`values` name the result.
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits, uint32_t chunk) {
+                uint32_t n, uint32_t bits, uint32_t chunk, uint32_t digit_bits) {
   if (n <= 1 || bits == 0) return;
-  if (chunk == 0) chunk = radix_chunk(rt, n);
+  if (digit_bits == 0) digit_bits = radix_digit_bits(rt);
+  if (digit_bits != 4 && digit_bits != 8) throw std::invalid_argument("radix_sort: digits of 4 or 8 bits");
+  bits = std::min(bits, 32u);
+  if (chunk == 0) chunk = radix_chunk(rt, n, digit_bits);
   const uint32_t items = (n + chunk - 1) / chunk;
-  const uint32_t table = 16 * items;  // digit-major counts, then their scan
+  const uint32_t table = (1u << digit_bits) * items;  // digit-major counts, then their scan
+  // CPUs run a work-group on one thread: groups small enough that every compute
+  // unit gets several.
+  const size_t local =
+      rt.device().type == "GPU" ? kLocal
+                                : std::clamp<size_t>(items / (4 * std::max(rt.device().compute_units, 1u)), 1, kLocal);
+  const std::string count = "radix_count" + std::to_string(digit_bits);
+  const std::string scatter = "radix_scatter" + std::to_string(digit_bits);
   cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * table);
   cl::Buffer scratch = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * scan_scratch_entries(table));
-  uint32_t passes = (bits + kRadixBits - 1) / kRadixBits;
-  for (uint32_t pass = 0; pass < passes; ++pass) {
-    uint32_t shift = pass * kRadixBits;
-    rt.launch("radix_count", items, kLocal, keys, n, shift, items, chunk, counts);
+  for (uint32_t shift = 0; shift < bits; shift += digit_bits) {
+    const uint32_t width = std::min(digit_bits, bits - shift);
+    const uint32_t mask = (1u << width) - 1u;
+    rt.launch(count, items, local, keys, n, shift, mask, items, chunk, counts);
     exclusive_scan(rt, counts, table, scratch);
-    rt.launch("radix_scatter", items, kLocal, keys, values, n, shift, items, chunk, counts, tmp_keys, tmp_values);
+    rt.launch(scatter, items, local, keys, values, n, shift, mask, items, chunk, counts, tmp_keys, tmp_values);
     std::swap(keys, tmp_keys);
     std::swap(values, tmp_values);
   }
@@ -97,6 +113,7 @@ PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather
   ranges_ = rt.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint2));
   max_count_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
   valid_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
+  rt.zero(ranges_, cells * sizeof(cl_uint2));  // kept empty between runs by clear_ranges
   // The arrays' padding is read (and ignored) by filter.cl: give it values.
   rt.zero(sorted_, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
   rt.zero(values_a_, 3 * size_t(stride_) * sizeof(float));
@@ -110,14 +127,17 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   if (n == 0) return 0;
   if (n > capacity_) throw std::invalid_argument("PathSpaceFilter: batch larger than its capacity");
   p.key_bits = filter_key_bits(n);
-  const uint32_t cells = 1u << p.key_bits;
 
+  // keys_ still holds the last run's sorted keys: empty the ranges it wrote.
+  if (dirty_count_ > 0) rt_.launch("clear_ranges", dirty_count_, kLocal, dirty_count_, dirty_bits_, keys_, ranges_);
+  dirty_count_ = 0;
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
   rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_, radius_tags_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
-  rt_.launch("clear_ranges", cells, kLocal, cells, ranges_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
+  dirty_count_ = n;
+  dirty_bits_ = p.key_bits;
   const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
   rt_.launch("gather_tuples", gather_items, kLocal, stride_, gather_lanes_, indices_, vertices, radius_tags_, values,
              valid_, sorted_, values_a_);

@@ -27,13 +27,18 @@ uint32_t filter_key_bits(uint32_t count);
 // Sorts `n` (key, value) pairs by the low `bits` bits of the keys, stably, using
 // `tmp_keys`/`tmp_values` of the same size; the handles are swapped as it goes,
 // so afterwards `keys` and `values` name the buffers holding the sorted pairs.
-// Each work-item sorts a chunk of `chunk` pairs; 0 picks radix_chunk's.
+// Each pass sorts by a digit of `digit_bits` (4 or 8) bits, each work-item a
+// chunk of `chunk` pairs; 0 picks this device's (radix_digit_bits, radix_chunk).
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits, uint32_t chunk = 0);
+                uint32_t n, uint32_t bits, uint32_t chunk = 0, uint32_t digit_bits = 0);
 
-// The pairs per work-item radix_sort uses on this device for `n` pairs: a few
-// hundred on CPUs (a work-item is a loop there), 16 on GPUs.
-uint32_t radix_chunk(const Runtime& rt, uint32_t n);
+// The digit radix_sort uses on this device: 8 bits on CPUs, 4 on GPUs (whose
+// 16 counters per work-item stay in registers).
+uint32_t radix_digit_bits(const Runtime& rt);
+
+// The pairs per work-item radix_sort uses on this device for `n` pairs: 16 per
+// digit value or more on CPUs (a work-item is a loop there), 16 on GPUs.
+uint32_t radix_chunk(const Runtime& rt, uint32_t n, uint32_t digit_bits);
 
 // Replaces data[0, total) by its exclusive prefix sum, using `scratch` of at
 // least scan_scratch_entries(total) uints.
@@ -70,6 +75,9 @@ class PathSpaceFilter {
   cl::Buffer radius_tags_, sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;
+  // The last run's tuples and key bits: keys_ holds its sorted keys, whose
+  // entries of ranges_ the next run empties first.
+  uint32_t dirty_count_ = 0, dirty_bits_ = 0;
 };
 
 }  // namespace psf

@@ -2,7 +2,9 @@
  *
  * Reads: the sorted keys. Writes: ranges[key] = (first, one past the last) for
  * every key present, start and end side by side so a lookup touches one cache
- * line; clear_ranges empties the table first ((0, 0)). Keys of paths without a
+ * line. The table is empty ((0, 0)) before: the host zeroes it once, and
+ * clear_ranges empties again only the entries the previous batch wrote, from its
+ * sorted keys (a batch's keys fill at most half the table). Keys of paths without a
  * vertex (>= 2^key_bits) get no range; they sort behind all others, and *valid
  * is set to the number of tuples before them (the later stages stop there).
  *
@@ -11,10 +13,11 @@
  * may compile to a load and store of the whole pair, which loses the other
  * work-item's word (seen with NVIDIA's OpenCL). */
 
-__kernel void clear_ranges(uint size, __global uint2* ranges) {
-  uint k = get_global_id(0);
-  if (k >= size) return;
-  ranges[k] = (uint2)(0u, 0u);
+__kernel void clear_ranges(uint n, uint key_bits, __global const uint* keys, __global uint2* ranges) {
+  uint i = get_global_id(0);
+  if (i >= n) return;
+  uint k = keys[i];
+  if (k < (1u << key_bits) && (i == 0u || keys[i - 1u] != k)) ranges[k] = (uint2)(0u, 0u);
 }
 
 __kernel void cell_ranges(uint n, uint key_bits, __global const uint* keys, __global uint2* ranges,

@@ -1,26 +1,38 @@
 /* sort.cl: stable least-significant-digit radix sort of (key, value) pairs,
- * 4 bits a pass over only the bits the keys use (count, scan, scatter).
+ * 4 or 8 bits a pass over only the bits the keys use (count, scan, scatter).
  *
  * Each of `items` work-items owns a contiguous chunk of the input: radix_count
  * counts its digits, radix_scan_blocks and radix_scan_add turn the digit-major
  * table counts[d * items + t] into exclusive offsets, radix_scatter moves its
  * chunk in input order to those offsets. Serial chunks make every pass stable
- * without barriers. The host picks the chunk: long ones on CPU devices (PoCL),
- * where a work-item is a loop, 16 pairs on GPUs, where the table of 16 * items
- * counts is then as long as the input and the scan must be parallel. */
+ * without barriers. The host picks the digit and the chunk by device kind
+ * (host/filter.cpp): on CPU devices (PoCL), where a work-item is a loop, 8-bit
+ * digits (half the passes of 4) over chunks of thousands of pairs; on GPUs 4-bit
+ * digits, whose 16 counters stay in registers, over 16 pairs per work-item, where
+ * the table of 16 * items counts is then as long as the input and the scan must
+ * be parallel. The digit of a pass is (key >> shift) & mask: the last pass masks
+ * off the bits above those being sorted. */
 
-#define PSF_RADIX_BITS 4u
-#define PSF_RADIX_BINS 16u
-
-__kernel void radix_count(__global const uint* keys, uint n, uint shift, uint items, uint chunk,
-                          __global uint* counts) {
+inline void radix_count_chunk(__global const uint* keys, uint n, uint shift, uint mask, uint items, uint chunk,
+                              __global uint* counts, uint* c, uint bins) {
   uint t = get_global_id(0);
   if (t >= items) return;
-  uint c[PSF_RADIX_BINS];
-  for (uint d = 0u; d < PSF_RADIX_BINS; ++d) c[d] = 0u;
+  for (uint d = 0u; d < bins; ++d) c[d] = 0u;
   uint begin = min(n, t * chunk), end = min(n, begin + chunk);
-  for (uint i = begin; i < end; ++i) c[(keys[i] >> shift) & (PSF_RADIX_BINS - 1u)] += 1u;
-  for (uint d = 0u; d < PSF_RADIX_BINS; ++d) counts[d * items + t] = c[d];
+  for (uint i = begin; i < end; ++i) c[(keys[i] >> shift) & mask] += 1u;
+  for (uint d = 0u; d < bins; ++d) counts[d * items + t] = c[d];
+}
+
+__kernel void radix_count4(__global const uint* keys, uint n, uint shift, uint mask, uint items, uint chunk,
+                           __global uint* counts) {
+  uint c[16];
+  radix_count_chunk(keys, n, shift, mask, items, chunk, counts, c, 16u);
+}
+
+__kernel void radix_count8(__global const uint* keys, uint n, uint shift, uint mask, uint items, uint chunk,
+                           __global uint* counts) {
+  uint c[256];
+  radix_count_chunk(keys, n, shift, mask, items, chunk, counts, c, 256u);
 }
 
 #define PSF_SCAN_PER_ITEM (PSF_SCAN_BLOCK / PSF_SCAN_LOCAL)
@@ -66,19 +78,32 @@ __kernel void radix_scan_add(__global uint* data, uint data_offset, uint total, 
   data[data_offset + i] += offsets[offsets_offset + i / PSF_SCAN_BLOCK];
 }
 
-__kernel void radix_scatter(__global const uint* keys_in, __global const uint* values_in, uint n, uint shift,
-                            uint items, uint chunk, __global const uint* offsets, __global uint* keys_out,
-                            __global uint* values_out) {
+inline void radix_scatter_chunk(__global const uint* keys_in, __global const uint* values_in, uint n, uint shift,
+                                uint mask, uint items, uint chunk, __global const uint* offsets,
+                                __global uint* keys_out, __global uint* values_out, uint* o, uint bins) {
   uint t = get_global_id(0);
   if (t >= items) return;
-  uint o[PSF_RADIX_BINS];
-  for (uint d = 0u; d < PSF_RADIX_BINS; ++d) o[d] = offsets[d * items + t];
+  for (uint d = 0u; d < bins; ++d) o[d] = offsets[d * items + t];
   uint begin = min(n, t * chunk), end = min(n, begin + chunk);
   for (uint i = begin; i < end; ++i) {
     uint k = keys_in[i];
-    uint d = (k >> shift) & (PSF_RADIX_BINS - 1u);
+    uint d = (k >> shift) & mask;
     keys_out[o[d]] = k;
     values_out[o[d]] = values_in[i];
     o[d] += 1u;
   }
+}
+
+__kernel void radix_scatter4(__global const uint* keys_in, __global const uint* values_in, uint n, uint shift,
+                             uint mask, uint items, uint chunk, __global const uint* offsets, __global uint* keys_out,
+                             __global uint* values_out) {
+  uint o[16];
+  radix_scatter_chunk(keys_in, values_in, n, shift, mask, items, chunk, offsets, keys_out, values_out, o, 16u);
+}
+
+__kernel void radix_scatter8(__global const uint* keys_in, __global const uint* values_in, uint n, uint shift,
+                             uint mask, uint items, uint chunk, __global const uint* offsets, __global uint* keys_out,
+                             __global uint* values_out) {
+  uint o[256];
+  radix_scatter_chunk(keys_in, values_in, n, shift, mask, items, chunk, offsets, keys_out, values_out, o, 256u);
 }
