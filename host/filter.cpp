@@ -84,11 +84,10 @@ void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& t
 }
 
 size_t PathSpaceFilter::bytes_per_tuple() {
-  // radius and tag per path (cell_keys), sorted tuples (PSF_SORTED_FIELDS
-  // arrays), keys and indices (2x each), values (2x, as r, g, b arrays), counts,
-  // ranges (2 uints for each of up to 4 cells per tuple). The arrays' padding is
-  // per batch, not per tuple.
-  return 2 * sizeof(float) + PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
+  // sorted tuples (PSF_SORTED_FIELDS arrays), keys and indices (2x each),
+  // values (2x, as r, g, b arrays), counts, ranges (2 uints for each of up to 4
+  // cells per tuple). The arrays' padding is per batch, not per tuple.
+  return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
          sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
 }
 
@@ -102,7 +101,6 @@ PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather
   size_t n = std::max(capacity, 1u);
   size_t cells = size_t(1) << filter_key_bits(capacity);
   sorted_ = rt.buffer(CL_MEM_READ_WRITE, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
-  radius_tags_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int2));
   keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   indices_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
   tmp_keys_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
@@ -133,14 +131,14 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   dirty_count_ = 0;
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
-  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_, radius_tags_);
+  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
   dirty_count_ = n;
   dirty_bits_ = p.key_bits;
   const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
-  rt_.launch("gather_tuples", gather_items, kLocal, stride_, gather_lanes_, indices_, vertices, radius_tags_, values,
-             valid_, sorted_, values_a_);
+  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, values, valid_,
+             sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
   // every iteration averages the same tuples, so the counts are those of any.

@@ -72,7 +72,7 @@ class PathSpaceFilter {
   uint32_t capacity_;
   uint32_t stride_;        // floats between two fields of sorted_ (capacity + padding)
   uint32_t gather_lanes_;  // tuples per work-item of gather_tuples
-  cl::Buffer radius_tags_, sorted_;
+  cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;
   // The last run's tuples and key bits: keys_ holds its sorted keys, whose

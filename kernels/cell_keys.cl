@@ -2,8 +2,9 @@
  * Sec. 2.2; sorted-cell search as in SPH codes).
  *
  * Reads: each path's filtering vertex. Writes: the key of its cell with the path
- * index, to be sorted, and in path order its query radius (a float's bits) and
- * its tag (4 level + 2 light-sample visibility) for gather_tuples (tuples.cl); the
+ * index, to be sorted. gather_tuples (tuples.cl) computes the radius and the tag
+ * (4 level + 2 light-sample visibility) again with the same functions, which is
+ * cheaper than storing them in path order and reading them back at random; the
  * visibility is 0 or 1 (shade.cl), and any nonzero value counts as 1.
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
  * of a few pixels at the camera path length d_i) or a global r0. Vertices are
@@ -69,19 +70,21 @@ inline float vertex_radius(FilterParams p, float4 position, float4 albedo) {
 
 inline int vertex_level(float r) { return grid_level(fmax(r, 1e-30f)); }
 
+/* The filter's tag of a vertex with radius r > 0: 4 level + 2 light-sample
+ * visibility (filter.cl adds the bit of a finite value). */
+inline int vertex_tag(float r, float4 normal) { return 4 * vertex_level(r) + (normal.w != 0.0f ? 2 : 0); }
+
 __kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __global uint* keys,
-                        __global uint* indices, __global int2* radius_tags) {
+                        __global uint* indices) {
   uint i = get_global_id(0);
   if (i >= p.count) return;
-  float4 x = vertices[i].position, n = vertices[i].normal, a = vertices[i].albedo;
+  float4 x = vertices[i].position, a = vertices[i].albedo;
   indices[i] = i;
   float r = vertex_radius(p, x, a);
   if (r == 0.0f) {
     keys[i] = 1u << p.key_bits;
-    radius_tags[i] = (int2)(0, 0);
     return;
   }
   int level = vertex_level(r);
   keys[i] = cell_key(level, cell_of(x.xyz, cell_size(level, p.cells27)), p.key_bits);
-  radius_tags[i] = (int2)(as_int(r), 4 * level + (n.w != 0.0f ? 2 : 0));
 }

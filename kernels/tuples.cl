@@ -30,7 +30,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
   {                                                                                      \
     uint j = order[min(i0 + k##u, last)];                                                \
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
-    int2 rt = radius_tags[j];                                                            \
+    float rj = vertex_radius(p, xj, aj);                                                 \
     float4 cj = values[j];                                                               \
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     x.s##k = xj.x;                                                                       \
@@ -42,16 +42,15 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     ar.s##k = aj.x;                                                                      \
     ag.s##k = aj.y;                                                                      \
     ab.s##k = aj.z;                                                                      \
-    r.s##k = as_float(rt.x);                                                             \
-    tag.s##k = rt.y | finite;                                                            \
+    r.s##k = rj;                                                                         \
+    tag.s##k = vertex_tag(rj, nj) | finite;                                              \
     cr.s##k = cj.x;                                                                      \
     cg.s##k = cj.y;                                                                      \
     cb.s##k = cj.z;                                                                      \
   }
 
-__kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
-                            __global const PathVertex* vertices, __global const int2* radius_tags,
-                            __global const float4* values, __global const uint* valid, __global float* sorted,
+__kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global const uint* order,
+                            __global const PathVertex* vertices, __global const float4* values, __global const uint* valid, __global float* sorted,
                             __global float* sorted_values) {
   uint v = *valid;
   __global int* sorted_tags = (__global int*)(sorted + PSF_SORTED_TAG * stride); /* an int field */
@@ -60,7 +59,7 @@ __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
     if (i >= v) return;
     uint j = order[i];
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo;
-    int2 rt = radius_tags[j];
+    float rj = vertex_radius(p, xj, aj);
     float4 cj = values[j];
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
     sorted[PSF_SORTED_X * stride + i] = xj.x;
@@ -72,8 +71,8 @@ __kernel void gather_tuples(uint stride, uint lanes, __global const uint* order,
     sorted[PSF_SORTED_AR * stride + i] = aj.x;
     sorted[PSF_SORTED_AG * stride + i] = aj.y;
     sorted[PSF_SORTED_AB * stride + i] = aj.z;
-    sorted_tags[i] = rt.y | finite;
-    sorted[PSF_SORTED_R * stride + i] = as_float(rt.x);
+    sorted_tags[i] = vertex_tag(rj, nj) | finite;
+    sorted[PSF_SORTED_R * stride + i] = rj;
     sorted_values[i] = cj.x;
     sorted_values[stride + i] = cj.y;
     sorted_values[2 * stride + i] = cj.z;
