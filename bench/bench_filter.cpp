@@ -389,6 +389,15 @@ int main(int argc, char** argv) {
         filter.run(p, opt.iterations, vertices, values, filtered, counts);  // warm-up
         rt.finish();
         std::vector<double> device, wall, search, average;
+        // Device time per stage (host/filter.cpp's order), for the breakdown.
+        const std::vector<std::pair<const char*, std::vector<std::string>>> stages = {
+            {"keys", {"cell_keys"}},
+            {"sort", {"radix_"}},
+            {"ranges", {"clear_ranges", "cell_ranges"}},
+            {"gather", {"gather_tuples"}},
+            {"filter", {"filter"}},
+            {"scatter", {"scatter_values"}}};
+        std::vector<std::vector<double>> stage_s(stages.size());
         for (auto _ : state) {
           rt.reset_stats();
           auto t0 = std::chrono::steady_clock::now();
@@ -401,6 +410,8 @@ int main(int argc, char** argv) {
           wall.push_back(w);
           average.push_back(bench::kernel_ms(rt.stats(), {"filter"}) * 1e-3);
           search.push_back(d - average.back());
+          for (size_t k = 0; k < stages.size(); ++k)
+            stage_s[k].push_back(bench::kernel_ms(rt.stats(), stages[k].second) * 1e-3);
         }
         Timing dt = bench::summarize(device), wt = bench::summarize(wall);
         Timing st = bench::summarize(search), at = bench::summarize(average);
@@ -427,6 +438,12 @@ int main(int argc, char** argv) {
                "filter kernel %.1f ms); wall median %.1f ms, min %.1f ms; mean neighbours averaged %.2f\n",
                bname.c_str(), cells27 ? "27 cells of size r" : "8 cells of size 2r", ms, dt.min_s * 1e3,
                st.median_s * 1e3, at.median_s * 1e3, wt.median_s * 1e3, wt.min_s * 1e3, mean_count);
+        report("%s: stages, device medians:", bname.c_str());
+        for (size_t k = 0; k < stages.size(); ++k) {
+          const double stage_ms = bench::summarize(stage_s[k]).median_s * 1e3;
+          state.counters[std::string("stage_") + stages[k].first + "_ms"] = stage_ms;
+          report(" %s %.2f ms%s", stages[k].first, stage_ms, k + 1 < stages.size() ? "," : "\n");
+        }
         if (ratio_pt > 0) {
           state.counters["ratio_filter_pathtrace"] = ratio_pt;
           report("%s: filter / path tracing of the batch = %.1f / %.1f ms = %.3f (goal <= 0.25: %s)\n", bname.c_str(),
