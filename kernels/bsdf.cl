@@ -164,6 +164,17 @@ inline float3 fresnel_conductor(float cos_i, float3 eta, float3 k) {
   return 0.5f * (rs + rp);
 }
 
+/* A conductor whose Fresnel reflectance at normal incidence is r (clamped to
+ * [0, PSF_MAX_REFLECTANCE]) and rises to 1 at grazing angles: eta = 1 and
+ * k = 2 sqrt(r / (1 - r)), since F(1) = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)
+ * = k^2 / (4 + k^2) (pbrt-v4's conductor `reflectance`; glTF's metals). */
+inline void conductor_from_reflectance(Material* m, float3 r) {
+  r = clamp(r, 0.0f, PSF_MAX_REFLECTANCE);
+  m->eta.xyz = (float3)(1.0f);
+  m->k.xyz = 2.0f * sqrt(r / (1.0f - r));
+  m->specular.xyz = (float3)(1.0f);
+}
+
 /* --- Microfacet distributions ------------------------------------------- */
 
 /* D(m): GGX (Trowbridge-Reitz) or Beckmann, anisotropic (Walter et al. 2007). */

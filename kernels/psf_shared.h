@@ -131,6 +131,12 @@ typedef struct {
 #define PSF_MATFLAG_NONLINEAR 2u /* plastics: Mitsuba's `nonlinear` (colour shift by internal scattering) */
 #define PSF_MATFLAG_MASKED 4u    /* opacity below 1 somewhere (mask): alpha-tested during ray traversal */
 #define PSF_MATFLAG_NORMALS 8u   /* some triangle of it has vertex normals (set by host/render.cpp) */
+/* Conductors with tex_color: the texture is the reflectance at normal incidence
+ * r, and each hit sets eta = 1, k = 2 sqrt(r / (1 - r)), specular = 1
+ * (conductor_from_reflectance, bsdf.cl; pbrt-v4's conductor `reflectance`). */
+#define PSF_MATFLAG_REFLECTANCE 16u
+/* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
+#define PSF_MAX_REFLECTANCE 0.9999f
 
 /* Texture index meaning "none": entry 0 of the texture table is a placeholder, so
  * that a zero-initialised Material is a plain diffuse one. */

@@ -2,7 +2,8 @@
  *
  * Reads: the hit triangle's TriAttrib (shading normals, uv), the texture table
  * and texels (texture.cl). Writes into the Material: its colour term from its
- * texture (albedo for diffuse and plastics, specular for the other types).
+ * texture (albedo for diffuse and plastics, specular for the other types, or
+ * with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR).
  *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels) -> the shading Frame
  * The shading normal is the barycentric interpolation of the vertex normals
  * (Phong 1975), else the face normal ng; the geometric normal stays with the
@@ -32,6 +33,7 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     if (m->tex_color != PSF_NO_TEXTURE) {
       float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
       if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m)) m->albedo.xyz = c;
+      else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
     }
     /* dp/du and dp/dv of the triangle's uv parametrisation. */

@@ -1163,7 +1163,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   // Heights 0 and 0.5 at texel centres u = 1/4 and 3/4: dh/du = 1 between them (bilinear).
   uint32_t height = store.pixels(ramp, 2, 1, {0, 0, 0, 1, 0.5f, 0.5f, 0.5f, 1});
   uint32_t colour = store.pixels(ramp, 2, 1, {0.2f, 0.4f, 0.6f, 1, 0.2f, 0.4f, 0.6f, 1});
-  std::vector<Material> mats(6);
+  std::vector<Material> mats(7);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
   mats[1].two_sided = 1;
@@ -1179,6 +1179,12 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   mats[4].flags = PSF_MATFLAG_NORMALS;  // vertex normals
   mats[5] = mats[4];
   mats[5].flags = 0;  // vertex normals present but not flagged: not read
+  // The texture is the reflectance at normal incidence (glTF metals).
+  mats[6].type = PSF_MATERIAL_ROUGH_CONDUCTOR;
+  mats[6].alpha_u = mats[6].alpha_v = 0.2f;
+  mats[6].tex_color = colour;
+  mats[6].flags = PSF_MATFLAG_REFLECTANCE;
+  mats[6].specular = {{0.5f, 0.5f, 0.5f, 0}};  // replaced by 1
   TriAttrib a{};
   glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
   a.n0 = {{n0.x, n0.y, n0.z, 0}};
@@ -1199,7 +1205,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   const glm::vec3 up(0.2f, 0.1f, 0.97f), down(0.2f, 0.1f, -0.97f);
   std::vector<Query> q = {{0, {0.3f, 0.3f}, up}, {0, {0.3f, 0.3f}, down}, {1, {0.3f, 0.3f}, down},
                           {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
-                          {5, {0.25f, 0.5f}, up}};
+                          {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up}};
   uint32_t n = uint32_t(q.size());
   std::vector<uint32_t> mi;
   std::vector<cl_float2> bary;
@@ -1212,10 +1218,11 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   cl::Buffer bmi = rt.upload(mi), bb = rt.upload(bary), bw = rt.upload(wo);
   cl::Buffer on = rt.buffer(CL_MEM_READ_WRITE, n * 16), os = rt.buffer(CL_MEM_READ_WRITE, n * 16);
   cl::Buffer oa = rt.buffer(CL_MEM_READ_WRITE, n * 16), osp = rt.buffer(CL_MEM_READ_WRITE, n * 16);
+  cl::Buffer oc = rt.buffer(CL_MEM_READ_WRITE, n * 16);
   cl_float4 p0 = {{0, 0, 0, 0}}, p1 = {{1, 0, 0, 0}}, p2 = {{0, 1, 0, 0}};
-  rt.launch("surface_test_frame", n, 64, bm, ba, bt, bx, bmi, p0, p1, p2, bb, bw, on, os, oa, osp, n);
+  rt.launch("surface_test_frame", n, 64, bm, ba, bt, bx, bmi, p0, p1, p2, bb, bw, on, os, oa, osp, oc, n);
   auto N = rt.download<cl_float4>(on, n), S = rt.download<cl_float4>(os, n);
-  auto A = rt.download<cl_float4>(oa, n), SP = rt.download<cl_float4>(osp, n);
+  auto A = rt.download<cl_float4>(oa, n), SP = rt.download<cl_float4>(osp, n), C = rt.download<cl_float4>(oc, n);
   auto v3 = [](const cl_float4& v) { return glm::vec3(v.s[0], v.s[1], v.s[2]); };
   auto near = [](const glm::vec3& x, const glm::vec3& y) { return glm::length(x - y) < 2e-3f; };
   CHECK(near(v3(N[0]), {0, 0, 1}));
@@ -1230,6 +1237,10 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   glm::vec3 phong = glm::normalize(0.25f * n0 + 0.25f * n1 + 0.5f * n2);
   CHECK(near(v3(N[5]), phong));
   CHECK(near(v3(N[6]), {0, 0, 1}));
+  // A reflectance texture: specular 1 and a complex IOR whose Fresnel reflectance
+  // at normal incidence (bsdf_albedo) is the texel colour.
+  CHECK(near(v3(SP[7]), {1, 1, 1}));
+  CHECK(near(v3(C[7]), {0.2f, 0.4f, 0.6f}));
 }
 
 TEST_CASE("Textures: EXR and HDR images load linear, beyond 1", "[bsdf]") {

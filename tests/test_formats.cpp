@@ -503,18 +503,66 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(m.albedo.s[2] == Approx(0.5f));
   }
   SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
-  SECTION("textures and metals are reported, once per material") {
+  SECTION("missing textures and metallic blends are reported, once per material") {
     std::string json = gltf_json(embedded);
     json.replace(json.find("\"metallicFactor\": 0}, \"doubleSided\""), 20,
-                 "\"metallicFactor\": 1, \"baseColorTexture\": {\"index\": 0}}");
+                 "\"metallicFactor\": 0.7, \"baseColorTexture\": {\"index\": 0}}");
     json.replace(json.find("\"asset\""), 0,
                  "\"images\": [{\"uri\": \"missing.png\"}], \"textures\": [{\"source\": 0}],\n  ");
     psf::Scene s = psf::load_scene(dir.write("t.gltf", json));
     size_t n = 0;
     for (const auto& w : s.warnings)
-      if (contains(w, "materials[0]") && contains(w, "baseColorTexture") && contains(w, "metallic")) ++n;
+      if (contains(w, "materials[0]") && contains(w, "baseColorTexture") && contains(w, "metallicFactor 0.7")) ++n;
     CHECK(n == 1);
+    CHECK(s.materials[s.tri_material[0]].type == PSF_MATERIAL_ROUGH_CONDUCTOR);  // 0.7 rounds to a metal
   }
+  SECTION("metallic-roughness: metals are conductors of the base colour at normal incidence, dielectrics plastics") {
+    std::string json = gltf_json(embedded);
+    const std::string m0 =
+        "{\"pbrMetallicRoughness\": {\"baseColorFactor\": [0.2, 0.4, 0.6, 1], \"metallicFactor\": 0}";
+    REQUIRE(json.find(m0) != std::string::npos);
+    // Material 0: a metal of roughness 0.5; material 1 (the emitter) stays a dielectric, roughness 1 by default.
+    json.replace(json.find(m0), m0.size(),
+                 "{\"pbrMetallicRoughness\": {\"baseColorFactor\": [0.9, 0.6, 0.3, 1], \"roughnessFactor\": 0.5}");
+    psf::Scene s = psf::load_scene(dir.write("metal.gltf", json));
+    CHECK(s.warnings.empty());
+    const Material& a = s.materials[s.tri_material[0]];
+    CHECK(a.type == PSF_MATERIAL_ROUGH_CONDUCTOR);  // metallicFactor defaults to 1
+    CHECK(a.alpha_u == Approx(0.25f));              // roughness^2
+    CHECK(a.alpha_v == Approx(0.25f));
+    CHECK((a.flags & PSF_MATFLAG_BECKMANN) == 0);  // GGX
+    // Normal incidence: F = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2) times the specular colour.
+    const float base[3] = {0.9f, 0.6f, 0.3f};
+    for (int c = 0; c < 3; ++c) {
+      const double eta = a.eta.s[c], k = a.k.s[c];
+      const double f0 = ((eta - 1) * (eta - 1) + k * k) / ((eta + 1) * (eta + 1) + k * k);
+      CHECK(f0 * a.specular.s[c] == Approx(base[c]).epsilon(1e-5));
+    }
+    const Material& e = s.materials[s.tri_material[2]];
+    CHECK(e.type == PSF_MATERIAL_ROUGH_PLASTIC);
+    CHECK(e.alpha_u == Approx(1.0f));
+    CHECK(e.eta.s[0] == Approx(1.5f));
+    CHECK(e.tex_table != PSF_NO_TEXTURE);  // roughplastic's transmittance table
+    // Roughness 0: the smooth types.
+    std::string smooth = json;
+    smooth.replace(smooth.find("\"roughnessFactor\": 0.5"), 22, "\"roughnessFactor\": 0.0");
+    psf::Scene t = psf::load_scene(dir.write("mirror.gltf", smooth));
+    CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_CONDUCTOR);
+  }
+}
+
+TEST_CASE("glTF: scenes/material-spheres.gltf has its metals and dielectrics", "[formats]") {
+  psf::Scene s = psf::load_scene(psf::test::source_path("scenes/material-spheres.gltf"));
+  CHECK(s.warnings.empty());
+  REQUIRE(s.materials.size() == 9);  // the ground, 4 metals, 4 dielectrics
+  const uint32_t types[9] = {PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_CONDUCTOR,       PSF_MATERIAL_ROUGH_CONDUCTOR,
+                             PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_PLASTIC,
+                             PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC};
+  for (int i = 0; i < 9; ++i) {
+    INFO("material " << i);
+    CHECK(s.materials[i].type == types[i]);
+  }
+  CHECK(s.materials[3].alpha_u == Approx(0.25f));  // roughness 0.5
 }
 
 TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {

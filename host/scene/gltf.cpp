@@ -24,6 +24,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 #include <set>
+#include <sstream>
 
 #include "scene/formats.h"
 #include "scene/materials.h"
@@ -323,8 +324,21 @@ class GltfLoader {
       if (texture == PSF_NO_TEXTURE) left_out.push_back("baseColorTexture (not decoded; using baseColorFactor)");
       if (pbr.baseColorTexture.texCoord != 0) left_out.push_back("baseColorTexture.texCoord != 0 (using TEXCOORD_0)");
     }
-    if (pbr.metallicFactor > 0.0 || pbr.metallicRoughnessTexture.index >= 0)
-      left_out.push_back("metallic-roughness (shaded as diffuse)");
+    // Metallic-roughness (glTF 2.0 Appendix B): metals as roughconductor whose
+    // Fresnel reflectance at normal incidence is the base colour, dielectrics as
+    // roughplastic with IOR 1.5 over the base colour; GGX with alpha = roughness^2
+    // (the smooth types at roughness 0). A metallic factor between 0 and 1 (a
+    // blend of the two) is rounded to the nearer one.
+    const float metallic = std::clamp(float(pbr.metallicFactor), 0.0f, 1.0f);
+    const float roughness = std::clamp(float(pbr.roughnessFactor), 0.0f, 1.0f);
+    const bool metal = metallic >= 0.5f;
+    if (metallic > 0.0f && metallic < 1.0f) {
+      std::ostringstream f;
+      f << "metallicFactor " << metallic << " (a blend; shaded as " << (metal ? "a metal" : "a dielectric") << ")";
+      left_out.push_back(f.str());
+    }
+    if (pbr.metallicRoughnessTexture.index >= 0)
+      left_out.push_back("metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
     if (g.normalTexture.index >= 0) left_out.push_back("normalTexture");
     if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
     if (g.alphaMode != "OPAQUE") left_out.push_back("alphaMode " + g.alphaMode);
@@ -341,9 +355,26 @@ class GltfLoader {
       base = textures_.mean(texture);  // the texture already holds the factor
     }
     glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
-    m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+    const bool rough = roughness > 0.0f;
+    m.alpha_u = m.alpha_v = std::max(roughness * roughness, 1e-4f);  // Mitsuba's lower bound
+    if (metal) {
+      // The base colour is the reflectance at normal incidence: eta and k from it
+      // (per hit from the texture: PSF_MATFLAG_REFLECTANCE, kernels/surface.cl).
+      m.type = rough ? PSF_MATERIAL_ROUGH_CONDUCTOR : PSF_MATERIAL_CONDUCTOR;
+      glm::vec3 eta, k;
+      detail::conductor_from_reflectance(albedo, eta, k);
+      m.eta = {{eta.x, eta.y, eta.z, 0}};
+      m.k = {{k.x, k.y, k.z, 0}};
+      m.specular = {{1, 1, 1, 0}};
+      if (texture != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_REFLECTANCE;
+    } else {
+      m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
+      m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+      m.specular = {{1, 1, 1, 0}};
+      m.eta = {{1.5f, 0, 0, 0}};
+      detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
+    }
     m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
-    m.type = PSF_MATERIAL_DIFFUSE;
     m.two_sided = g.doubleSided ? 1u : 0u;
     return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
   }

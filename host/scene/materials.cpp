@@ -135,6 +135,12 @@ bool conductor_by_name(const std::string& name, glm::vec3& eta, glm::vec3& k) {
   return true;
 }
 
+void conductor_from_reflectance(const glm::vec3& r, glm::vec3& eta, glm::vec3& k) {
+  const glm::vec3 c = glm::clamp(r, 0.0f, PSF_MAX_REFLECTANCE);
+  eta = glm::vec3(1.0f);
+  k = 2.0f * glm::sqrt(c / (1.0f - c));
+}
+
 double fresnel_dielectric(double cos_i, double eta) {
   double s2 = 1.0 - cos_i * cos_i;
   double ct2 = 1.0 - s2 / (eta * eta);

@@ -75,6 +75,11 @@ std::optional<float> ior_by_name(const std::string& name);
 // tabulated by Tungsten's ComplexIorData). False if unknown.
 bool conductor_by_name(const std::string& name, glm::vec3& eta, glm::vec3& k);
 
+// The complex IOR of a conductor whose Fresnel reflectance at normal incidence is
+// r (clamped to [0, PSF_MAX_REFLECTANCE]): eta = 1, k = 2 sqrt(r / (1 - r)), as
+// kernels/bsdf.cl's conductor_from_reflectance (glTF's metals).
+void conductor_from_reflectance(const glm::vec3& r, glm::vec3& eta, glm::vec3& k);
+
 // Unpolarised Fresnel reflectance of a dielectric interface (eta = transmitted /
 // incident IOR) at incidence cosine cos_i in [0, 1].
 double fresnel_dielectric(double cos_i, double eta);
