@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <Imath/half.h>
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
@@ -501,6 +502,62 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(m.albedo.s[0] == Approx(0.25f));  // mean of (1, 0, 0, 1) x 0.5
     CHECK(m.albedo.s[1] == Approx(0.5f));
     CHECK(m.albedo.s[2] == Approx(0.5f));
+  }
+  SECTION("alphaMode MASK and BLEND: an opacity from the base colour's alpha") {
+    // 2x2 RGBA texels, alpha 0.2, 0.4, 0.6, 1 (8-bit: 51, 102, 153, 255).
+    const unsigned char px[] = {255, 255, 255, 51, 255, 255, 255, 102, 255, 255, 255, 153, 255, 255, 255, 255};
+    std::string png;
+    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
+                           &png, 2, 2, 4, px, 8);
+    auto load = [&](const std::string& alpha) {
+      std::string json = gltf_json(embedded);
+      const std::string factor = "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]";
+      json.replace(json.find(factor), factor.size(),
+                   "\"baseColorFactor\": [0.5, 1, 1, 1], \"baseColorTexture\": {\"index\": 0}");
+      const std::string sided = "\"doubleSided\": true";
+      json.replace(json.find(sided), sided.size(), sided + ", " + alpha);
+      json.replace(json.find("\"asset\""), 0,
+                   "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
+                       "\"}], \"textures\": [{\"source\": 0}],\n  ");
+      return psf::load_scene(dir.write("alpha.gltf", json));
+    };
+    // The x channel of the opacity texture's 4 texels.
+    auto opacity = [](const psf::Scene& s, const Material& m) {
+      std::vector<float> x;
+      const TextureInfo& t = s.textures.at(m.tex_opacity);
+      for (uint32_t i = 0; i < t.width * t.height; ++i) {
+        Imath::half h;
+        h.setBits(s.texels.at(size_t(t.offset + i) * 4));
+        x.push_back(float(h));
+      }
+      return x;
+    };
+    psf::Scene mask = load("\"alphaMode\": \"MASK\", \"alphaCutoff\": 0.5");
+    INFO(mask.warnings.size() << " warnings");
+    CHECK(mask.warnings.empty());
+    const Material& a = mask.materials[mask.tri_material[0]];
+    CHECK((a.flags & PSF_MATFLAG_MASKED) != 0);
+    REQUIRE(a.tex_opacity != PSF_NO_TEXTURE);
+    CHECK(a.opacity == 1.0f);
+    CHECK(opacity(mask, a) == std::vector<float>{0, 0, 1, 1});
+    psf::Scene blend = load("\"alphaMode\": \"BLEND\"");
+    const Material& b = blend.materials[blend.tri_material[0]];
+    CHECK((b.flags & PSF_MATFLAG_MASKED) != 0);
+    REQUIRE(b.tex_opacity != PSF_NO_TEXTURE);
+    std::vector<float> bo = opacity(blend, b);
+    const float expect[4] = {0.2f, 0.4f, 0.6f, 1.0f};
+    for (int i = 0; i < 4; ++i) CHECK(bo[size_t(i)] == Approx(expect[i]).margin(1e-3));
+    psf::Scene opaque = load("\"alphaMode\": \"OPAQUE\"");
+    CHECK((opaque.materials[opaque.tri_material[0]].flags & PSF_MATFLAG_MASKED) == 0);
+    // Without a texture: the factor's alpha against the cutoff, for the whole surface.
+    std::string json = gltf_json(embedded);
+    json.replace(json.find("[0.2, 0.4, 0.6, 1]"), 18, "[0.2, 0.4, 0.6, 0.3]");
+    json.replace(json.find("\"doubleSided\": true"), 19, "\"doubleSided\": true, \"alphaMode\": \"MASK\"");
+    psf::Scene cut = psf::load_scene(dir.write("cut.gltf", json));
+    const Material& c = cut.materials[cut.tri_material[0]];
+    CHECK((c.flags & PSF_MATFLAG_MASKED) != 0);
+    CHECK(c.opacity == 0.0f);  // 0.3 < the default cutoff 0.5
+    CHECK(c.tex_opacity == PSF_NO_TEXTURE);
   }
   SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
   SECTION("missing textures and metallic blends are reported, once per material") {

@@ -318,9 +318,19 @@ class GltfLoader {
     if (strength != g.extensions.end() && strength->second.Has("emissiveStrength"))
       emission *= float(strength->second.Get("emissiveStrength").GetNumberAsDouble());
     std::vector<std::string> left_out;
-    uint32_t texture = PSF_NO_TEXTURE;
+    uint32_t texture = PSF_NO_TEXTURE, opacity_texture = PSF_NO_TEXTURE;
+    // Alpha (glTF 2.0 Sec. 3.9.4): MASK is opaque where alpha >= alphaCutoff and
+    // absent elsewhere, BLEND an opacity of alpha (a stochastic cut-out, as
+    // Mitsuba's mask: a surface of opacity a is seen with probability a);
+    // alpha = baseColorFactor[3] times the base colour texture's alpha.
+    const bool masked = g.alphaMode == "MASK", blended = g.alphaMode == "BLEND";
+    const float alpha_factor =
+        pbr.baseColorFactor.size() >= 4 ? std::clamp(float(pbr.baseColorFactor[3]), 0.0f, 1.0f) : 1.0f;
+    const float cutoff = float(g.alphaCutoff);
     if (pbr.baseColorTexture.index >= 0) {
       texture = base_color_texture(pbr.baseColorTexture.index, base, where);
+      if (texture != PSF_NO_TEXTURE && (masked || blended))
+        opacity_texture = alpha_texture(pbr.baseColorTexture.index, alpha_factor, masked ? cutoff : -1.0f);
       if (texture == PSF_NO_TEXTURE) left_out.push_back("baseColorTexture (not decoded; using baseColorFactor)");
       if (pbr.baseColorTexture.texCoord != 0) left_out.push_back("baseColorTexture.texCoord != 0 (using TEXCOORD_0)");
     }
@@ -341,7 +351,7 @@ class GltfLoader {
       left_out.push_back("metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
     if (g.normalTexture.index >= 0) left_out.push_back("normalTexture");
     if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
-    if (g.alphaMode != "OPAQUE") left_out.push_back("alphaMode " + g.alphaMode);
+    if (g.alphaMode != "OPAQUE" && !masked && !blended) left_out.push_back("alphaMode " + g.alphaMode);
     for (const auto& e : g.extensions)
       if (e.first != "KHR_materials_emissive_strength") left_out.push_back(e.first);
     if (!left_out.empty()) {
@@ -374,6 +384,14 @@ class GltfLoader {
       m.eta = {{1.5f, 0, 0, 0}};
       detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
     }
+    if (masked || blended) {
+      // Without a texture the whole surface has one alpha.
+      m.opacity = opacity_texture != PSF_NO_TEXTURE ? 1.0f
+                  : masked                          ? (alpha_factor >= cutoff ? 1.0f : 0.0f)
+                                                    : alpha_factor;
+      m.tex_opacity = opacity_texture;
+      if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
+    }
     m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
     m.two_sided = g.doubleSided ? 1u : 0u;
     return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
@@ -382,6 +400,32 @@ class GltfLoader {
   // The base colour texture `index` times the factor, as linear RGB (the image
   // is sRGB-encoded, glTF 2.0 Sec. 3.9.2), or PSF_NO_TEXTURE with a warning.
   uint32_t base_color_texture(int index, const glm::vec3& factor, const std::string& where) {
+    int width = 0, height = 0;
+    std::vector<float> rgba = decode_texture(index, where, width, height);
+    if (rgba.empty()) return PSF_NO_TEXTURE;
+    for (size_t i = 0; i < rgba.size(); i += 4)
+      for (int k = 0; k < 3; ++k) rgba[i + size_t(k)] *= factor[k];
+    return textures_.pixels(texture_desc(index, true), width, height, rgba);
+  }
+
+  // The opacity of the base colour texture `index` (decoded by base_color_texture
+  // before) in the x channel: its alpha times `factor`, thresholded at `cutoff`
+  // (0 below, 1 at or above) unless cutoff < 0.
+  uint32_t alpha_texture(int index, float factor, float cutoff) {
+    int width = 0, height = 0;
+    std::vector<float> rgba = decode_texture(index, "", width, height);
+    for (size_t i = 0; i < rgba.size(); i += 4) {
+      float a = rgba[i + 3] * factor;
+      if (cutoff >= 0.0f) a = a >= cutoff ? 1.0f : 0.0f;
+      rgba[i] = rgba[i + 1] = rgba[i + 2] = a;
+      rgba[i + 3] = 1.0f;
+    }
+    return textures_.pixels(texture_desc(index, false), width, height, rgba);
+  }
+
+  // Texture `index`'s image as linear RGB (sRGB-decoded) and alpha, 4 floats a
+  // texel, rows from the top; empty if it has no usable pixels.
+  std::vector<float> decode_texture(int index, const std::string& where, int& width, int& height) {
     if (size_t(index) >= model_.textures.size()) fail(where, "texture index " + std::to_string(index) + " out of range");
     const tinygltf::Texture& tex = model_.textures[size_t(index)];
     if (tex.source < 0 || size_t(tex.source) >= model_.images.size())
@@ -390,7 +434,9 @@ class GltfLoader {
     const size_t n = size_t(std::max(img.width, 0)) * size_t(std::max(img.height, 0));
     const int c = img.component, bytes = img.bits == 16 ? 2 : 1;
     if (n == 0 || c < 1 || c > 4 || (img.bits != 8 && img.bits != 16) || img.image.size() < n * size_t(c * bytes))
-      return PSF_NO_TEXTURE;
+      return {};
+    width = img.width;
+    height = img.height;
     std::vector<float> rgba(n * 4, 1.0f);
     for (size_t i = 0; i < n; ++i)
       for (int k = 0; k < c; ++k) {
@@ -401,8 +447,13 @@ class GltfLoader {
         if (c <= 2 && k == 0) rgba[i * 4 + 1] = rgba[i * 4 + 2] = v;  // grey (+ alpha)
         rgba[i * 4 + (c <= 2 && k == 1 ? 3 : size_t(k))] = v;
       }
-    for (size_t i = 0; i < n; ++i)
-      for (int k = 0; k < 3; ++k) rgba[i * 4 + size_t(k)] *= factor[k];
+    return rgba;
+  }
+
+  // Filtering and wrapping of texture `index` from its sampler (`warn`: report
+  // what is not supported).
+  TextureDesc texture_desc(int index, bool warn) {
+    const tinygltf::Texture& tex = model_.textures[size_t(index)];
     TextureDesc desc;
     desc.path = "gltf:" + path_ + ":images[" + std::to_string(tex.source) + "]";
     if (tex.sampler >= 0 && size_t(tex.sampler) < model_.samplers.size()) {
@@ -410,9 +461,10 @@ class GltfLoader {
       desc.bilinear = smp.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST;
       if (smp.wrapS == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE) desc.wrap = PSF_TEX_CLAMP;
       if (smp.wrapS == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT) desc.wrap = PSF_TEX_MIRROR;
-      if (smp.wrapS != smp.wrapT) warn_once("samplers[" + std::to_string(tex.sampler) + "]: wrapT differs from wrapS; using wrapS");
+      if (smp.wrapS != smp.wrapT && warn)
+        warn_once("samplers[" + std::to_string(tex.sampler) + "]: wrapT differs from wrapS; using wrapS");
     }
-    return textures_.pixels(desc, img.width, img.height, rgba);
+    return desc;
   }
 
   uint32_t push_material(const Material& m, const std::string& name) {
