@@ -135,6 +135,9 @@ typedef struct {
  * r, and each hit sets eta = 1, k = 2 sqrt(r / (1 - r)), specular = 1
  * (conductor_from_reflectance, bsdf.cl; pbrt-v4's conductor `reflectance`). */
 #define PSF_MATFLAG_REFLECTANCE 16u
+/* tex_bump is a tangent-space normal map (rgb = (n + 1) / 2, glTF's normalTexture,
+ * Mitsuba 3's normalmap) instead of a height map; bump_scale scales its x and y. */
+#define PSF_MATFLAG_NORMALMAP 32u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 
@@ -159,7 +162,7 @@ typedef struct {
   psf_uint flags;           /* PSF_MATFLAG_* */
   psf_uint tex_color;       /* texture replacing albedo (diffuse, plastics) or specular (others), or PSF_NO_TEXTURE */
   psf_uint tex_opacity;     /* opacity texture (mask; x channel), or PSF_NO_TEXTURE */
-  psf_uint tex_bump;        /* bump map height texture (x channel), or PSF_NO_TEXTURE */
+  psf_uint tex_bump;        /* bump map height texture (x channel; with PSF_MATFLAG_NORMALMAP a normal map), or none */
   float opacity;            /* with PSF_MATFLAG_MASKED: constant opacity, times tex_opacity (mask; 1 opaque) */
   float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
   psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */

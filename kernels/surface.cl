@@ -10,7 +10,8 @@
  * caller for side tests and ray offsets. Bump mapping perturbs it as Mitsuba's
  * bumpmap (Blinn 1978): dp/du' = dp/du + n (dh/du - <n, dp/du>), likewise for
  * v, n' = normalize(dp/du' x dp/dv') turned to the side of n, where h is the
- * scaled height texture and dp/du, dp/dv come from the triangle's uv. The
+ * scaled height texture and dp/du, dp/dv come from the triangle's uv; a normal
+ * map (PSF_MATFLAG_NORMALMAP) gives n' in the frame (t, n x t, n), t along dp/du. The
  * tangent follows dp/du where it matters (bump maps, anisotropic roughness).
  * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided). */
 
@@ -50,7 +51,18 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
       dpdu = c.s;
       dpdv = c.t;
     }
-    if (bump) {
+    if (bump && (m->flags & PSF_MATFLAG_NORMALMAP)) {
+      /* Tangent space: t along dp/du made orthogonal to n, b = n x t (Mitsuba 3's
+       * normalmap, the glTF sample viewer's frame without stored tangents). */
+      float3 c = texture_eval(textures, texels, m->tex_bump, uv).xyz * 2.0f - 1.0f;
+      c.xy *= m->bump_scale;
+      float3 t = normalize(dpdu - ns * dot(ns, dpdu));
+      float3 nb = normalize(c.x * t + c.y * cross(ns, t) + c.z * ns);
+      if (isfinite(nb.x) && isfinite(nb.y) && isfinite(nb.z) && isfinite(t.x) && dot(nb, ns) > 0.0f) {
+        ns = nb;
+        dpdu = t;
+      }
+    } else if (bump) {
       float2 g = texture_eval_grad(textures, texels, m->tex_bump, uv) * m->bump_scale;
       float3 du = dpdu + ns * (g.x - dot(ns, dpdu));
       float3 dv = dpdv + ns * (g.y - dot(ns, dpdv));

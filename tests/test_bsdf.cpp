@@ -1163,7 +1163,10 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   // Heights 0 and 0.5 at texel centres u = 1/4 and 3/4: dh/du = 1 between them (bilinear).
   uint32_t height = store.pixels(ramp, 2, 1, {0, 0, 0, 1, 0.5f, 0.5f, 0.5f, 1});
   uint32_t colour = store.pixels(ramp, 2, 1, {0.2f, 0.4f, 0.6f, 1, 0.2f, 0.4f, 0.6f, 1});
-  std::vector<Material> mats(7);
+  // Normal maps: tangent-space normals (0.6, 0, 0.8) and (0, 0.6, 0.8) as (n + 1) / 2.
+  uint32_t normal_x = store.pixels(ramp, 1, 1, {0.8f, 0.5f, 0.9f, 1});
+  uint32_t normal_y = store.pixels(ramp, 1, 1, {0.5f, 0.8f, 0.9f, 1});
+  std::vector<Material> mats(9);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
   mats[1].two_sided = 1;
@@ -1185,6 +1188,13 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   mats[6].tex_color = colour;
   mats[6].flags = PSF_MATFLAG_REFLECTANCE;
   mats[6].specular = {{0.5f, 0.5f, 0.5f, 0}};  // replaced by 1
+  mats[7] = mats[0];
+  mats[7].tex_bump = normal_x;
+  mats[7].bump_scale = 1.0f;
+  mats[7].flags = PSF_MATFLAG_NORMALMAP;
+  mats[8] = mats[7];
+  mats[8].tex_bump = normal_y;
+  mats[8].bump_scale = 0.5f;  // scales x and y
   TriAttrib a{};
   glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
   a.n0 = {{n0.x, n0.y, n0.z, 0}};
@@ -1205,7 +1215,8 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   const glm::vec3 up(0.2f, 0.1f, 0.97f), down(0.2f, 0.1f, -0.97f);
   std::vector<Query> q = {{0, {0.3f, 0.3f}, up}, {0, {0.3f, 0.3f}, down}, {1, {0.3f, 0.3f}, down},
                           {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
-                          {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up}};
+                          {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up},  {7, {0.3f, 0.3f}, up},
+                          {8, {0.3f, 0.3f}, up}};
   uint32_t n = uint32_t(q.size());
   std::vector<uint32_t> mi;
   std::vector<cl_float2> bary;
@@ -1241,6 +1252,10 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   // at normal incidence (bsdf_albedo) is the texel colour.
   CHECK(near(v3(SP[7]), {1, 1, 1}));
   CHECK(near(v3(C[7]), {0.2f, 0.4f, 0.6f}));
+  // Normal maps in the frame (t, n x t, n) = (x, y, z) of this triangle.
+  CHECK(near(v3(N[8]), {0.6f, 0, 0.8f}));
+  CHECK(near(v3(S[8]), {0.8f, 0, -0.6f}));  // dp/du made orthogonal to the new normal
+  CHECK(near(v3(N[9]), glm::normalize(glm::vec3(0, 0.3f, 0.8f))));
 }
 
 TEST_CASE("Textures: EXR and HDR images load linear, beyond 1", "[bsdf]") {
@@ -1301,6 +1316,9 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
       "<texture type=\"checkerboard\"/></texture><bsdf type=\"roughdielectric\">"
       "<float name=\"alpha\" value=\"0.3\"/><float name=\"ior\" value=\"1\"/></bsdf></bsdf>\n"      // 8
       "<bsdf type=\"plastic\" id=\"smooth\"><rgb name=\"diffuseReflectance\" value=\"0.2 0.3 0.4\"/></bsdf>\n"  // 9
+      "<bsdf type=\"normalmap\" id=\"normals\"><texture name=\"normalmap\" type=\"bitmap\">"
+      "<boolean name=\"raw\" value=\"true\"/><string name=\"filename\" value=\"textures/Wood.JPG.png\"/>"
+      "</texture><bsdf type=\"diffuse\"/></bsdf>\n"                                                // 10
       "<shape type=\"rectangle\"><ref id=\"cu\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"plain\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"wood\"/></shape>\n"
@@ -1309,9 +1327,10 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
       "<shape type=\"rectangle\"><ref id=\"leaf\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"bumpy\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"smooth\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"normals\"/></shape>\n"
       "</scene>\n");
   psf::Scene s = psf::load_scene(xml);
-  REQUIRE(s.materials.size() == 8);
+  REQUIRE(s.materials.size() == 9);
   for (const std::string& wmsg : s.warnings) INFO(wmsg);
   const Material& cu = s.materials[0];
   CHECK(cu.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
@@ -1356,6 +1375,11 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
   const Material& smooth = s.materials[7];
   CHECK(smooth.type == PSF_MATERIAL_PLASTIC);
   CHECK(smooth.eta.s[2] == Approx(psf::detail::fresnel_diffuse_reflectance(1.000277 / 1.49)).epsilon(1e-4));
+  const Material& normals = s.materials[8];
+  CHECK(normals.type == PSF_MATERIAL_DIFFUSE);
+  CHECK((normals.flags & PSF_MATFLAG_NORMALMAP) != 0u);
+  REQUIRE(normals.tex_bump != PSF_NO_TEXTURE);
+  CHECK(s.textures[normals.tex_bump].width == 4u);
   CHECK(s.warnings.size() == 3);  // the two above and: no <sensor>
   // Mitsuba 3 names for the same parameters; the default conductor is a mirror.
   std::string xml3 = dir.write("scene3.xml",

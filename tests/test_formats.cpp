@@ -559,6 +559,28 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(c.opacity == 0.0f);  // 0.3 < the default cutoff 0.5
     CHECK(c.tex_opacity == PSF_NO_TEXTURE);
   }
+  SECTION("normalTexture: a normal map, linear, with its scale") {
+    const unsigned char px[] = {128, 128, 255};
+    std::string png;
+    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
+                           &png, 1, 1, 3, px, 3);
+    std::string json = gltf_json(embedded);
+    const std::string sided = "\"doubleSided\": true";
+    json.replace(json.find(sided), sided.size(), sided + ", \"normalTexture\": {\"index\": 0, \"scale\": 0.7}");
+    json.replace(json.find("\"asset\""), 0,
+                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
+                     "\"}], \"textures\": [{\"source\": 0}],\n  ");
+    psf::Scene s = psf::load_scene(dir.write("normal.gltf", json));
+    CHECK(s.warnings.empty());
+    const Material& m = s.materials[s.tri_material[0]];
+    CHECK((m.flags & PSF_MATFLAG_NORMALMAP) != 0);
+    REQUIRE(m.tex_bump != PSF_NO_TEXTURE);
+    CHECK(m.bump_scale == Approx(0.7f));
+    const TextureInfo& t = s.textures.at(m.tex_bump);
+    Imath::half h;
+    h.setBits(s.texels.at(size_t(t.offset) * 4));
+    CHECK(float(h) == Approx(128.0f / 255.0f).margin(1e-3));  // not sRGB-decoded (0.216)
+  }
   SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
   SECTION("missing textures and metallic blends are reported, once per material") {
     std::string json = gltf_json(embedded);

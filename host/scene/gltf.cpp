@@ -349,7 +349,12 @@ class GltfLoader {
     }
     if (pbr.metallicRoughnessTexture.index >= 0)
       left_out.push_back("metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
-    if (g.normalTexture.index >= 0) left_out.push_back("normalTexture");
+    uint32_t normal_map = PSF_NO_TEXTURE;
+    if (g.normalTexture.index >= 0) {
+      normal_map = normal_texture(g.normalTexture.index, where);
+      if (normal_map == PSF_NO_TEXTURE) left_out.push_back("normalTexture (not decoded)");
+      if (g.normalTexture.texCoord != 0) left_out.push_back("normalTexture.texCoord != 0 (using TEXCOORD_0)");
+    }
     if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
     if (g.alphaMode != "OPAQUE" && !masked && !blended) left_out.push_back("alphaMode " + g.alphaMode);
     for (const auto& e : g.extensions)
@@ -384,6 +389,11 @@ class GltfLoader {
       m.eta = {{1.5f, 0, 0, 0}};
       detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
     }
+    if (normal_map != PSF_NO_TEXTURE) {
+      m.tex_bump = normal_map;
+      m.bump_scale = float(g.normalTexture.scale);
+      m.flags |= PSF_MATFLAG_NORMALMAP;
+    }
     if (masked || blended) {
       // Without a texture the whole surface has one alpha.
       m.opacity = opacity_texture != PSF_NO_TEXTURE ? 1.0f
@@ -408,6 +418,15 @@ class GltfLoader {
     return textures_.pixels(texture_desc(index, true), width, height, rgba);
   }
 
+  // The normal texture `index`: linear (not sRGB-decoded) rgb = (n + 1) / 2 of
+  // the tangent-space normal n, or PSF_NO_TEXTURE.
+  uint32_t normal_texture(int index, const std::string& where) {
+    int width = 0, height = 0;
+    std::vector<float> rgba = decode_texture(index, where, width, height, false);
+    if (rgba.empty()) return PSF_NO_TEXTURE;
+    return textures_.pixels(texture_desc(index, false), width, height, rgba);
+  }
+
   // The opacity of the base colour texture `index` (decoded by base_color_texture
   // before) in the x channel: its alpha times `factor`, thresholded at `cutoff`
   // (0 below, 1 at or above) unless cutoff < 0.
@@ -423,9 +442,10 @@ class GltfLoader {
     return textures_.pixels(texture_desc(index, false), width, height, rgba);
   }
 
-  // Texture `index`'s image as linear RGB (sRGB-decoded) and alpha, 4 floats a
-  // texel, rows from the top; empty if it has no usable pixels.
-  std::vector<float> decode_texture(int index, const std::string& where, int& width, int& height) {
+  // Texture `index`'s image as RGB (sRGB-decoded unless `srgb` is false) and
+  // alpha, 4 floats a texel, rows from the top; empty if it has no usable pixels.
+  std::vector<float> decode_texture(int index, const std::string& where, int& width, int& height,
+                                    bool srgb = true) {
     if (size_t(index) >= model_.textures.size()) fail(where, "texture index " + std::to_string(index) + " out of range");
     const tinygltf::Texture& tex = model_.textures[size_t(index)];
     if (tex.source < 0 || size_t(tex.source) >= model_.images.size())
@@ -443,7 +463,7 @@ class GltfLoader {
         size_t at = (i * size_t(c) + size_t(k)) * size_t(bytes);
         float v = bytes == 2 ? float(img.image[at] | (img.image[at + 1] << 8)) / 65535.0f : float(img.image[at]) / 255.0f;
         bool alpha = k == 3 || (c == 2 && k == 1);
-        if (!alpha) v = srgb_to_linear(v);
+        if (!alpha && srgb) v = srgb_to_linear(v);
         if (c <= 2 && k == 0) rgba[i * 4 + 1] = rgba[i * 4 + 2] = v;  // grey (+ alpha)
         rgba[i * 4 + (c <= 2 && k == 1 ? 3 : size_t(k))] = v;
       }

@@ -1006,7 +1006,7 @@ class MitsubaLoader {
         {"roughplastic", &MitsubaLoader::bsdf_plastic},     {"dielectric", &MitsubaLoader::bsdf_dielectric},
         {"roughdielectric", &MitsubaLoader::bsdf_dielectric}, {"thindielectric", &MitsubaLoader::bsdf_dielectric},
         {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
-        {"mask", &MitsubaLoader::bsdf_mask}};
+        {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap}};
     return plugins;
   }
 
@@ -1254,6 +1254,28 @@ class MitsubaLoader {
     if (index != PSF_NO_TEXTURE) {
       b.m.tex_bump = index;
       b.m.bump_scale = scale;
+    }
+    b.name.clear();
+    return b;
+  }
+
+  // normalmap (Mitsuba 3): the nested BSDF with its shading normal read from a
+  // tangent-space normal map, rgb = (n + 1) / 2 in the frame (t, n x t, n), t
+  // along dp/du (kernels/surface.cl). Mitsuba asks for a bitmap with raw="true";
+  // the texture is decoded as the file says, as Mitsuba does.
+  Bsdf bsdf_normalmap(const Element& e) {
+    check_properties(e, {"normalmap"});
+    Bsdf b = bsdf(nested_bsdf(e));
+    const Property* p = find(e, "normalmap");
+    if (!p || p->kind != Property::Kind::Object || std::string(p->object.name()) != "texture")
+      fail(e.node, "<bsdf type=\"normalmap\"> needs a texture named 'normalmap'");
+    if (b.m.tex_bump != PSF_NO_TEXTURE)
+      warn(e.node, "bsdf:bumpmap-nested", "nested bump or normal maps are not supported; the outer one is used");
+    uint32_t index = texture(p->object, TextureUse::Color, "no normal mapping");
+    if (index != PSF_NO_TEXTURE) {
+      b.m.tex_bump = index;
+      b.m.bump_scale = 1.0f;
+      b.m.flags |= PSF_MATFLAG_NORMALMAP;
     }
     b.name.clear();
     return b;
