@@ -63,7 +63,7 @@ __kernel void texture_test_eval(__global const TextureInfo* textures, __global c
 
 /* surface_frame on triangle (p0, p1, p2) with attributes attribs[0], for query k:
  * barycentrics bary[k].xy, wo[k]. Writes the frame's n and s and the material's
- * resolved albedo (xyz), specular (xyz) and bsdf_albedo (xyz). */
+ * resolved albedo (xyz), specular (xyz), bsdf_albedo (xyz) and alpha_u (w). */
 __kernel void surface_test_frame(__global const Material* materials, __global const TriAttrib* attribs,
                                  __global const TextureInfo* textures, __global const half* texels,
                                  __global const uint* mat, float4 p0, float4 p1, float4 p2,
@@ -79,5 +79,5 @@ __kernel void surface_test_frame(__global const Material* materials, __global co
   s_out[k] = (float4)(f.s, 0.0f);
   albedo_out[k] = m.albedo;
   specular_out[k] = m.specular;
-  colour_out[k] = (float4)(bsdf_albedo(m), 0.0f);
+  colour_out[k] = (float4)(bsdf_albedo(m), m.alpha_u);
 }

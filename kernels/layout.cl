@@ -34,7 +34,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Material, tex_bump);
   out[i++] = PSF_OFFSET(Material, opacity);
   out[i++] = PSF_OFFSET(Material, tex_table);
-  out[i++] = PSF_OFFSET(Material, pad0);
+  out[i++] = PSF_OFFSET(Material, tex_alpha);
   out[i++] = sizeof(TextureInfo);
   out[i++] = PSF_OFFSET(TextureInfo, uv_v);
   out[i++] = PSF_OFFSET(TextureInfo, offset);

@@ -166,7 +166,7 @@ typedef struct {
   float opacity;            /* with PSF_MATFLAG_MASKED: constant opacity, times tex_opacity (mask; 1 opaque) */
   float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
   psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
-  psf_uint pad0;            /* padding */
+  psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes), or none */
 } Material;
 
 /* TriAttrib.flags */

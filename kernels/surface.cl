@@ -3,7 +3,8 @@
  * Reads: the hit triangle's TriAttrib (shading normals, uv), the texture table
  * and texels (texture.cl). Writes into the Material: its colour term from its
  * texture (albedo for diffuse and plastics, specular for the other types, or
- * with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR).
+ * with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), and its roughness
+ * from tex_alpha.
  *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels) -> the shading Frame
  * The shading normal is the barycentric interpolation of the vertex normals
  * (Phong 1975), else the face normal ng; the geometric normal stays with the
@@ -27,7 +28,7 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   }
   bool bump = m->tex_bump != PSF_NO_TEXTURE;
   Frame f;
-  if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v) {
+  if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE) {
     float4 uv01 = a->uv01;
     float2 uv0 = uv01.xy, uv1 = uv01.zw, uv2 = (float2)(a->u2, a->v2);
     float2 uv = b0 * uv0 + b1 * uv1 + b2 * uv2;
@@ -37,6 +38,8 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
     }
+    if (m->tex_alpha != PSF_NO_TEXTURE) /* textured roughness, at Mitsuba's lower bound */
+      m->alpha_u = m->alpha_v = fmax(texture_eval(textures, texels, m->tex_alpha, uv).x, 1e-4f);
     /* dp/du and dp/dv of the triangle's uv parametrisation. */
     float2 d1 = uv1 - uv0, d2 = uv2 - uv0;
     float det = d1.x * d2.y - d1.y * d2.x;
@@ -86,7 +89,7 @@ inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, f
                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                            __global const half* texels) {
   if ((m->flags & PSF_MATFLAG_NORMALS) || m->tex_color != PSF_NO_TEXTURE || m->tex_bump != PSF_NO_TEXTURE ||
-      m->alpha_u != m->alpha_v)
+      m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE)
     return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels);
   float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
   return frame_from_normal(n);

@@ -1166,7 +1166,8 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   // Normal maps: tangent-space normals (0.6, 0, 0.8) and (0, 0.6, 0.8) as (n + 1) / 2.
   uint32_t normal_x = store.pixels(ramp, 1, 1, {0.8f, 0.5f, 0.9f, 1});
   uint32_t normal_y = store.pixels(ramp, 1, 1, {0.5f, 0.8f, 0.9f, 1});
-  std::vector<Material> mats(9);
+  uint32_t roughness = store.pixels(ramp, 1, 1, {0.3f, 0.3f, 0.3f, 1});
+  std::vector<Material> mats(10);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
   mats[1].two_sided = 1;
@@ -1195,6 +1196,10 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   mats[8] = mats[7];
   mats[8].tex_bump = normal_y;
   mats[8].bump_scale = 0.5f;  // scales x and y
+  mats[9].type = PSF_MATERIAL_ROUGH_CONDUCTOR;  // textured roughness replaces alpha_u and alpha_v
+  mats[9].alpha_u = 0.1f;
+  mats[9].alpha_v = 0.2f;
+  mats[9].tex_alpha = roughness;
   TriAttrib a{};
   glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
   a.n0 = {{n0.x, n0.y, n0.z, 0}};
@@ -1216,7 +1221,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   std::vector<Query> q = {{0, {0.3f, 0.3f}, up}, {0, {0.3f, 0.3f}, down}, {1, {0.3f, 0.3f}, down},
                           {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
                           {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up},  {7, {0.3f, 0.3f}, up},
-                          {8, {0.3f, 0.3f}, up}};
+                          {8, {0.3f, 0.3f}, up},   {9, {0.3f, 0.3f}, up}};
   uint32_t n = uint32_t(q.size());
   std::vector<uint32_t> mi;
   std::vector<cl_float2> bary;
@@ -1256,6 +1261,9 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(near(v3(N[8]), {0.6f, 0, 0.8f}));
   CHECK(near(v3(S[8]), {0.8f, 0, -0.6f}));  // dp/du made orthogonal to the new normal
   CHECK(near(v3(N[9]), glm::normalize(glm::vec3(0, 0.3f, 0.8f))));
+  // Roughness: alpha_u from the texture (both axes), else the material's.
+  CHECK(C[10].s[3] == Approx(0.3f).margin(1e-3));
+  CHECK(C[4].s[3] == Approx(0.1f));
 }
 
 TEST_CASE("Textures: EXR and HDR images load linear, beyond 1", "[bsdf]") {
@@ -1319,6 +1327,9 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
       "<bsdf type=\"normalmap\" id=\"normals\"><texture name=\"normalmap\" type=\"bitmap\">"
       "<boolean name=\"raw\" value=\"true\"/><string name=\"filename\" value=\"textures/Wood.JPG.png\"/>"
       "</texture><bsdf type=\"diffuse\"/></bsdf>\n"                                                // 10
+      "<bsdf type=\"roughconductor\" id=\"brushed\"><texture name=\"alpha\" type=\"bitmap\">"
+      "<boolean name=\"raw\" value=\"true\"/><string name=\"filename\" value=\"textures/Wood.JPG.png\"/>"
+      "</texture></bsdf>\n"                                                                         // 11
       "<shape type=\"rectangle\"><ref id=\"cu\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"plain\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"wood\"/></shape>\n"
@@ -1328,9 +1339,10 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
       "<shape type=\"rectangle\"><ref id=\"bumpy\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"smooth\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"normals\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"brushed\"/></shape>\n"
       "</scene>\n");
   psf::Scene s = psf::load_scene(xml);
-  REQUIRE(s.materials.size() == 9);
+  REQUIRE(s.materials.size() == 10);
   for (const std::string& wmsg : s.warnings) INFO(wmsg);
   const Material& cu = s.materials[0];
   CHECK(cu.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
@@ -1380,6 +1392,10 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
   CHECK((normals.flags & PSF_MATFLAG_NORMALMAP) != 0u);
   REQUIRE(normals.tex_bump != PSF_NO_TEXTURE);
   CHECK(s.textures[normals.tex_bump].width == 4u);
+  const Material& brushed = s.materials[9];
+  CHECK(brushed.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  REQUIRE(brushed.tex_alpha != PSF_NO_TEXTURE);
+  CHECK(brushed.alpha_u == Approx(200.0f / 255.0f).margin(2e-3));  // the raw texture's mean until a hit reads it
   CHECK(s.warnings.size() == 3);  // the two above and: no <sensor>
   // Mitsuba 3 names for the same parameters; the default conductor is a mirror.
   std::string xml3 = dir.write("scene3.xml",

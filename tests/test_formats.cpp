@@ -559,6 +559,30 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(c.opacity == 0.0f);  // 0.3 < the default cutoff 0.5
     CHECK(c.tex_opacity == PSF_NO_TEXTURE);
   }
+  SECTION("metallicRoughnessTexture: a metal's roughness per texel") {
+    const unsigned char px[] = {0, 128, 255};  // roughness (green) 128/255, metallic (blue) 1
+    std::string png;
+    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
+                           &png, 1, 1, 3, px, 3);
+    std::string json = gltf_json(embedded);
+    const std::string m0 = "\"metallicFactor\": 0}, \"doubleSided\"";
+    json.replace(json.find(m0), m0.size(),
+                 "\"metallicFactor\": 1, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": {\"index\": 0}}, "
+                 "\"doubleSided\"");
+    json.replace(json.find("\"asset\""), 0,
+                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
+                     "\"}], \"textures\": [{\"source\": 0}],\n  ");
+    psf::Scene s = psf::load_scene(dir.write("rough.gltf", json));
+    const Material& m = s.materials[s.tri_material[0]];
+    CHECK(m.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+    REQUIRE(m.tex_alpha != PSF_NO_TEXTURE);
+    const TextureInfo& t = s.textures.at(m.tex_alpha);
+    Imath::half h;
+    h.setBits(s.texels.at(size_t(t.offset) * 4));
+    const float r = 0.5f * 128.0f / 255.0f;
+    CHECK(float(h) == Approx(r * r).margin(1e-3));  // alpha = (factor x green)^2, green not sRGB-decoded
+    CHECK(m.alpha_u == Approx(r * r).margin(1e-3));
+  }
   SECTION("normalTexture: a normal map, linear, with its scale") {
     const unsigned char px[] = {128, 128, 255};
     std::string png;

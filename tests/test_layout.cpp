@@ -35,7 +35,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Material, tex_bump)", offsetof(Material, tex_bump)},
       {"offsetof(Material, opacity)", offsetof(Material, opacity)},
       {"offsetof(Material, tex_table)", offsetof(Material, tex_table)},
-      {"offsetof(Material, pad0)", offsetof(Material, pad0)},
+      {"offsetof(Material, tex_alpha)", offsetof(Material, tex_alpha)},
       {"sizeof(TextureInfo)", sizeof(TextureInfo)},
       {"offsetof(TextureInfo, uv_v)", offsetof(TextureInfo, uv_v)},
       {"offsetof(TextureInfo, offset)", offsetof(TextureInfo, offset)},

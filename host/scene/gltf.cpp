@@ -347,8 +347,17 @@ class GltfLoader {
       f << "metallicFactor " << metallic << " (a blend; shaded as " << (metal ? "a metal" : "a dielectric") << ")";
       left_out.push_back(f.str());
     }
-    if (pbr.metallicRoughnessTexture.index >= 0)
-      left_out.push_back("metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
+    // The texture's roughness (green) per hit for metals (roughconductor); its
+    // metallic channel (blue) and a dielectric's roughness (roughplastic's tables
+    // are made for one alpha) take the factors.
+    uint32_t alpha_map = PSF_NO_TEXTURE;
+    if (pbr.metallicRoughnessTexture.index >= 0) {
+      if (metal && roughness > 0.0f)
+        alpha_map = roughness_texture(pbr.metallicRoughnessTexture.index, roughness, where);
+      left_out.push_back(alpha_map != PSF_NO_TEXTURE
+                             ? "metallicRoughnessTexture's metallic channel (using metallicFactor)"
+                             : "metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
+    }
     uint32_t normal_map = PSF_NO_TEXTURE;
     if (g.normalTexture.index >= 0) {
       normal_map = normal_texture(g.normalTexture.index, where);
@@ -382,6 +391,10 @@ class GltfLoader {
       m.k = {{k.x, k.y, k.z, 0}};
       m.specular = {{1, 1, 1, 0}};
       if (texture != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_REFLECTANCE;
+      if (alpha_map != PSF_NO_TEXTURE) {
+        m.tex_alpha = alpha_map;
+        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
+      }
     } else {
       m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
       m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
@@ -416,6 +429,20 @@ class GltfLoader {
     for (size_t i = 0; i < rgba.size(); i += 4)
       for (int k = 0; k < 3; ++k) rgba[i + size_t(k)] *= factor[k];
     return textures_.pixels(texture_desc(index, true), width, height, rgba);
+  }
+
+  // The microfacet alpha = (factor g)^2 of the metallic-roughness texture
+  // `index` (linear; roughness in green) in the x channel, or PSF_NO_TEXTURE.
+  uint32_t roughness_texture(int index, float factor, const std::string& where) {
+    int width = 0, height = 0;
+    std::vector<float> rgba = decode_texture(index, where, width, height, false);
+    if (rgba.empty()) return PSF_NO_TEXTURE;
+    for (size_t i = 0; i < rgba.size(); i += 4) {
+      float r = factor * rgba[i + 1];
+      rgba[i] = rgba[i + 1] = rgba[i + 2] = r * r;
+      rgba[i + 3] = 1.0f;
+    }
+    return textures_.pixels(texture_desc(index, false), width, height, rgba);
   }
 
   // The normal texture `index`: linear (not sRGB-decoded) rgb = (n + 1) / 2 of
