@@ -157,6 +157,24 @@ std::string base64(const std::string& bytes) {
   return out;
 }
 
+// An 8-bit PNG in memory: width x height texels of `channels` bytes, rows from the top.
+std::string png_bytes(int width, int height, int channels, const unsigned char* px) {
+  std::string png;
+  stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
+                         &png, width, height, channels, px, width * channels);
+  return png;
+}
+
+// `json` with `png` as image 0 (embedded, base64) and texture 0 sampling it;
+// `more` adds further top-level members (samplers).
+std::string with_image(std::string json, const std::string& png, const std::string& texture = R"({"source": 0})",
+                       const std::string& more = "") {
+  json.replace(json.find("\"asset\""), 0,
+               "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) + "\"}], \"textures\": [" + texture +
+                   "]," + more + "\n  ");
+  return json;
+}
+
 // 176 bytes: a unit quad's 4 positions, its 6 uint16 indices, a triangle's 3
 // positions, the quad's 4 normals and 4 uvs.
 std::string gltf_buffer() {
@@ -483,17 +501,12 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   SECTION("an embedded base colour texture (sRGB) times the factor") {
     // 2x2 sRGB texels: red, green, blue, white; factor (0.5, 1, 1).
     const unsigned char px[] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255};
-    std::string png;
-    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
-                           &png, 2, 2, 3, px, 6);
     std::string json = gltf_json(embedded);
     const std::string factor = "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]";
     json.replace(json.find(factor), factor.size(),
                  "\"baseColorFactor\": [0.5, 1, 1, 1], \"baseColorTexture\": {\"index\": 0}");
-    json.replace(json.find("\"asset\""), 0,
-                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
-                     "\"}], \"textures\": [{\"source\": 0, \"sampler\": 0}], "
-                     "\"samplers\": [{\"magFilter\": 9728, \"wrapS\": 33071, \"wrapT\": 33071}],\n  ");
+    json = with_image(json, png_bytes(2, 2, 3, px), R"({"source": 0, "sampler": 0})",
+                      R"( "samplers": [{"magFilter": 9728, "wrapS": 33071, "wrapT": 33071}],)");
     psf::Scene s = psf::load_scene(dir.write("tex.gltf", json));
     CHECK(s.warnings.empty());
     const Material& m = s.materials[s.tri_material[0]];
@@ -506,9 +519,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   SECTION("alphaMode MASK and BLEND: an opacity from the base colour's alpha") {
     // 2x2 RGBA texels, alpha 0.2, 0.4, 0.6, 1 (8-bit: 51, 102, 153, 255).
     const unsigned char px[] = {255, 255, 255, 51, 255, 255, 255, 102, 255, 255, 255, 153, 255, 255, 255, 255};
-    std::string png;
-    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
-                           &png, 2, 2, 4, px, 8);
+    const std::string png = png_bytes(2, 2, 4, px);
     auto load = [&](const std::string& alpha) {
       std::string json = gltf_json(embedded);
       const std::string factor = "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]";
@@ -516,10 +527,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
                    "\"baseColorFactor\": [0.5, 1, 1, 1], \"baseColorTexture\": {\"index\": 0}");
       const std::string sided = "\"doubleSided\": true";
       json.replace(json.find(sided), sided.size(), sided + ", " + alpha);
-      json.replace(json.find("\"asset\""), 0,
-                   "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
-                       "\"}], \"textures\": [{\"source\": 0}],\n  ");
-      return psf::load_scene(dir.write("alpha.gltf", json));
+      return psf::load_scene(dir.write("alpha.gltf", with_image(json, png)));
     };
     // The x channel of the opacity texture's 4 texels.
     auto opacity = [](const psf::Scene& s, const Material& m) {
@@ -561,18 +569,12 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   }
   SECTION("metallicRoughnessTexture: a metal's roughness per texel") {
     const unsigned char px[] = {0, 128, 255};  // roughness (green) 128/255, metallic (blue) 1
-    std::string png;
-    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
-                           &png, 1, 1, 3, px, 3);
     std::string json = gltf_json(embedded);
     const std::string m0 = "\"metallicFactor\": 0}, \"doubleSided\"";
     json.replace(json.find(m0), m0.size(),
                  "\"metallicFactor\": 1, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": {\"index\": 0}}, "
                  "\"doubleSided\"");
-    json.replace(json.find("\"asset\""), 0,
-                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
-                     "\"}], \"textures\": [{\"source\": 0}],\n  ");
-    psf::Scene s = psf::load_scene(dir.write("rough.gltf", json));
+    psf::Scene s = psf::load_scene(dir.write("rough.gltf", with_image(json, png_bytes(1, 1, 3, px))));
     const Material& m = s.materials[s.tri_material[0]];
     CHECK(m.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
     REQUIRE(m.tex_alpha != PSF_NO_TEXTURE);
@@ -585,16 +587,10 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   }
   SECTION("normalTexture: a normal map, linear, with its scale") {
     const unsigned char px[] = {128, 128, 255};
-    std::string png;
-    stbi_write_png_to_func([](void* ctx, void* data, int size) { static_cast<std::string*>(ctx)->append((char*)data, size); },
-                           &png, 1, 1, 3, px, 3);
     std::string json = gltf_json(embedded);
     const std::string sided = "\"doubleSided\": true";
     json.replace(json.find(sided), sided.size(), sided + ", \"normalTexture\": {\"index\": 0, \"scale\": 0.7}");
-    json.replace(json.find("\"asset\""), 0,
-                 "\"images\": [{\"uri\": \"data:image/png;base64," + base64(png) +
-                     "\"}], \"textures\": [{\"source\": 0}],\n  ");
-    psf::Scene s = psf::load_scene(dir.write("normal.gltf", json));
+    psf::Scene s = psf::load_scene(dir.write("normal.gltf", with_image(json, png_bytes(1, 1, 3, px))));
     CHECK(s.warnings.empty());
     const Material& m = s.materials[s.tri_material[0]];
     CHECK((m.flags & PSF_MATFLAG_NORMALMAP) != 0);
