@@ -175,6 +175,20 @@ std::string with_image(std::string json, const std::string& png, const std::stri
   return json;
 }
 
+// `json` with its first `what` replaced by `with` (which must be there).
+std::string replaced(std::string json, const std::string& what, const std::string& with) {
+  size_t at = json.find(what);
+  REQUIRE(at != std::string::npos);
+  return json.replace(at, what.size(), with);
+}
+
+// The x channel of texel i of texture `index` of a loaded scene (halfs).
+float texel_x(const psf::Scene& s, uint32_t index, size_t i) {
+  Imath::half h;
+  h.setBits(s.texels.at((size_t(s.textures.at(index).offset) + i) * 4));
+  return float(h);
+}
+
 // 176 bytes: a unit quad's 4 positions, its 6 uint16 indices, a triangle's 3
 // positions, the quad's 4 normals and 4 uvs.
 std::string gltf_buffer() {
@@ -532,12 +546,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     // The x channel of the opacity texture's 4 texels.
     auto opacity = [](const psf::Scene& s, const Material& m) {
       std::vector<float> x;
-      const TextureInfo& t = s.textures.at(m.tex_opacity);
-      for (uint32_t i = 0; i < t.width * t.height; ++i) {
-        Imath::half h;
-        h.setBits(s.texels.at(size_t(t.offset + i) * 4));
-        x.push_back(float(h));
-      }
+      for (size_t i = 0; i < 4; ++i) x.push_back(texel_x(s, m.tex_opacity, i));
       return x;
     };
     psf::Scene mask = load("\"alphaMode\": \"MASK\", \"alphaCutoff\": 0.5");
@@ -569,21 +578,59 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   }
   SECTION("metallicRoughnessTexture: a metal's roughness per texel") {
     const unsigned char px[] = {0, 128, 255};  // roughness (green) 128/255, metallic (blue) 1
-    std::string json = gltf_json(embedded);
-    const std::string m0 = "\"metallicFactor\": 0}, \"doubleSided\"";
-    json.replace(json.find(m0), m0.size(),
-                 "\"metallicFactor\": 1, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": {\"index\": 0}}, "
-                 "\"doubleSided\"");
+    std::string json = replaced(gltf_json(embedded), "\"metallicFactor\": 0}, \"doubleSided\"",
+                                "\"metallicFactor\": 1, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": "
+                                "{\"index\": 0}}, \"doubleSided\"");
     psf::Scene s = psf::load_scene(dir.write("rough.gltf", with_image(json, png_bytes(1, 1, 3, px))));
     const Material& m = s.materials[s.tri_material[0]];
     CHECK(m.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
     REQUIRE(m.tex_alpha != PSF_NO_TEXTURE);
-    const TextureInfo& t = s.textures.at(m.tex_alpha);
-    Imath::half h;
-    h.setBits(s.texels.at(size_t(t.offset) * 4));
     const float r = 0.5f * 128.0f / 255.0f;
-    CHECK(float(h) == Approx(r * r).margin(1e-3));  // alpha = (factor x green)^2, green not sRGB-decoded
+    CHECK(texel_x(s, m.tex_alpha, 0) == Approx(r * r).margin(1e-3));  // (factor x green)^2, green linear
     CHECK(m.alpha_u == Approx(r * r).margin(1e-3));
+  }
+  SECTION("KHR_texture_transform: u' = offset + R(rotation) S(scale) u") {
+    const unsigned char px[] = {200, 100, 50};
+    std::string json = replaced(gltf_json(embedded), "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]",
+                                "\"baseColorFactor\": [1, 1, 1, 1], \"baseColorTexture\": {\"index\": 0, "
+                                "\"extensions\": {\"KHR_texture_transform\": {\"offset\": [0.25, -0.5], "
+                                "\"rotation\": 0.5, \"scale\": [2, 3]}}}");
+    psf::Scene s = psf::load_scene(dir.write("xform.gltf", with_image(json, png_bytes(1, 1, 3, px))));
+    CHECK(s.warnings.empty());
+    const Material& m = s.materials[s.tri_material[0]];
+    REQUIRE(m.tex_color != PSF_NO_TEXTURE);
+    const TextureInfo& t = s.textures.at(m.tex_color);
+    // The extension's GLSL: columns (cos, sin), (-sin, cos) of the rotation.
+    const float c = std::cos(0.5f), sn = std::sin(0.5f);
+    CHECK(t.uv_u.s[0] == Approx(2 * c));
+    CHECK(t.uv_u.s[1] == Approx(-3 * sn));
+    CHECK(t.uv_u.s[2] == Approx(0.25f));
+    CHECK(t.uv_v.s[0] == Approx(2 * sn));
+    CHECK(t.uv_v.s[1] == Approx(3 * c));
+    CHECK(t.uv_v.s[2] == Approx(-0.5f));
+  }
+  SECTION("KHR_materials_transmission and KHR_materials_ior: glass") {
+    const std::string m0 = "\"metallicFactor\": 0}, \"doubleSided\": true";
+    psf::Scene s = psf::load_scene(dir.write(
+        "glass.gltf", replaced(gltf_json(embedded), m0,
+                               "\"metallicFactor\": 0, \"roughnessFactor\": 0}, \"doubleSided\": true, "
+                               "\"extensions\": {\"KHR_materials_transmission\": {\"transmissionFactor\": 1}, "
+                               "\"KHR_materials_ior\": {\"ior\": 1.33}}")));
+    CHECK(s.warnings.empty());
+    const Material& m = s.materials[s.tri_material[0]];
+    CHECK(m.type == PSF_MATERIAL_DIELECTRIC);  // roughness 0
+    CHECK(m.eta.s[0] == Approx(1.33f));
+    CHECK(m.eta.s[1] == Approx(1.0f / (1.33f * 1.33f)));
+    CHECK(m.transmittance.s[0] == Approx(0.2f));  // tinted by the base colour
+    CHECK(m.transmittance.s[2] == Approx(0.6f));
+    CHECK(m.specular.s[1] == Approx(1.0f));
+    // ior alone sets a dielectric's coating.
+    psf::Scene t = psf::load_scene(dir.write(
+        "coat.gltf", replaced(gltf_json(embedded), m0,
+                              "\"metallicFactor\": 0}, \"doubleSided\": true, \"extensions\": "
+                              "{\"KHR_materials_ior\": {\"ior\": 1.7}}")));
+    CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_ROUGH_PLASTIC);
+    CHECK(t.materials[t.tri_material[0]].eta.s[0] == Approx(1.7f));
   }
   SECTION("normalTexture: a normal map, linear, with its scale") {
     const unsigned char px[] = {128, 128, 255};
@@ -596,10 +643,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK((m.flags & PSF_MATFLAG_NORMALMAP) != 0);
     REQUIRE(m.tex_bump != PSF_NO_TEXTURE);
     CHECK(m.bump_scale == Approx(0.7f));
-    const TextureInfo& t = s.textures.at(m.tex_bump);
-    Imath::half h;
-    h.setBits(s.texels.at(size_t(t.offset) * 4));
-    CHECK(float(h) == Approx(128.0f / 255.0f).margin(1e-3));  // not sRGB-decoded (0.216)
+    CHECK(texel_x(s, m.tex_bump, 0) == Approx(128.0f / 255.0f).margin(1e-3));  // not sRGB-decoded (0.216)
   }
   SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
   SECTION("missing textures and metallic blends are reported, once per material") {

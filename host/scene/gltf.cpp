@@ -50,7 +50,9 @@ class GltfLoader {
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
     for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
 
-    static const std::set<std::string> supported = {"KHR_lights_punctual", "KHR_materials_emissive_strength"};
+    static const std::set<std::string> supported = {"KHR_lights_punctual", "KHR_materials_emissive_strength",
+                                                    "KHR_materials_transmission", "KHR_materials_ior",
+                                                    "KHR_texture_transform"};
     for (const std::string& e : model_.extensionsUsed)
       if (!supported.count(e)) warn_once("extension " + e + " is not supported; ignored");
     if (!model_.animations.empty()) warn_once("animations are not supported; using the rest pose");
@@ -328,9 +330,9 @@ class GltfLoader {
         pbr.baseColorFactor.size() >= 4 ? std::clamp(float(pbr.baseColorFactor[3]), 0.0f, 1.0f) : 1.0f;
     const float cutoff = float(g.alphaCutoff);
     if (pbr.baseColorTexture.index >= 0) {
-      texture = base_color_texture(pbr.baseColorTexture.index, base, where);
+      texture = base_color_texture(pbr.baseColorTexture, base, where);
       if (texture != PSF_NO_TEXTURE && (masked || blended))
-        opacity_texture = alpha_texture(pbr.baseColorTexture.index, alpha_factor, masked ? cutoff : -1.0f);
+        opacity_texture = alpha_texture(pbr.baseColorTexture, alpha_factor, masked ? cutoff : -1.0f);
       if (texture == PSF_NO_TEXTURE) left_out.push_back("baseColorTexture (not decoded; using baseColorFactor)");
       if (pbr.baseColorTexture.texCoord != 0) left_out.push_back("baseColorTexture.texCoord != 0 (using TEXCOORD_0)");
     }
@@ -353,21 +355,42 @@ class GltfLoader {
     uint32_t alpha_map = PSF_NO_TEXTURE;
     if (pbr.metallicRoughnessTexture.index >= 0) {
       if (metal && roughness > 0.0f)
-        alpha_map = roughness_texture(pbr.metallicRoughnessTexture.index, roughness, where);
+        alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
       left_out.push_back(alpha_map != PSF_NO_TEXTURE
                              ? "metallicRoughnessTexture's metallic channel (using metallicFactor)"
                              : "metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
     }
     uint32_t normal_map = PSF_NO_TEXTURE;
     if (g.normalTexture.index >= 0) {
-      normal_map = normal_texture(g.normalTexture.index, where);
+      normal_map = normal_texture(g.normalTexture, where);
       if (normal_map == PSF_NO_TEXTURE) left_out.push_back("normalTexture (not decoded)");
       if (g.normalTexture.texCoord != 0) left_out.push_back("normalTexture.texCoord != 0 (using TEXCOORD_0)");
     }
+    // KHR_materials_ior (default 1.5) and KHR_materials_transmission: a
+    // dielectric that transmits (factor >= 0.5; no blend) is a (rough)dielectric
+    // whose transmission the base colour tints.
+    auto ext_number = [&](const char* ext, const char* name, float fallback) {
+      auto it = g.extensions.find(ext);
+      if (it == g.extensions.end() || !it->second.Has(name)) return fallback;
+      const tinygltf::Value& v = it->second.Get(name);
+      return v.IsNumber() || v.IsInt() ? float(v.GetNumberAsDouble()) : fallback;
+    };
+    float ior = ext_number("KHR_materials_ior", "ior", 1.5f);
+    if (!(ior >= 1.0f)) ior = 1.5f;  // 0 (or nonsense): the default
+    const float transmission =
+        std::clamp(ext_number("KHR_materials_transmission", "transmissionFactor", 0.0f), 0.0f, 1.0f);
+    const bool transmits = !metal && transmission >= 0.5f && ior > 1.0f;
+    if (transmission > 0.0f && transmission < 1.0f && !metal)
+      left_out.push_back("transmissionFactor (a blend; shaded as " +
+                         std::string(transmits ? "transmitting)" : "not transmitting)"));
+    if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
+      left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
     if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
     if (g.alphaMode != "OPAQUE" && !masked && !blended) left_out.push_back("alphaMode " + g.alphaMode);
     for (const auto& e : g.extensions)
-      if (e.first != "KHR_materials_emissive_strength") left_out.push_back(e.first);
+      if (e.first != "KHR_materials_emissive_strength" && e.first != "KHR_materials_transmission" &&
+          e.first != "KHR_materials_ior")
+        left_out.push_back(e.first);
     if (!left_out.empty()) {
       std::string list;
       for (const std::string& s : left_out) list += (list.empty() ? "" : ", ") + s;
@@ -381,7 +404,13 @@ class GltfLoader {
     glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
     const bool rough = roughness > 0.0f;
     m.alpha_u = m.alpha_v = std::max(roughness * roughness, 1e-4f);  // Mitsuba's lower bound
-    if (metal) {
+    if (transmits) {
+      m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
+      m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
+      m.specular = {{1, 1, 1, 0}};
+      m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
+      m.tex_color = PSF_NO_TEXTURE;
+    } else if (metal) {
       // The base colour is the reflectance at normal incidence: eta and k from it
       // (per hit from the texture: PSF_MATFLAG_REFLECTANCE, kernels/surface.cl).
       m.type = rough ? PSF_MATERIAL_ROUGH_CONDUCTOR : PSF_MATERIAL_CONDUCTOR;
@@ -399,7 +428,7 @@ class GltfLoader {
       m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
       m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
       m.specular = {{1, 1, 1, 0}};
-      m.eta = {{1.5f, 0, 0, 0}};
+      m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
       detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
     }
     if (normal_map != PSF_NO_TEXTURE) {
@@ -422,51 +451,51 @@ class GltfLoader {
 
   // The base colour texture `index` times the factor, as linear RGB (the image
   // is sRGB-encoded, glTF 2.0 Sec. 3.9.2), or PSF_NO_TEXTURE with a warning.
-  uint32_t base_color_texture(int index, const glm::vec3& factor, const std::string& where) {
+  uint32_t base_color_texture(const tinygltf::TextureInfo& info, const glm::vec3& factor, const std::string& where) {
     int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(index, where, width, height);
+    std::vector<float> rgba = decode_texture(info.index, where, width, height);
     if (rgba.empty()) return PSF_NO_TEXTURE;
     for (size_t i = 0; i < rgba.size(); i += 4)
       for (int k = 0; k < 3; ++k) rgba[i + size_t(k)] *= factor[k];
-    return textures_.pixels(texture_desc(index, true), width, height, rgba);
+    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
   }
 
   // The microfacet alpha = (factor g)^2 of the metallic-roughness texture
   // `index` (linear; roughness in green) in the x channel, or PSF_NO_TEXTURE.
-  uint32_t roughness_texture(int index, float factor, const std::string& where) {
+  uint32_t roughness_texture(const tinygltf::TextureInfo& info, float factor, const std::string& where) {
     int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(index, where, width, height, false);
+    std::vector<float> rgba = decode_texture(info.index, where, width, height, false);
     if (rgba.empty()) return PSF_NO_TEXTURE;
     for (size_t i = 0; i < rgba.size(); i += 4) {
       float r = factor * rgba[i + 1];
       rgba[i] = rgba[i + 1] = rgba[i + 2] = r * r;
       rgba[i + 3] = 1.0f;
     }
-    return textures_.pixels(texture_desc(index, false), width, height, rgba);
+    return textures_.pixels(texture_desc(info.index, info.extensions, false), width, height, rgba);
   }
 
   // The normal texture `index`: linear (not sRGB-decoded) rgb = (n + 1) / 2 of
   // the tangent-space normal n, or PSF_NO_TEXTURE.
-  uint32_t normal_texture(int index, const std::string& where) {
+  uint32_t normal_texture(const tinygltf::NormalTextureInfo& info, const std::string& where) {
     int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(index, where, width, height, false);
+    std::vector<float> rgba = decode_texture(info.index, where, width, height, false);
     if (rgba.empty()) return PSF_NO_TEXTURE;
-    return textures_.pixels(texture_desc(index, false), width, height, rgba);
+    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
   }
 
   // The opacity of the base colour texture `index` (decoded by base_color_texture
   // before) in the x channel: its alpha times `factor`, thresholded at `cutoff`
   // (0 below, 1 at or above) unless cutoff < 0.
-  uint32_t alpha_texture(int index, float factor, float cutoff) {
+  uint32_t alpha_texture(const tinygltf::TextureInfo& info, float factor, float cutoff) {
     int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(index, "", width, height);
+    std::vector<float> rgba = decode_texture(info.index, "", width, height);
     for (size_t i = 0; i < rgba.size(); i += 4) {
       float a = rgba[i + 3] * factor;
       if (cutoff >= 0.0f) a = a >= cutoff ? 1.0f : 0.0f;
       rgba[i] = rgba[i + 1] = rgba[i + 2] = a;
       rgba[i + 3] = 1.0f;
     }
-    return textures_.pixels(texture_desc(index, false), width, height, rgba);
+    return textures_.pixels(texture_desc(info.index, info.extensions, false), width, height, rgba);
   }
 
   // Texture `index`'s image as RGB (sRGB-decoded unless `srgb` is false) and
@@ -497,11 +526,33 @@ class GltfLoader {
     return rgba;
   }
 
-  // Filtering and wrapping of texture `index` from its sampler (`warn`: report
-  // what is not supported).
-  TextureDesc texture_desc(int index, bool warn) {
+  // Filtering and wrapping of texture `index` from its sampler, and the uv
+  // transform of KHR_texture_transform in the textureInfo's `extensions` (u' =
+  // T R S u: offset, rotation by +angle as the extension's GLSL, scale); `warn`:
+  // report what is not supported.
+  TextureDesc texture_desc(int index, const tinygltf::ExtensionMap& extensions, bool warn) {
     const tinygltf::Texture& tex = model_.textures[size_t(index)];
     TextureDesc desc;
+    auto transform = extensions.find("KHR_texture_transform");
+    if (transform != extensions.end()) {
+      const tinygltf::Value& t = transform->second;
+      auto number = [&](const tinygltf::Value& v, double fallback) {
+        return v.IsNumber() || v.IsInt() ? v.GetNumberAsDouble() : fallback;
+      };
+      auto pair = [&](const char* name, double fallback) {
+        glm::dvec2 out(fallback);
+        if (t.Has(name) && t.Get(name).IsArray() && t.Get(name).ArrayLen() == 2)
+          out = glm::dvec2(number(t.Get(name).Get(0), fallback), number(t.Get(name).Get(1), fallback));
+        return out;
+      };
+      const glm::dvec2 offset = pair("offset", 0.0), scale = pair("scale", 1.0);
+      const double angle = t.Has("rotation") ? number(t.Get("rotation"), 0.0) : 0.0;
+      const double c = std::cos(angle), sn = std::sin(angle);
+      desc.uv_u = glm::vec3(float(c * scale.x), float(-sn * scale.y), float(offset.x));
+      desc.uv_v = glm::vec3(float(sn * scale.x), float(c * scale.y), float(offset.y));
+      if (warn && t.Has("texCoord") && number(t.Get("texCoord"), 0.0) != 0.0)
+        warn_once("KHR_texture_transform texCoord != 0: using TEXCOORD_0");
+    }
     desc.path = "gltf:" + path_ + ":images[" + std::to_string(tex.source) + "]";
     if (tex.sampler >= 0 && size_t(tex.sampler) < model_.samplers.size()) {
       const tinygltf::Sampler& smp = model_.samplers[size_t(tex.sampler)];
