@@ -1,8 +1,11 @@
 #include "lights.h"
 
+#include <Imath/half.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <stdexcept>
 
 namespace psf {
@@ -80,15 +83,43 @@ EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width,
   return d;
 }
 
+namespace {
+// The mean RGB of texture `index` of the scene's texel buffer (halfs), or 1 for
+// none or a texture outside the table.
+glm::vec3 texture_mean(const Scene& scene, uint32_t index) {
+  if (index == PSF_NO_TEXTURE || index >= scene.textures.size()) return glm::vec3(1.0f);
+  const TextureInfo& t = scene.textures[index];
+  const size_t n = size_t(t.width) * t.height, first = size_t(t.offset) * 4;
+  if (n == 0 || first + n * 4 > scene.texels.size()) return glm::vec3(1.0f);
+  glm::dvec3 sum(0.0);
+  for (size_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) {
+      Imath::half h;
+      h.setBits(scene.texels[first + i * 4 + size_t(c)]);
+      sum[c] += double(float(h));
+    }
+  return glm::vec3(sum / double(n));
+}
+}  // namespace
+
 LightTable build_light_table(const Scene& scene) {
   LightTable t;
   std::vector<double> power;
+  std::map<uint32_t, glm::vec3> means;  // of the emission textures
 
   // Emissive triangles (area lights): every triangle of an emissive material.
   for (size_t i = 0; i < scene.triangles.size(); ++i) {
     const Material& m = scene.materials[scene.tri_material[i]];
     glm::vec3 le(m.emission.s[0], m.emission.s[1], m.emission.s[2]);
     if (lum(le) <= 0.0f) continue;
+    // With an emission texture, the light is chosen by its mean (any choice
+    // keeps next-event estimation unbiased; the sample carries the texel's value).
+    glm::vec3 scale(1.0f);
+    if (m.tex_emission != PSF_NO_TEXTURE) {
+      auto it = means.find(m.tex_emission);
+      if (it == means.end()) it = means.emplace(m.tex_emission, texture_mean(scene, m.tex_emission)).first;
+      scale = it->second;
+    }
     const auto& tri = scene.triangles[i];
     glm::vec3 a = scene.positions[tri[0]], b = scene.positions[tri[1]], c = scene.positions[tri[2]];
     float area = 0.5f * glm::length(glm::cross(b - a, c - a));
@@ -101,8 +132,9 @@ LightTable build_light_table(const Scene& scene) {
     e.prim = uint32_t(i);
     e.two_sided = m.two_sided;
     e.type = PSF_EMITTER_TRIANGLE;
+    e.tex_emission = m.tex_emission;
     t.emitters.push_back(e);
-    power.push_back(kPi * double(area) * lum(le) * (m.two_sided ? 2.0 : 1.0));
+    power.push_back(kPi * double(area) * lum(le * scale) * (m.two_sided ? 2.0 : 1.0));
   }
 
   const double radius = scene_radius(scene);

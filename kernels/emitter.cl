@@ -11,7 +11,8 @@
  *   env_pdf(...)         -> solid-angle pdf of env_sample for that direction
  * Light types and their samples:
  *   triangle:    uniform by area (Turk 1990: b1 = sqrt(u) (1 - v), b2 = sqrt(u) v);
- *                pdf = P(light) / area * r^2 / cos_l
+ *                pdf = P(light) / area * r^2 / cos_l; with an emission texture
+ *                the caller multiplies the radiance by it at (prim, b1, b2)
  *   point:       delta; radiance I / r^2, pdf = P(light)
  *   spot:        delta; I / r^2 times Mitsuba's falloff: 1 inside the beam width,
  *                (cutoff - angle) / (cutoff - beam width) up to the cutoff, 0 beyond
@@ -34,6 +35,9 @@ typedef struct {
   float3 radiance; /* radiance arriving at the shading point (point, spot: I / r^2; directional: E) */
   float pdf;       /* solid-angle pdf of this sample, or the selection probability of a delta light (0: none) */
   uint delta;      /* 1: a delta light (no MIS) */
+  uint tex;        /* a triangle's emission texture (radiance is to be multiplied by it at (prim, b1, b2)), or none */
+  uint prim;       /* the triangle */
+  float b1, b2;    /* barycentrics of the point on it */
 } LightSample;
 
 /* Index of the first of n cdf entries > u (the last entry is 1; n - 1 if none
@@ -200,6 +204,9 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
   ls.wi = (float3)(0.0f, 0.0f, 1.0f);
   ls.dist = 0.0f;
   ls.delta = 0u;
+  ls.tex = PSF_NO_TEXTURE;
+  ls.prim = 0u;
+  ls.b1 = ls.b2 = 0.0f;
   if (count == 0u) return ls;
   Emitter em = emitters[sample_cdf(cdf, count, ul)];
   float select = em.radiance.w;
@@ -248,6 +255,10 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
   if (cos_l <= 0.0f) return ls;
   ls.pdf = select / em.v0.w * d2 / cos_l;
   ls.radiance = em.radiance.xyz;
+  ls.tex = em.tex_emission;
+  ls.prim = em.prim;
+  ls.b1 = su * (1.0f - ub);
+  ls.b2 = su * ub;
   return ls;
 }
 

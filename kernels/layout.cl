@@ -35,6 +35,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Material, opacity);
   out[i++] = PSF_OFFSET(Material, tex_table);
   out[i++] = PSF_OFFSET(Material, tex_alpha);
+  out[i++] = PSF_OFFSET(Material, tex_emission);
   out[i++] = sizeof(TextureInfo);
   out[i++] = PSF_OFFSET(TextureInfo, uv_v);
   out[i++] = PSF_OFFSET(TextureInfo, offset);
@@ -48,6 +49,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Emitter, prim);
   out[i++] = PSF_OFFSET(Emitter, two_sided);
   out[i++] = PSF_OFFSET(Emitter, type);
+  out[i++] = PSF_OFFSET(Emitter, tex_emission);
   out[i++] = sizeof(Environment);
   out[i++] = PSF_OFFSET(Environment, to_map2);
   out[i++] = PSF_OFFSET(Environment, scale);

@@ -167,6 +167,8 @@ typedef struct {
   float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
   psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
   psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes), or none */
+  psf_uint tex_emission;    /* texture (rgb) multiplying the emission where it is hit or sampled, or PSF_NO_TEXTURE */
+  psf_uint pad0;            /* padding */
 } Material;
 
 /* TriAttrib.flags */
@@ -223,7 +225,7 @@ typedef struct {
   psf_uint prim;       /* triangle: index in scene order */
   psf_uint two_sided;  /* triangle: 1 emits on both sides */
   psf_uint type;       /* PSF_EMITTER_* */
-  psf_uint pad1;       /* padding */
+  psf_uint tex_emission; /* triangle: its material's tex_emission (radiance times the texture at the point) */
 } Emitter;
 
 /* The environment: radiance from infinitely far away along every direction that

@@ -160,7 +160,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     float w = 1.0f;
     if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR) && params.num_emitters > 0u)
       w = power_heuristic(st.throughput.w, emitter_pdf_hit(tri_light_pdf, hit.prim, dist, fabs(dot(ng, wo))));
-    add_radiance(&st, beta * m.emission.xyz * w);
+    add_radiance(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
   }
 
   /* The shading frame (interpolated normal, bump map; turned towards wo if
@@ -200,6 +200,8 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
                           bounce_sample(sobol, key, st, PSF_DIM_LIGHT_SELECT),
                           bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV),
                           bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV + 1u));
+      if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
+        ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
     }
     float bsdf_pdf;
     float3 f = ls.pdf > 0.0f ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);

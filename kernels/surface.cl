@@ -16,6 +16,21 @@
  * tangent follows dp/du where it matters (bump maps, anisotropic roughness).
  * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided). */
 
+/* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */
+inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
+  float4 uv01 = a->uv01;
+  return (1.0f - b1 - b2) * uv01.xy + b1 * uv01.zw + b2 * (float2)(a->u2, a->v2);
+}
+
+/* A material's emission at barycentrics (b1, b2) of the triangle (its emission
+ * texture, if any, multiplies it). */
+inline float3 surface_emission(Material m, __global const TriAttrib* a, float b1, float b2,
+                               __global const TextureInfo* textures, __global const half* texels) {
+  float3 le = m.emission.xyz;
+  if (m.tex_emission != PSF_NO_TEXTURE) le *= texture_eval(textures, texels, m.tex_emission, surface_uv(a, b1, b2)).xyz;
+  return le;
+}
+
 inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
                                    float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                                    __global const half* texels) {

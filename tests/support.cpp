@@ -77,4 +77,12 @@ std::string temp_dir(const std::string& name) {
   return d.string();
 }
 
+void look_at(psf::Scene& s, glm::vec3 origin, glm::vec3 target, glm::vec3 up, float fov_degrees, int size) {
+  s.camera.origin = origin;
+  s.camera.target = target;
+  s.camera.up = up;
+  s.camera.fov_degrees = fov_degrees;
+  s.width = s.height = size;
+}
+
 }  // namespace psf::test

@@ -4,7 +4,10 @@
 #include <optional>
 #include <string>
 
+#include <glm/glm.hpp>
+
 #include "cl/runtime.h"
+#include "scene/scene.h"
 
 namespace psf::test {
 
@@ -51,5 +54,9 @@ PsfRun run_psf(const std::string& args, const std::string& prefix = "");
 
 // A folder of this test process under the system's temporary folder.
 std::string temp_dir(const std::string& name);
+
+// Points the scene's camera from `origin` at `target` (up, field of view in
+// degrees along the camera's fov_axis) and sets a square film of `size` pixels.
+void look_at(psf::Scene& s, glm::vec3 origin, glm::vec3 target, glm::vec3 up, float fov_degrees, int size);
 
 }  // namespace psf::test

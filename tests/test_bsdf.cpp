@@ -1565,11 +1565,7 @@ TEST_CASE("Materials: mask cut-outs are alpha-tested during ray traversal", "[bs
     s.materials = {light, mask};
     square(s, 2.0f, 0, true);
     square(s, 1.0f, 1, true);
-    s.camera.origin = {0, 0, 0};
-    s.camera.target = {0, 0, 1};
-    s.camera.up = {0, 1, 0};
-    s.camera.fov_degrees = 40.0f;
-    s.width = s.height = 16;
+    psf::test::look_at(s, {0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 40.0f, 16);
     return s;
   };
   auto& rt = psf::test::runtime();

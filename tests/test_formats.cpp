@@ -632,6 +632,19 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_ROUGH_PLASTIC);
     CHECK(t.materials[t.tri_material[0]].eta.s[0] == Approx(1.7f));
   }
+  SECTION("emissiveTexture: multiplies the emissive factor, sRGB-decoded") {
+    const unsigned char px[] = {128, 64, 0};
+    // Material 1 emits (factor (1, 0.5, 0.25) times strength 4).
+    std::string json = replaced(gltf_json(embedded), "\"emissiveFactor\": [1, 0.5, 0.25]",
+                                "\"emissiveFactor\": [1, 0.5, 0.25], \"emissiveTexture\": {\"index\": 0}");
+    psf::Scene s = psf::load_scene(dir.write("glow.gltf", with_image(json, png_bytes(1, 1, 3, px))));
+    CHECK(s.warnings.empty());
+    const Material& e = s.materials[s.tri_material[2]];
+    CHECK(e.emission.s[0] == Approx(4.0f));
+    REQUIRE(e.tex_emission != PSF_NO_TEXTURE);
+    CHECK(texel_x(s, e.tex_emission, 0) == Approx(0.2158f).margin(1e-3));  // sRGB 128/255 decoded
+    CHECK(s.materials[s.tri_material[0]].tex_emission == PSF_NO_TEXTURE);
+  }
   SECTION("normalTexture: a normal map, linear, with its scale") {
     const unsigned char px[] = {128, 128, 255};
     std::string json = gltf_json(embedded);

@@ -385,7 +385,14 @@ class GltfLoader {
                          std::string(transmits ? "transmitting)" : "not transmitting)"));
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
-    if (g.emissiveTexture.index >= 0) left_out.push_back("emissiveTexture (using emissiveFactor)");
+    // The emission: emissiveFactor (times KHR_materials_emissive_strength) times
+    // the emissive texture (sRGB-decoded), evaluated where it is hit or sampled.
+    uint32_t emission_map = PSF_NO_TEXTURE;
+    if (g.emissiveTexture.index >= 0 && glm::length(emission) > 0.0f) {
+      emission_map = emissive_texture(g.emissiveTexture, where);
+      if (emission_map == PSF_NO_TEXTURE) left_out.push_back("emissiveTexture (not decoded; using emissiveFactor)");
+      if (g.emissiveTexture.texCoord != 0) left_out.push_back("emissiveTexture.texCoord != 0 (using TEXCOORD_0)");
+    }
     if (g.alphaMode != "OPAQUE" && !masked && !blended) left_out.push_back("alphaMode " + g.alphaMode);
     for (const auto& e : g.extensions)
       if (e.first != "KHR_materials_emissive_strength" && e.first != "KHR_materials_transmission" &&
@@ -445,6 +452,7 @@ class GltfLoader {
       if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
     }
     m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
+    m.tex_emission = emission_map;
     m.two_sided = g.doubleSided ? 1u : 0u;
     return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
   }
@@ -472,6 +480,14 @@ class GltfLoader {
       rgba[i + 3] = 1.0f;
     }
     return textures_.pixels(texture_desc(info.index, info.extensions, false), width, height, rgba);
+  }
+
+  // The emissive texture: linear RGB (sRGB-decoded), or PSF_NO_TEXTURE.
+  uint32_t emissive_texture(const tinygltf::TextureInfo& info, const std::string& where) {
+    int width = 0, height = 0;
+    std::vector<float> rgba = decode_texture(info.index, where, width, height);
+    if (rgba.empty()) return PSF_NO_TEXTURE;
+    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
   }
 
   // The normal texture `index`: linear (not sRGB-decoded) rgb = (n + 1) / 2 of
