@@ -495,6 +495,21 @@ TEST_CASE("Emitter: Mitsuba 0.5 and 3 emitter parameters", "[emitter]") {
     CHECK(count(":5: only one environment emitter") == 1);
     CHECK(count(":6: emitter 'sunsky' is not supported") == 1);
   }
+  SECTION("an area emitter's radiance texture") {
+    const unsigned char glow[] = {255, 128, 0};
+    REQUIRE(stbi_write_png(dir.path("glow.png").c_str(), 1, 1, 3, glow, 3) != 0);
+    psf::Scene s = load("3.0.0",
+                        "<shape type=\"rectangle\"><emitter type=\"area\"><texture name=\"radiance\" "
+                        "type=\"bitmap\"><string name=\"filename\" value=\"glow.png\"/></texture></emitter></shape>\n");
+    REQUIRE(s.materials.size() == 1);
+    const Material& m = s.materials[0];
+    CHECK(m.emission.s[0] == 1.0f);
+    REQUIRE(m.tex_emission != PSF_NO_TEXTURE);
+    CHECK(s.textures.at(m.tex_emission).width == 1u);
+    psf::LightTable t = psf::build_light_table(s);
+    REQUIRE(t.emitters.size() == 2);  // the rectangle's two triangles
+    CHECK(t.emitters[0].tex_emission == m.tex_emission);
+  }
   SECTION("negative texels are set to 0 with a warning") {
     psf::Image neg = exr;
     neg.rgb[4] = -2.0f;

@@ -979,11 +979,13 @@ class MitsubaLoader {
     Bsdf b;
     b.name = "default";
     if (bsdf_node) b = bsdf(bsdf_node);
-    glm::vec3 radiance = emitter_node ? emitter(emitter_node) : glm::vec3(0.0f);
+    SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
+    const glm::vec3 radiance = emission.radiance;
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
 
     Material m = b.m;
     m.emission = {{radiance.x, radiance.y, radiance.z, 0}};
+    m.tex_emission = emission.texture;
     // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
     m.two_sided = b.two_sided && !emits ? 1u : 0u;
     uint32_t index = uint32_t(scene_.materials.size());
@@ -1453,7 +1455,13 @@ class MitsubaLoader {
 
   // --- emitters -------------------------------------------------------------
 
-  using EmitterBuilder = glm::vec3 (MitsubaLoader::*)(const Element&);
+  // What an emitter on a surface gives its material: a radiance, times a texture
+  // if there is one.
+  struct SurfaceEmission {
+    glm::vec3 radiance{0.0f};
+    uint32_t texture = PSF_NO_TEXTURE;
+  };
+  using EmitterBuilder = SurfaceEmission (MitsubaLoader::*)(const Element&);
 
   static const std::map<std::string, EmitterBuilder>& emitter_plugins() {
     static const std::map<std::string, EmitterBuilder> plugins = {{"area", &MitsubaLoader::emitter_area}};
@@ -1461,12 +1469,12 @@ class MitsubaLoader {
   }
 
   // The radiance of an emitter on a surface; zero (with a warning) for unsupported types.
-  glm::vec3 emitter(pugi::xml_node node) {
+  SurfaceEmission emitter(pugi::xml_node node) {
     auto cached = emitters_.find(node.internal_object());
     if (cached != emitters_.end()) return cached->second;
     Element e = parse_element(node);
     auto plugin = emitter_plugins().find(e.type);
-    glm::vec3 radiance(0.0f);
+    SurfaceEmission radiance;
     if (plugin != emitter_plugins().end()) {
       radiance = (this->*plugin->second)(e);
     } else {
@@ -1476,8 +1484,13 @@ class MitsubaLoader {
     return radiance;
   }
 
-  glm::vec3 emitter_area(const Element& e) {
-    return get_color(e, "radiance", ColorUse::Radiance).value_or(glm::vec3(1.0f));
+  SurfaceEmission emitter_area(const Element& e) {
+    // A radiance texture (Mitsuba 3): evaluated where the light is hit or
+    // sampled (Material.tex_emission).
+    const Property* p = find(e, "radiance");
+    if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture")
+      return {glm::vec3(1.0f), texture(p->object, TextureUse::Color, "emitting 1")};
+    return {get_color(e, "radiance", ColorUse::Radiance).value_or(glm::vec3(1.0f)), PSF_NO_TEXTURE};
   }
 
   // --- lights: point, spot, directional, constant, envmap ------------------
@@ -1634,7 +1647,7 @@ class MitsubaLoader {
   TextureStore store_{scene_};                                         // scene_'s textures and texels
   std::map<std::pair<const void*, int>, uint32_t> textures_;           // (texture element, use) -> texture
   std::set<const void*> in_progress_;                                  // BSDFs being built (cycle check)
-  std::map<const void*, glm::vec3> emitters_;                          // emitter element -> radiance
+  std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
   std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
