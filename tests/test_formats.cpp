@@ -707,14 +707,17 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   }
 }
 
-TEST_CASE("glTF: scenes/material-spheres.gltf has its metals and dielectrics", "[formats]") {
+TEST_CASE("glTF: scenes/material-spheres.gltf has its metals, dielectrics and glass", "[formats]") {
   psf::Scene s = psf::load_scene(psf::test::source_path("scenes/material-spheres.gltf"));
   CHECK(s.warnings.empty());
-  REQUIRE(s.materials.size() == 9);  // the ground, 4 metals, 4 dielectrics
-  const uint32_t types[9] = {PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_CONDUCTOR,       PSF_MATERIAL_ROUGH_CONDUCTOR,
-                             PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_PLASTIC,
-                             PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC};
-  for (int i = 0; i < 9; ++i) {
+  REQUIRE(s.materials.size() == 13);  // the ground, then rows of 4 metals, 4 dielectrics, 4 glasses
+  const uint32_t types[13] = {
+      PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_CONDUCTOR,       PSF_MATERIAL_ROUGH_CONDUCTOR,
+      PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_PLASTIC,
+      PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,
+      PSF_MATERIAL_DIELECTRIC,      PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_ROUGH_DIELECTRIC,
+      PSF_MATERIAL_ROUGH_DIELECTRIC};
+  for (int i = 0; i < 13; ++i) {
     INFO("material " << i);
     CHECK(s.materials[i].type == types[i]);
   }
