@@ -12,8 +12,9 @@
  * bumpmap (Blinn 1978): dp/du' = dp/du + n (dh/du - <n, dp/du>), likewise for
  * v, n' = normalize(dp/du' x dp/dv') turned to the side of n, where h is the
  * scaled height texture and dp/du, dp/dv come from the triangle's uv; a normal
- * map (PSF_MATFLAG_NORMALMAP) gives n' in the frame (t, n x t, n), t along dp/du. The
- * tangent follows dp/du where it matters (bump maps, anisotropic roughness).
+ * map (PSF_MATFLAG_NORMALMAP) gives n' in the frame (t, n x t, n), t along
+ * dp/du. The tangent follows dp/du where it matters (bump maps, anisotropic
+ * roughness).
  * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided). */
 
 /* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */
