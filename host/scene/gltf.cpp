@@ -332,7 +332,7 @@ class GltfLoader {
     if (pbr.baseColorTexture.index >= 0) {
       texture = base_color_texture(pbr.baseColorTexture, base, where);
       if (texture != PSF_NO_TEXTURE && (masked || blended))
-        opacity_texture = alpha_texture(pbr.baseColorTexture, alpha_factor, masked ? cutoff : -1.0f);
+        opacity_texture = alpha_texture(pbr.baseColorTexture, alpha_factor, masked ? cutoff : -1.0f, where);
       if (texture == PSF_NO_TEXTURE) left_out.push_back("baseColorTexture (not decoded; using baseColorFactor)");
       if (pbr.baseColorTexture.texCoord != 0) left_out.push_back("baseColorTexture.texCoord != 0 (using TEXCOORD_0)");
     }
@@ -362,7 +362,8 @@ class GltfLoader {
     }
     uint32_t normal_map = PSF_NO_TEXTURE;
     if (g.normalTexture.index >= 0) {
-      normal_map = normal_texture(g.normalTexture, where);
+      // Linear (not sRGB-decoded): rgb = (n + 1) / 2 of the tangent-space normal n.
+      normal_map = make_texture(g.normalTexture.index, g.normalTexture.extensions, where, false, true);
       if (normal_map == PSF_NO_TEXTURE) left_out.push_back("normalTexture (not decoded)");
       if (g.normalTexture.texCoord != 0) left_out.push_back("normalTexture.texCoord != 0 (using TEXCOORD_0)");
     }
@@ -389,7 +390,7 @@ class GltfLoader {
     // the emissive texture (sRGB-decoded), evaluated where it is hit or sampled.
     uint32_t emission_map = PSF_NO_TEXTURE;
     if (g.emissiveTexture.index >= 0 && glm::length(emission) > 0.0f) {
-      emission_map = emissive_texture(g.emissiveTexture, where);
+      emission_map = make_texture(g.emissiveTexture.index, g.emissiveTexture.extensions, where, true, true);
       if (emission_map == PSF_NO_TEXTURE) left_out.push_back("emissiveTexture (not decoded; using emissiveFactor)");
       if (g.emissiveTexture.texCoord != 0) left_out.push_back("emissiveTexture.texCoord != 0 (using TEXCOORD_0)");
     }
@@ -457,61 +458,47 @@ class GltfLoader {
     return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
   }
 
-  // The base colour texture `index` times the factor, as linear RGB (the image
-  // is sRGB-encoded, glTF 2.0 Sec. 3.9.2), or PSF_NO_TEXTURE with a warning.
-  uint32_t base_color_texture(const tinygltf::TextureInfo& info, const glm::vec3& factor, const std::string& where) {
+  // Texture `index` decoded (sRGB unless `srgb` is false), each texel's 4 floats
+  // passed through `map` (if any), with the sampler and the uv transform of the
+  // textureInfo's `extensions`; PSF_NO_TEXTURE if the image has no usable pixels.
+  // `warn`: report the sampler's unsupported settings (once per texture use).
+  uint32_t make_texture(int index, const tinygltf::ExtensionMap& extensions, const std::string& where, bool srgb,
+                        bool warn, const std::function<void(float*)>& map = {}) {
     int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(info.index, where, width, height);
+    std::vector<float> rgba = decode_texture(index, where, width, height, srgb);
     if (rgba.empty()) return PSF_NO_TEXTURE;
-    for (size_t i = 0; i < rgba.size(); i += 4)
-      for (int k = 0; k < 3; ++k) rgba[i + size_t(k)] *= factor[k];
-    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
+    if (map)
+      for (size_t i = 0; i < rgba.size(); i += 4) map(&rgba[i]);
+    return textures_.pixels(texture_desc(index, extensions, warn), width, height, rgba);
+  }
+
+  // The base colour texture times the factor, as linear RGB (the image is
+  // sRGB-encoded, glTF 2.0 Sec. 3.9.2), or PSF_NO_TEXTURE.
+  uint32_t base_color_texture(const tinygltf::TextureInfo& info, const glm::vec3& factor, const std::string& where) {
+    return make_texture(info.index, info.extensions, where, true, true, [&](float* t) {
+      for (int k = 0; k < 3; ++k) t[k] *= factor[k];
+    });
   }
 
   // The microfacet alpha = (factor g)^2 of the metallic-roughness texture
-  // `index` (linear; roughness in green) in the x channel, or PSF_NO_TEXTURE.
+  // (linear; roughness in green) in the x channel, or PSF_NO_TEXTURE.
   uint32_t roughness_texture(const tinygltf::TextureInfo& info, float factor, const std::string& where) {
-    int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(info.index, where, width, height, false);
-    if (rgba.empty()) return PSF_NO_TEXTURE;
-    for (size_t i = 0; i < rgba.size(); i += 4) {
-      float r = factor * rgba[i + 1];
-      rgba[i] = rgba[i + 1] = rgba[i + 2] = r * r;
-      rgba[i + 3] = 1.0f;
-    }
-    return textures_.pixels(texture_desc(info.index, info.extensions, false), width, height, rgba);
+    return make_texture(info.index, info.extensions, where, false, false, [&](float* t) {
+      float r = factor * t[1];
+      t[0] = t[1] = t[2] = r * r;
+      t[3] = 1.0f;
+    });
   }
 
-  // The emissive texture: linear RGB (sRGB-decoded), or PSF_NO_TEXTURE.
-  uint32_t emissive_texture(const tinygltf::TextureInfo& info, const std::string& where) {
-    int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(info.index, where, width, height);
-    if (rgba.empty()) return PSF_NO_TEXTURE;
-    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
-  }
-
-  // The normal texture `index`: linear (not sRGB-decoded) rgb = (n + 1) / 2 of
-  // the tangent-space normal n, or PSF_NO_TEXTURE.
-  uint32_t normal_texture(const tinygltf::NormalTextureInfo& info, const std::string& where) {
-    int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(info.index, where, width, height, false);
-    if (rgba.empty()) return PSF_NO_TEXTURE;
-    return textures_.pixels(texture_desc(info.index, info.extensions, true), width, height, rgba);
-  }
-
-  // The opacity of the base colour texture `index` (decoded by base_color_texture
-  // before) in the x channel: its alpha times `factor`, thresholded at `cutoff`
-  // (0 below, 1 at or above) unless cutoff < 0.
-  uint32_t alpha_texture(const tinygltf::TextureInfo& info, float factor, float cutoff) {
-    int width = 0, height = 0;
-    std::vector<float> rgba = decode_texture(info.index, "", width, height);
-    for (size_t i = 0; i < rgba.size(); i += 4) {
-      float a = rgba[i + 3] * factor;
+  // The opacity of the base colour texture in the x channel: its alpha times
+  // `factor`, thresholded at `cutoff` (0 below, 1 at or above) unless cutoff < 0.
+  uint32_t alpha_texture(const tinygltf::TextureInfo& info, float factor, float cutoff, const std::string& where) {
+    return make_texture(info.index, info.extensions, where, true, false, [&](float* t) {
+      float a = t[3] * factor;
       if (cutoff >= 0.0f) a = a >= cutoff ? 1.0f : 0.0f;
-      rgba[i] = rgba[i + 1] = rgba[i + 2] = a;
-      rgba[i + 3] = 1.0f;
-    }
-    return textures_.pixels(texture_desc(info.index, info.extensions, false), width, height, rgba);
+      t[0] = t[1] = t[2] = a;
+      t[3] = 1.0f;
+    });
   }
 
   // Texture `index`'s image as RGB (sRGB-decoded unless `srgb` is false) and

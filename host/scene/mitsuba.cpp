@@ -1103,17 +1103,16 @@ class MitsubaLoader {
     // (kernels/surface.cl): roughconductor and roughdielectric; roughplastic's
     // tables are made for one alpha.
     const bool texturable = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC;
-    if (a && a->kind == Property::Kind::Object && texturable) {
-      uint32_t index = texture(a->object, TextureUse::Height, "using 0.1");
-      if (index != PSF_NO_TEXTURE) {
-        m.tex_alpha = index;
-        a = nullptr;  // the constant below: the texture's mean, for what reads alpha before a hit
-        m.alpha_u = m.alpha_v = std::max(store_.mean(index).x, 1e-4f);
-      }
+    if (a && a->kind == Property::Kind::Object && texturable)
+      m.tex_alpha = texture(a->object, TextureUse::Height, "using 0.1");
+    float alpha_u, alpha_v;
+    if (m.tex_alpha != PSF_NO_TEXTURE) {  // the texture's mean, for what reads alpha before a hit
+      alpha_u = alpha_v = store_.mean(m.tex_alpha).x;
+    } else {
+      alpha_u = a ? value(a, "alpha") : value(au, "alpha_u");
+      alpha_v = a ? alpha_u : value(av, "alpha_v");
+      if (alpha_u < 0.0f || alpha_v < 0.0f) fail((a ? a : au)->node, "the roughness must not be negative");
     }
-    float alpha_u = m.tex_alpha != PSF_NO_TEXTURE ? m.alpha_u : a ? value(a, "alpha") : value(au, "alpha_u");
-    float alpha_v = m.tex_alpha != PSF_NO_TEXTURE ? m.alpha_v : a ? alpha_u : value(av, "alpha_v");
-    if (alpha_u < 0.0f || alpha_v < 0.0f) fail((a ? a : au)->node, "the roughness must not be negative");
     if (isotropic && alpha_u != alpha_v) {
       warn(au->node, "bsdf:" + e.type + ":anisotropic",
            "bsdf '" + e.type + "' is isotropic; using alpha = sqrt(alpha_u alpha_v)");
