@@ -33,6 +33,13 @@ float scene_radius(const Scene& scene) {
 
 bool is_environment(const LightDesc& l) { return l.type == LightType::Constant || l.type == LightType::Envmap; }
 
+// The integral over [0, s] of the hat function max(0, 1 - |t|), for any s
+// (an antiderivative, 0 at s = 0).
+double hat_integral(double s) {
+  const double a = std::min(std::abs(s), 1.0);
+  return std::copysign(a - 0.5 * a * a, s);
+}
+
 }  // namespace
 
 EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height) {
@@ -42,15 +49,37 @@ EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width,
   d.marginal.assign(h + 1, 0.0f);
   d.blocks.assign(h * (nb + 1), 0.0f);
   d.within_block.assign(h * nb * K, 1.0f);
+  // Cell (x, y) covers u in [x, x + 1] / W and v in [y, y + 1] / H; its weight is
+  // the mean over it of the bilinear luminance (kernels/emitter.cl env_lookup:
+  // column x's centre at u = (x + 1/2) / W, row r at v = r / (H - 1)) times
+  // sin(theta) at its centre. Along u the cell spans column x's centre and half
+  // of each neighbour's hat: weights 1/8, 3/4, 1/8. Along v it spans
+  // [y, y + 1] (H - 1) / H in row units, over which row r's hat integrates to
+  // the difference of hat_integral at the ends.
+  std::vector<double> blurred(w * h);
+  for (size_t y = 0; y < h; ++y)
+    for (size_t x = 0; x < w; ++x) {
+      auto lum_at = [&](size_t c) {
+        const float* t = &rgb[(y * w + c) * 3];
+        return std::max(0.0, double(lum(glm::vec3(t[0], t[1], t[2]))));
+      };
+      blurred[y * w + x] = 0.125 * lum_at((x + w - 1) % w) + 0.75 * lum_at(x) + 0.125 * lum_at((x + 1) % w);
+    }
   std::vector<double> row_sum(h, 0.0), f(w), block_sum(nb);
   double total = 0.0;
   for (size_t y = 0; y < h; ++y) {
     double sin_theta = std::sin((double(y) + 0.5) / double(h) * kPi);
+    const double rows = double(h > 1 ? h - 1 : 1), a = double(y) * rows / double(h), b = double(y + 1) * rows / double(h);
+    std::fill(f.begin(), f.end(), 0.0);
+    for (size_t r = size_t(std::floor(a)); r < h && double(r) <= std::ceil(b); ++r) {
+      const double weight = (hat_integral(b - double(r)) - hat_integral(a - double(r))) / (b - a);
+      if (weight > 0.0)
+        for (size_t x = 0; x < w; ++x) f[x] += weight * blurred[r * w + x];
+    }
     double run = 0.0;
     std::fill(block_sum.begin(), block_sum.end(), 0.0);
     for (size_t x = 0; x < w; ++x) {
-      const float* t = &rgb[(y * w + x) * 3];
-      f[x] = std::max(0.0, double(lum(glm::vec3(t[0], t[1], t[2])))) * sin_theta;
+      f[x] *= sin_theta;
       run += f[x];
       block_sum[x / K] += f[x];
     }

@@ -31,8 +31,10 @@ struct LightTable {
 // whose texel count does not match its size.
 LightTable build_light_table(const Scene& scene);
 
-// The environment's 2D piecewise-constant distribution over its texels:
-// f(x, y) = luminance(texel) * sin(theta_y), theta_y at the row's centre.
+// The environment's 2D piecewise-constant distribution over a grid of W x H
+// cells of the (u, v) square: f(x, y) = the mean over cell (x, y) of the
+// map's bilinear luminance (kernels/emitter.cl env_lookup) times sin(theta_y),
+// theta_y at the row's centre.
 // marginal: height + 1 entries from 0 to 1. Each row's conditional in two levels
 // (psf_shared.h Environment): blocks, B + 1 entries per row with B =
 // ceil(width / PSF_ENV_BLOCK), and within_block, PSF_ENV_BLOCK upper values per
@@ -42,7 +44,7 @@ struct EnvDistribution {
   std::vector<float> marginal;
   std::vector<float> blocks;
   std::vector<float> within_block;
-  double integral = 0.0;  // sum of f times the texel's (du, dv) area: the mean of f over [0,1]^2
+  double integral = 0.0;  // sum of f times the cell's (du, dv) area: the mean of f over [0,1]^2
 };
 EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height);
 

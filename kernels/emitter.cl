@@ -17,13 +17,17 @@
  *   spot:        delta; I / r^2 times Mitsuba's falloff: 1 inside the beam width,
  *                (cutoff - angle) / (cutoff - beam width) up to the cutoff, 0 beyond
  *   directional: delta; wi = -direction, radiance the irradiance E, pdf = P(light)
- *   environment: a lat-long map sampled with a 2D piecewise-constant distribution
- *                (Pharr, Jakob & Humphreys, PBRT 3rd ed., Sec. 13.6.7 and 14.2.4):
- *                a row from the marginal cdf of sum_x L(x, y) sin(theta_y), a
- *                texel from that row's conditional cdf (in two levels: a block of
- *                PSF_ENV_BLOCK texels, then a texel of it), a uniform point in the
- *                texel; pdf(omega) = p(u, v) / (2 pi^2 sin theta). A constant
- *                environment is sampled uniformly over the sphere (1 / 4pi).
+ *   environment: a lat-long map, its radiance bilinear between texels
+ *                (env_lookup), sampled with a 2D piecewise-constant distribution
+ *                over a grid of W x H cells of the (u, v) square (Pharr, Jakob &
+ *                Humphreys, PBRT 3rd ed., Sec. 13.6.7 and 14.2.4), each cell
+ *                weighted by the mean of the bilinear radiance over it times
+ *                sin(theta) at its centre (host/lights.cpp): a row from the
+ *                marginal cdf, a cell from that row's conditional cdf (in two
+ *                levels: a block of PSF_ENV_BLOCK cells, then a cell of it), a
+ *                uniform point in the cell; pdf(omega) = p(u, v) / (2 pi^2
+ *                sin theta). A constant environment is sampled uniformly over
+ *                the sphere (1 / 4pi).
  * Delta lights carry delta = 1: they cannot be hit by BSDF sampling, so their
  * samples take MIS weight 1. Directions at infinity have dist = INFINITY. */
 
@@ -67,19 +71,43 @@ inline float3 env_to_world(Environment env, float3 m) {
   return m.x * env.to_map0.xyz + m.y * env.to_map1.xyz + m.z * env.to_map2.xyz;
 }
 
-/* Texel (x, y) holding the unit map-frame direction m. */
-inline uint2 env_texel(Environment env, float3 m) {
+/* The map coordinates (u, v) in [0, 1]^2 of the unit map-frame direction m. */
+inline float2 env_uv(float3 m) {
   float u = atan2(m.x, -m.z) * (0.5f / PSF_ENV_PI);
   if (u < 0.0f) u += 1.0f;
-  float v = acos(clamp(m.y, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI);
-  uint x = min((uint)(u * (float)env.width), env.width - 1u);
-  uint y = min((uint)(v * (float)env.height), env.height - 1u);
+  return (float2)(u, acos(clamp(m.y, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI));
+}
+
+/* The cell (x, y) of the sampling grid (W x H cells of the (u, v) square) holding
+ * the unit map-frame direction m. */
+inline uint2 env_texel(Environment env, float3 m) {
+  float2 uv = env_uv(m);
+  uint x = min((uint)(uv.x * (float)env.width), env.width - 1u);
+  uint y = min((uint)(uv.y * (float)env.height), env.height - 1u);
   return (uint2)(x, y);
 }
 
 inline float3 env_texel_value(Environment env, __global const float* data, uint2 t) {
   size_t i = 3u * ((size_t)t.y * env.width + t.x);
   return (float3)(data[i], data[i + 1u], data[i + 2u]);
+}
+
+/* The map's radiance at (u, v), bilinear between texels as Mitsuba 3 reads its
+ * envmap: column x's centre at u = (x + 1/2) / W, periodic in u; row y at
+ * v = y / (H - 1), so the first and last rows lie on the poles. */
+inline float3 env_lookup(Environment env, __global const float* data, float2 uv) {
+  float fx = uv.x * (float)env.width - 0.5f, fy = uv.y * (float)(env.height - 1u);
+  float x0f = floor(fx);
+  float tx = clamp(fx - x0f, 0.0f, 1.0f);
+  int xi = (int)x0f;
+  uint x0 = xi < 0 ? env.width - 1u : min((uint)xi, env.width - 1u);
+  uint x1 = x0 + 1u < env.width ? x0 + 1u : 0u;
+  uint y0 = min((uint)fmax(fy, 0.0f), env.height > 1u ? env.height - 2u : 0u);
+  uint y1 = min(y0 + 1u, env.height - 1u);
+  float ty = clamp(fy - (float)y0, 0.0f, 1.0f);
+  float3 top = mix(env_texel_value(env, data, (uint2)(x0, y0)), env_texel_value(env, data, (uint2)(x1, y0)), tx);
+  float3 bottom = mix(env_texel_value(env, data, (uint2)(x0, y1)), env_texel_value(env, data, (uint2)(x1, y1)), tx);
+  return mix(top, bottom, ty);
 }
 
 /* Offsets in the data buffer (psf_shared.h Environment): the marginal cdf, row
@@ -107,7 +135,7 @@ inline float env_column_prob(Environment env, __global const float* data, uint x
 inline float3 env_radiance(Environment env, __global const float* data, float3 d) {
   if (!env.present) return (float3)(0.0f);
   if (env.width == 0u) return env.scale.xyz;
-  return env_texel_value(env, data, env_texel(env, env_to_map(env, d))) * env.scale.xyz;
+  return env_lookup(env, data, env_uv(env_to_map(env, d))) * env.scale.xyz;
 }
 
 /* Solid-angle pdf with which env_sample returns world direction d (unit). */
@@ -125,10 +153,10 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
 }
 
 /* A world direction from a map's distribution (env.width > 0); *pdf its
- * solid-angle pdf, *texel the texel it lies in (the radiance, not read here). */
+ * solid-angle pdf, *uv its map coordinates (the radiance, not read here). */
 inline float3 env_sample_texel(Environment env, __global const float* data, float u1, float u2, float* pdf,
-                               uint2* texel) {
-  *texel = (uint2)(0u);
+                               float2* uv) {
+  *uv = (float2)(0.0f);
   __global const float* marginal = data + env_marginal_offset(env);
   uint y = sample_cdf(marginal + 1, env.height, u2);
   float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
@@ -159,14 +187,14 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
   float sin_theta = psf_sincos(v * PSF_ENV_PI, &cos_theta);
   float sin_phi = psf_sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
   float3 m = (float3)(sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta);
-  *texel = (uint2)(x, y);
+  *uv = (float2)(u, v);
   *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
                           : 0.0f;
   return env_to_world(env, m);
 }
 
 /* A world direction from the environment's distribution; *pdf its solid-angle
- * pdf, *radiance the radiance from it (the sampled texel's, scaled). */
+ * pdf, *radiance the radiance from it (scaled). */
 inline float3 env_sample(Environment env, __global const float* data, float u1, float u2, float* pdf,
                          float3* radiance) {
   if (env.width == 0u) {
@@ -180,9 +208,9 @@ inline float3 env_sample(Environment env, __global const float* data, float u1, 
     float s = psf_sincos(phi, &c);
     return (float3)(r * c, r * s, z);
   }
-  uint2 texel;
-  float3 wi = env_sample_texel(env, data, u1, u2, pdf, &texel);
-  *radiance = *pdf > 0.0f ? env_texel_value(env, data, texel) * env.scale.xyz : (float3)(0.0f);
+  float2 uv;
+  float3 wi = env_sample_texel(env, data, u1, u2, pdf, &uv);
+  *radiance = *pdf > 0.0f ? env_lookup(env, data, uv) * env.scale.xyz : (float3)(0.0f);
   return wi;
 }
 

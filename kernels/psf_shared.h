@@ -231,11 +231,12 @@ typedef struct {
 /* The environment: radiance from infinitely far away along every direction that
  * escapes the scene. A latitude-longitude map in Mitsuba's convention (map
  * direction d = rotation * world direction; u = atan2(d.x, -d.z) / 2pi wrapped
- * to [0,1), v = acos(d.y) / pi, texel row 0 at v = 0, i.e. +y up), piecewise
- * constant per texel, or a constant radiance when width is 0. Its data buffer
- * (floats) holds the texels (width * height * 3, RGB, row-major), the marginal
- * cdf over rows (height + 1), then each row's conditional distribution in two
- * levels: a cdf over its blocks of PSF_ENV_BLOCK texels (B + 1 entries per row,
+ * to [0,1), v = acos(d.y) / pi, texel row 0 at v = 0, i.e. +y up), bilinear
+ * between texels (emitter.cl env_lookup), or a constant radiance when width is
+ * 0. Its data buffer (floats) holds the texels (width * height * 3, RGB,
+ * row-major), then the sampling distribution over a grid of as many cells: the
+ * marginal cdf over rows (height + 1), then each row's conditional distribution
+ * in two levels: a cdf over its blocks of PSF_ENV_BLOCK cells (B + 1 entries per row,
  * B = ceil(width / PSF_ENV_BLOCK)), and, from the next multiple of
  * PSF_ENV_BLOCK floats on, each block's own cdf (PSF_ENV_BLOCK upper values per
  * block, row after row; 1 past the row's end). The block cdfs are small enough

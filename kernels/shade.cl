@@ -18,10 +18,10 @@
  * number of path segments, so max_depth 1 shows emitters only and 2 adds direct light.
  * shade_env_samples and shade_env_texels (before shade, for scenes lit by an
  * environment map): draw each live path's light choice and, where it is the
- * environment, its direction and pdf, then read the radiance of the texel it
- * fell in. This is the part of next-event estimation that does not depend on the
- * shading point, and the one that waits on memory: a line of the map's cdf, then
- * a texel, both at random. In short kernels of their own, one wait each, the
+ * environment, its direction and pdf, then read the map's radiance there (four
+ * texels, bilinear). This is the part of next-event estimation that does not
+ * depend on the shading point, and the one that waits on memory: a line of the
+ * map's cdf, then texels, both at random. In short kernels of their own, one wait each, the
  * processor overlaps those misses across paths, which the long shade kernel
  * cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
@@ -45,8 +45,8 @@ inline float bounce_sample(__global const uint* sobol, uint key, PathState st, u
 }
 
 /* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
- * the environment was chosen, else 0); shade_env_samples leaves the texel's
- * index (as_float) in place of the radiance for shade_env_texels. */
+ * the environment was chosen, else 0); shade_env_samples leaves the sample's
+ * map coordinates (u, v) in place of the radiance for shade_env_texels. */
 inline void env_sample_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
                             __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
                             __global const float* env_data, __global const PathState* states,
@@ -60,11 +60,11 @@ inline void env_sample_slot(uint k, uint j, FrameParams params, __global const u
     Emitter em = emitters[sample_cdf(emitter_cdf, params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
       float pdf;
-      uint2 t;
+      float2 uv;
       float3 wi = env_sample_texel(env, env_data, sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV),
-                                   sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &t);
+                                   sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &uv);
       a = (float4)(wi, pdf > 0.0f ? em.radiance.w * pdf : 0.0f);
-      b = (float4)(as_float(t.y * env.width + t.x), 0.0f, 0.0f, 1.0f);
+      b = (float4)(uv, 0.0f, 1.0f);
     }
   }
   env_samples[2u * k] = a;
@@ -83,8 +83,7 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
 inline void env_texel_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
   float4 b = env_samples[2u * k + 1u];
   if (b.w == 0.0f) return;
-  uint t = as_uint(b.x);
-  float3 radiance = env_texel_value(env, env_data, (uint2)(t % env.width, t / env.width)) * env.scale.xyz;
+  float3 radiance = env_lookup(env, env_data, b.xy) * env.scale.xyz;
   env_samples[2u * k + 1u] = (float4)(radiance, 1.0f);
 }
 

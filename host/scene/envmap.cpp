@@ -63,8 +63,9 @@ LightDesc default_sky() {
   const glm::vec3 horizon(1.0f), zenith(0.5f, 0.7f, 1.0f), ground(0.3f);
   sky.texels.resize(size_t(sky.width) * sky.height * 3);
   for (int y = 0; y < sky.height; ++y) {
-    // cos(zenith angle) at the row's centre; rows 0..15 lie above the horizon.
-    float cos_theta = std::cos((float(y) + 0.5f) / float(sky.height) * 3.14159265f);
+    // cos(zenith angle) of the row, at v = y / (height - 1) as the map is read
+    // (kernels/emitter.cl env_lookup); rows 0..15 lie above the horizon.
+    float cos_theta = std::cos(float(y) / float(sky.height - 1) * 3.14159265f);
     glm::vec3 c = cos_theta > 0.0f ? glm::mix(horizon, zenith, cos_theta) : ground;
     for (int x = 0; x < sky.width; ++x)
       for (int k = 0; k < 3; ++k) sky.texels[(size_t(y) * sky.width + x) * 3 + k] = c[k];
