@@ -162,8 +162,13 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     add_radiance(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
   }
 
-  /* The shading frame (interpolated normal, bump map; turned towards wo if
-   * two-sided) and the material's textures (surface.cl). */
+  /* A blend's choice of BSDF (surface.cl), by a hash of the path and bounce (not a
+   * Sobol dimension, so that the other dimensions keep their place); then the
+   * shading frame (interpolated normal, bump map; turned towards wo if
+   * two-sided) and the material's textures. */
+  if (m.blend != 0u)
+    m = surface_blend(m, materials, tri_attribs + hit.prim, hit.u, hit.v, textures, texels,
+                      bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)));
   Frame frame = surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels);
   float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
   __global const half* table = m.tex_table != PSF_NO_TEXTURE ? texels + 4u * textures[m.tex_table].offset : texels;

@@ -15,12 +15,32 @@
  * map (PSF_MATFLAG_NORMALMAP) gives n' in the frame (t, n x t, n), t along
  * dp/du. The tangent follows dp/du where it matters (bump maps, anisotropic
  * roughness).
- * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided). */
+ * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided).
+ *   surface_blend(m, materials, attrib, b1, b2, textures, texels, u) -> the material that scatters
+ * A blended material (Material.blend) hands the shading point to its partner with
+ * probability blend_weight (times tex_blend's x channel there), u uniform in
+ * [0, 1). Light sampling, BSDF sampling and their MIS weights at the point then
+ * all use the one chosen, so each choice's estimate is unbiased for its BSDF and
+ * the expectation is the weighted sum of the two (stochastic material selection). */
 
 /* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */
 inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
   float4 uv01 = a->uv01;
   return (1.0f - b1 - b2) * uv01.xy + b1 * uv01.zw + b2 * (float2)(a->u2, a->v2);
+}
+
+/* The material that scatters at a hit on material m (see the header): m, or with
+ * probability blend_weight (times tex_blend) its partner, which keeps m's
+ * emission (already added by the caller) and m's vertex-normal flag. */
+inline Material surface_blend(Material m, __global const Material* materials, __global const TriAttrib* a, float b1,
+                              float b2, __global const TextureInfo* textures, __global const half* texels, float u) {
+  if (m.blend == 0u) return m;
+  float w = m.blend_weight;
+  if (m.tex_blend != PSF_NO_TEXTURE) w *= texture_eval(textures, texels, m.tex_blend, surface_uv(a, b1, b2)).x;
+  if (!(u < w)) return m;
+  Material b = materials[m.blend - 1u];
+  b.flags = (b.flags & ~PSF_MATFLAG_NORMALS) | (m.flags & PSF_MATFLAG_NORMALS);
+  return b;
 }
 
 /* A material's emission at barycentrics (b1, b2) of the triangle (its emission

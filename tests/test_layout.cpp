@@ -37,6 +37,8 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Material, tex_table)", offsetof(Material, tex_table)},
       {"offsetof(Material, tex_alpha)", offsetof(Material, tex_alpha)},
       {"offsetof(Material, tex_emission)", offsetof(Material, tex_emission)},
+      {"offsetof(Material, blend)", offsetof(Material, blend)},
+      {"offsetof(Material, tex_blend)", offsetof(Material, tex_blend)},
       {"sizeof(TextureInfo)", sizeof(TextureInfo)},
       {"offsetof(TextureInfo, uv_v)", offsetof(TextureInfo, uv_v)},
       {"offsetof(TextureInfo, offset)", offsetof(TextureInfo, offset)},
