@@ -1453,6 +1453,63 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
   CHECK((s3.materials[1].flags & PSF_MATFLAG_BECKMANN) == 0u);
 }
 
+TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "[bsdf]") {
+  TempDir dir;
+  std::vector<uint8_t> px(2 * 2 * 3, 200);
+  REQUIRE(stbi_write_png(dir.path("w.png").c_str(), 2, 2, 3, px.data(), 2 * 3));
+  std::string xml = dir.write(
+      "blend.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<bsdf type=\"twosided\" id=\"mix\"><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.3\"/>"
+      "<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
+      "<bsdf type=\"roughconductor\"/></bsdf></bsdf>\n"
+      "<bsdf type=\"bumpmap\" id=\"bumpy\"><texture type=\"checkerboard\"/><bsdf type=\"blendbsdf\">"
+      "<texture name=\"weight\" type=\"bitmap\"><string name=\"filename\" value=\"w.png\"/></texture>"
+      "<bsdf type=\"diffuse\"/><bsdf type=\"plastic\"/></bsdf></bsdf>\n"
+      "<shape type=\"rectangle\"><ref id=\"mix\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"bumpy\"/></shape>\n"
+      "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  std::string all;
+  for (const std::string& wmsg : s.warnings) all += wmsg + "\n";
+  INFO(all);
+  CHECK(all.find("not supported") == std::string::npos);
+  // Each blend's second BSDF is pushed first, then the material that names it.
+  REQUIRE(s.materials.size() == 4);
+  const Material& mix = s.materials[s.tri_material.front()];
+  CHECK(mix.type == PSF_MATERIAL_DIFFUSE);
+  CHECK(mix.albedo.s[0] == Approx(0.2f));
+  CHECK(mix.blend_weight == Approx(0.3f));
+  CHECK(mix.tex_blend == PSF_NO_TEXTURE);
+  REQUIRE(mix.blend >= 1);
+  const Material& metal = s.materials[mix.blend - 1];
+  CHECK(metal.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  CHECK(metal.blend == 0);
+  CHECK(mix.two_sided == 1u);  // twosided wraps both
+  CHECK(metal.two_sided == 1u);
+  const Material& bumpy = s.materials[s.tri_material.back()];
+  CHECK(bumpy.type == PSF_MATERIAL_DIFFUSE);
+  CHECK(bumpy.blend_weight == 1.0f);  // the texture's luminance is the weight
+  CHECK(bumpy.tex_blend != PSF_NO_TEXTURE);
+  REQUIRE(bumpy.blend >= 1);
+  const Material& plastic = s.materials[bumpy.blend - 1];
+  CHECK(plastic.type == PSF_MATERIAL_PLASTIC);
+  CHECK(bumpy.tex_bump != PSF_NO_TEXTURE);  // bumpmap wraps both
+  CHECK(plastic.tex_bump == bumpy.tex_bump);
+
+  // Not two nested BSDFs: an error at the blend's line.
+  std::string one = dir.write("one.xml",
+                              "<scene version=\"3.0.0\">\n<shape type=\"rectangle\">\n"
+                              "<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"/></bsdf></shape>\n</scene>\n");
+  try {
+    psf::load_scene(one);
+    FAIL("a blendbsdf with one nested BSDF is an error");
+  } catch (const psf::SceneError& e) {
+    CHECK(e.line() == 3);
+    CHECK(std::string(e.what()).find("two nested BSDFs") != std::string::npos);
+  }
+}
+
 TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals and uvs", "[bsdf]") {
   TempDir dir;
   std::vector<uint8_t> px(2 * 2 * 4, 255);

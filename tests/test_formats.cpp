@@ -576,18 +576,29 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(c.opacity == 0.0f);  // 0.3 < the default cutoff 0.5
     CHECK(c.tex_opacity == PSF_NO_TEXTURE);
   }
-  SECTION("metallicRoughnessTexture: a metal's roughness per texel") {
-    const unsigned char px[] = {0, 128, 255};  // roughness (green) 128/255, metallic (blue) 1
+  SECTION("metallicRoughnessTexture: metallic (a blend) and a metal's roughness per texel") {
+    const unsigned char px[] = {0, 128, 64};  // roughness (green) 128/255, metallic (blue) 64/255
     std::string json = replaced(gltf_json(embedded), "\"metallicFactor\": 0}, \"doubleSided\"",
                                 "\"metallicFactor\": 1, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": "
                                 "{\"index\": 0}}, \"doubleSided\"");
     psf::Scene s = psf::load_scene(dir.write("rough.gltf", with_image(json, png_bytes(1, 1, 3, px))));
-    const Material& m = s.materials[s.tri_material[0]];
+    // The dielectric scatters, or with probability metallic (the factor times
+    // the blue channel, linear) the metal.
+    const Material& d = s.materials[s.tri_material[0]];
+    CHECK(d.type == PSF_MATERIAL_ROUGH_PLASTIC);
+    REQUIRE(d.blend > 0);
+    REQUIRE(d.blend <= s.materials.size());
+    CHECK(d.blend_weight == 1.0f);
+    REQUIRE(d.tex_blend != PSF_NO_TEXTURE);
+    CHECK(texel_x(s, d.tex_blend, 0) == Approx(64.0f / 255.0f).margin(1e-3));  // not sRGB-decoded (0.05)
+    const Material& m = s.materials[d.blend - 1];
     CHECK(m.type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+    CHECK(m.blend == 0);
     REQUIRE(m.tex_alpha != PSF_NO_TEXTURE);
     const float r = 0.5f * 128.0f / 255.0f;
     CHECK(texel_x(s, m.tex_alpha, 0) == Approx(r * r).margin(1e-3));  // (factor x green)^2, green linear
     CHECK(m.alpha_u == Approx(r * r).margin(1e-3));
+    CHECK(m.two_sided == d.two_sided);
   }
   SECTION("KHR_texture_transform: u' = offset + R(rotation) S(scale) u") {
     const unsigned char px[] = {200, 100, 50};
@@ -659,7 +670,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(texel_x(s, m.tex_bump, 0) == Approx(128.0f / 255.0f).margin(1e-3));  // not sRGB-decoded (0.216)
   }
   SECTION("not JSON") { CHECK(contains(error_of([&] { psf::load_scene(dir.write("x.gltf", "{ nope")); }).second, "glTF")); }
-  SECTION("missing textures and metallic blends are reported, once per material") {
+  SECTION("missing textures are reported once per material; a metallic factor between 0 and 1 blends") {
     std::string json = gltf_json(embedded);
     json.replace(json.find("\"metallicFactor\": 0}, \"doubleSided\""), 20,
                  "\"metallicFactor\": 0.7, \"baseColorTexture\": {\"index\": 0}}");
@@ -668,9 +679,14 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     psf::Scene s = psf::load_scene(dir.write("t.gltf", json));
     size_t n = 0;
     for (const auto& w : s.warnings)
-      if (contains(w, "materials[0]") && contains(w, "baseColorTexture") && contains(w, "metallicFactor 0.7")) ++n;
+      if (contains(w, "materials[0]") && contains(w, "baseColorTexture")) ++n;
     CHECK(n == 1);
-    CHECK(s.materials[s.tri_material[0]].type == PSF_MATERIAL_ROUGH_CONDUCTOR);  // 0.7 rounds to a metal
+    const Material& d = s.materials[s.tri_material[0]];
+    CHECK(d.type == PSF_MATERIAL_ROUGH_PLASTIC);
+    CHECK(d.blend_weight == Approx(0.7f));
+    CHECK(d.tex_blend == PSF_NO_TEXTURE);
+    REQUIRE(d.blend > 0);
+    CHECK(s.materials[d.blend - 1].type == PSF_MATERIAL_ROUGH_CONDUCTOR);
   }
   SECTION("metallic-roughness: metals are conductors of the base colour at normal incidence, dielectrics plastics") {
     std::string json = gltf_json(embedded);
@@ -707,21 +723,32 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   }
 }
 
-TEST_CASE("glTF: scenes/material-spheres.gltf has its metals, dielectrics and glass", "[formats]") {
+TEST_CASE("glTF: scenes/material-spheres.gltf has its metals, dielectrics, glass and blends", "[formats]") {
   psf::Scene s = psf::load_scene(psf::test::source_path("scenes/material-spheres.gltf"));
   CHECK(s.warnings.empty());
-  REQUIRE(s.materials.size() == 13);  // the ground, then rows of 4 metals, 4 dielectrics, 4 glasses
-  const uint32_t types[13] = {
-      PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_CONDUCTOR,       PSF_MATERIAL_ROUGH_CONDUCTOR,
-      PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_PLASTIC,
-      PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,   PSF_MATERIAL_ROUGH_PLASTIC,
-      PSF_MATERIAL_DIELECTRIC,      PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_ROUGH_DIELECTRIC,
-      PSF_MATERIAL_ROUGH_DIELECTRIC};
-  for (int i = 0; i < 13; ++i) {
+  // The ground, rows of 4 metals, 4 dielectrics, 4 glasses, then copper of
+  // metallic 0, 1/3, 2/3, 1: a plastic, two plastics blended with a metal (each
+  // metal pushed before its plastic), a metal.
+  REQUIRE(s.materials.size() == 19);
+  const uint32_t types[19] = {
+      PSF_MATERIAL_ROUGH_PLASTIC,    PSF_MATERIAL_CONDUCTOR,        PSF_MATERIAL_ROUGH_CONDUCTOR,
+      PSF_MATERIAL_ROUGH_CONDUCTOR,  PSF_MATERIAL_ROUGH_CONDUCTOR,  PSF_MATERIAL_PLASTIC,
+      PSF_MATERIAL_ROUGH_PLASTIC,    PSF_MATERIAL_ROUGH_PLASTIC,    PSF_MATERIAL_ROUGH_PLASTIC,
+      PSF_MATERIAL_DIELECTRIC,       PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_ROUGH_DIELECTRIC,
+      PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_ROUGH_PLASTIC,    PSF_MATERIAL_ROUGH_CONDUCTOR,
+      PSF_MATERIAL_ROUGH_PLASTIC,    PSF_MATERIAL_ROUGH_CONDUCTOR,  PSF_MATERIAL_ROUGH_PLASTIC,
+      PSF_MATERIAL_ROUGH_CONDUCTOR};
+  for (int i = 0; i < 19; ++i) {
     INFO("material " << i);
     CHECK(s.materials[i].type == types[i]);
   }
   CHECK(s.materials[3].alpha_u == Approx(0.25f));  // roughness 0.5
+  CHECK(s.materials[13].blend == 0);
+  CHECK(s.materials[15].blend == 15);  // 1 + the metal at 14
+  CHECK(s.materials[15].blend_weight == Approx(1.0f / 3.0f));
+  CHECK(s.materials[17].blend == 17);
+  CHECK(s.materials[17].blend_weight == Approx(2.0f / 3.0f));
+  CHECK(s.materials[18].blend == 0);
 }
 
 TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {

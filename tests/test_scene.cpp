@@ -382,7 +382,7 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
 TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
   psf::Scene s = load_text(
       "<bsdf type=\"principled\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
-      "<bsdf type=\"blendbsdf\" id=\"c\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
+      "<bsdf type=\"mixturebsdf\" id=\"c\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
       "<bsdf type=\"conductor\"/></bsdf>\n"
       "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
       "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
@@ -393,7 +393,7 @@ TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]
   CHECK(s.warnings.size() == 5);
   CHECK(count_warnings(s, "no <sensor>") == 1);
   CHECK(count_warnings(s, ":2: bsdf 'principled'") == 1);
-  CHECK(count_warnings(s, ":3: bsdf 'blendbsdf'") == 1);
+  CHECK(count_warnings(s, ":3: bsdf 'mixturebsdf'") == 1);
   CHECK(count_warnings(s, ":7: texture file 'x.png' not found") == 1);  // the default reflectance instead
   CHECK(count_warnings(s, ":8: emitter 'sunsky'") == 1);
   REQUIRE(s.materials.size() == 3);

@@ -339,27 +339,24 @@ class GltfLoader {
     // Metallic-roughness (glTF 2.0 Appendix B): metals as roughconductor whose
     // Fresnel reflectance at normal incidence is the base colour, dielectrics as
     // roughplastic with IOR 1.5 over the base colour; GGX with alpha = roughness^2
-    // (the smooth types at roughness 0). A metallic factor between 0 and 1 (a
-    // blend of the two) is rounded to the nearer one.
+    // (the smooth types at roughness 0). Metallic between 0 and 1, from the
+    // factor or from metallicRoughnessTexture's blue channel, blends the two
+    // (Material.blend: the metal scatters with probability metallic).
     const float metallic = std::clamp(float(pbr.metallicFactor), 0.0f, 1.0f);
     const float roughness = std::clamp(float(pbr.roughnessFactor), 0.0f, 1.0f);
-    const bool metal = metallic >= 0.5f;
-    if (metallic > 0.0f && metallic < 1.0f) {
-      std::ostringstream f;
-      f << "metallicFactor " << metallic << " (a blend; shaded as " << (metal ? "a metal" : "a dielectric") << ")";
-      left_out.push_back(f.str());
+    const bool has_mr_texture = pbr.metallicRoughnessTexture.index >= 0;
+    const bool metal_only = metallic >= 1.0f && !has_mr_texture, has_metal = metallic > 0.0f;
+    // The texture's roughness (green) per hit for the metal (roughconductor); a
+    // dielectric's roughness (roughplastic's tables are made for one alpha) takes
+    // the factor.
+    uint32_t alpha_map = PSF_NO_TEXTURE, metallic_map = PSF_NO_TEXTURE;
+    if (has_mr_texture && has_metal) {
+      if (roughness > 0.0f) alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
+      metallic_map = metallic_texture(pbr.metallicRoughnessTexture, where);
+      if (metallic_map == PSF_NO_TEXTURE) left_out.push_back("metallicRoughnessTexture (not decoded; using the factors)");
     }
-    // The texture's roughness (green) per hit for metals (roughconductor); its
-    // metallic channel (blue) and a dielectric's roughness (roughplastic's tables
-    // are made for one alpha) take the factors.
-    uint32_t alpha_map = PSF_NO_TEXTURE;
-    if (pbr.metallicRoughnessTexture.index >= 0) {
-      if (metal && roughness > 0.0f)
-        alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
-      left_out.push_back(alpha_map != PSF_NO_TEXTURE
-                             ? "metallicRoughnessTexture's metallic channel (using metallicFactor)"
-                             : "metallicRoughnessTexture (using metallicFactor and roughnessFactor)");
-    }
+    if (has_mr_texture && !metal_only && roughness > 0.0f)
+      left_out.push_back("metallicRoughnessTexture's roughness on the dielectric (using roughnessFactor)");
     uint32_t normal_map = PSF_NO_TEXTURE;
     if (g.normalTexture.index >= 0) {
       // Linear (not sRGB-decoded): rgb = (n + 1) / 2 of the tangent-space normal n.
@@ -369,7 +366,7 @@ class GltfLoader {
     }
     // KHR_materials_ior (default 1.5) and KHR_materials_transmission: a
     // dielectric that transmits (factor >= 0.5; no blend) is a (rough)dielectric
-    // whose transmission the base colour tints.
+    // whose transmission the base colour tints (blended with a metal as above).
     auto ext_number = [&](const char* ext, const char* name, float fallback) {
       auto it = g.extensions.find(ext);
       if (it == g.extensions.end() || !it->second.Has(name)) return fallback;
@@ -380,8 +377,8 @@ class GltfLoader {
     if (!(ior >= 1.0f)) ior = 1.5f;  // 0 (or nonsense): the default
     const float transmission =
         std::clamp(ext_number("KHR_materials_transmission", "transmissionFactor", 0.0f), 0.0f, 1.0f);
-    const bool transmits = !metal && transmission >= 0.5f && ior > 1.0f;
-    if (transmission > 0.0f && transmission < 1.0f && !metal)
+    const bool transmits = !metal_only && transmission >= 0.5f && ior > 1.0f;
+    if (transmission > 0.0f && transmission < 1.0f && !metal_only)
       left_out.push_back("transmissionFactor (a blend; shaded as " +
                          std::string(transmits ? "transmitting)" : "not transmitting)"));
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
@@ -404,23 +401,36 @@ class GltfLoader {
       for (const std::string& s : left_out) list += (list.empty() ? "" : ", ") + s;
       warn_once(where + ": not supported: " + list);
     }
-    Material m{};
-    if (texture != PSF_NO_TEXTURE) {
-      m.tex_color = texture;
-      base = textures_.mean(texture);  // the texture already holds the factor
-    }
-    glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
+    if (texture != PSF_NO_TEXTURE) base = textures_.mean(texture);  // the texture already holds the factor
+    const glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
     const bool rough = roughness > 0.0f;
-    m.alpha_u = m.alpha_v = std::max(roughness * roughness, 1e-4f);  // Mitsuba's lower bound
-    if (transmits) {
-      m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
-      m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
-      m.specular = {{1, 1, 1, 0}};
-      m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
-      m.tex_color = PSF_NO_TEXTURE;
-    } else if (metal) {
-      // The base colour is the reflectance at normal incidence: eta and k from it
-      // (per hit from the texture: PSF_MATFLAG_REFLECTANCE, kernels/surface.cl).
+    // The parts' common settings: normal map, cut-out, emission, sides.
+    auto part = [&]() {
+      Material m{};
+      m.tex_color = texture;
+      m.alpha_u = m.alpha_v = std::max(roughness * roughness, 1e-4f);  // Mitsuba's lower bound
+      if (normal_map != PSF_NO_TEXTURE) {
+        m.tex_bump = normal_map;
+        m.bump_scale = float(g.normalTexture.scale);
+        m.flags |= PSF_MATFLAG_NORMALMAP;
+      }
+      if (masked || blended) {
+        // Without a texture the whole surface has one alpha.
+        m.opacity = opacity_texture != PSF_NO_TEXTURE ? 1.0f
+                    : masked                          ? (alpha_factor >= cutoff ? 1.0f : 0.0f)
+                                                      : alpha_factor;
+        m.tex_opacity = opacity_texture;
+        if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
+      }
+      m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
+      m.tex_emission = emission_map;
+      m.two_sided = g.doubleSided ? 1u : 0u;
+      return m;
+    };
+    // The metal: the base colour is the reflectance at normal incidence, eta and k
+    // from it (per hit from the texture: PSF_MATFLAG_REFLECTANCE, kernels/surface.cl).
+    auto metal_part = [&]() {
+      Material m = part();
       m.type = rough ? PSF_MATERIAL_ROUGH_CONDUCTOR : PSF_MATERIAL_CONDUCTOR;
       glm::vec3 eta, k;
       detail::conductor_from_reflectance(albedo, eta, k);
@@ -432,30 +442,35 @@ class GltfLoader {
         m.tex_alpha = alpha_map;
         m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
       }
-    } else {
-      m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
-      m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
-      m.specular = {{1, 1, 1, 0}};
-      m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
-      detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
+      return m;
+    };
+    auto dielectric_part = [&]() {
+      Material m = part();
+      if (transmits) {
+        m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
+        m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
+        m.specular = {{1, 1, 1, 0}};
+        m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
+        m.tex_color = PSF_NO_TEXTURE;
+      } else {
+        m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
+        m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+        m.specular = {{1, 1, 1, 0}};
+        m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
+        detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
+      }
+      return m;
+    };
+    const std::string name = g.name.empty() ? "material" + std::to_string(index) : g.name;
+    if (metal_only || (has_metal && metallic_map == PSF_NO_TEXTURE && has_mr_texture && metallic >= 1.0f))
+      return materials_[size_t(index)] = push_material(metal_part(), name);
+    Material m = dielectric_part();
+    if (has_metal) {
+      m.blend = 1 + push_material(metal_part(), name + " (metal)");
+      m.blend_weight = metallic;
+      m.tex_blend = metallic_map;
     }
-    if (normal_map != PSF_NO_TEXTURE) {
-      m.tex_bump = normal_map;
-      m.bump_scale = float(g.normalTexture.scale);
-      m.flags |= PSF_MATFLAG_NORMALMAP;
-    }
-    if (masked || blended) {
-      // Without a texture the whole surface has one alpha.
-      m.opacity = opacity_texture != PSF_NO_TEXTURE ? 1.0f
-                  : masked                          ? (alpha_factor >= cutoff ? 1.0f : 0.0f)
-                                                    : alpha_factor;
-      m.tex_opacity = opacity_texture;
-      if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
-    }
-    m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
-    m.tex_emission = emission_map;
-    m.two_sided = g.doubleSided ? 1u : 0u;
-    return materials_[size_t(index)] = push_material(m, g.name.empty() ? "material" + std::to_string(index) : g.name);
+    return materials_[size_t(index)] = push_material(m, name);
   }
 
   // Texture `index` decoded (sRGB unless `srgb` is false), each texel's 4 floats
@@ -486,6 +501,14 @@ class GltfLoader {
     return make_texture(info.index, info.extensions, where, false, false, [&](float* t) {
       float r = factor * t[1];
       t[0] = t[1] = t[2] = r * r;
+      t[3] = 1.0f;
+    });
+  }
+
+  // The metallic channel (blue) of a metallicRoughnessTexture in the x channel.
+  uint32_t metallic_texture(const tinygltf::TextureInfo& info, const std::string& where) {
+    return make_texture(info.index, info.extensions, where, false, false, [&](float* t) {
+      t[0] = t[1] = t[2] = t[2];
       t[3] = 1.0f;
     });
   }

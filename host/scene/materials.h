@@ -16,7 +16,7 @@ namespace psf::detail {
 // How a texture's texels are stored (RGBA halfs, kernels/texture.cl).
 enum class TextureUse {
   Color,   // linear RGB; alpha the image's, else 1
-  Height,  // x (and y, z): luminance of the linear RGB, for bump maps (Mitsuba 3's eval_1)
+  Height,  // x (and y, z): luminance of the linear RGB (Mitsuba 3's eval_1): bump maps, blendbsdf's weight
   Opacity  // x (and y, z): the alpha channel if the image has one, else the luminance
 };
 

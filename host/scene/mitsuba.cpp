@@ -265,6 +265,9 @@ struct Bsdf {
   Material m = diffuse_material(glm::vec3(0.5f));  // type, parameters, textures (emission zero)
   bool two_sided = false;                          // scatters on both sides (Mitsuba's twosided)
   std::string name;                                // the element's id, else its type
+  // blendbsdf: the BSDF that scatters instead with probability m.blend_weight
+  // (times m.tex_blend); the material gets it as Material.blend.
+  std::shared_ptr<const Bsdf> blend;
 };
 
 // Element tags that hold a plugin (a nested object) rather than a property value.
@@ -983,15 +986,24 @@ class MitsubaLoader {
     const glm::vec3 radiance = emission.radiance;
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
 
-    Material m = b.m;
-    m.emission = {{radiance.x, radiance.y, radiance.z, 0}};
-    m.tex_emission = emission.texture;
-    // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
-    m.two_sided = b.two_sided && !emits ? 1u : 0u;
-    uint32_t index = uint32_t(scene_.materials.size());
-    scene_.materials.push_back(m);
+    auto with_emission = [&](const Bsdf& from) {
+      Material m = from.m;
+      m.emission = {{radiance.x, radiance.y, radiance.z, 0}};
+      m.tex_emission = emission.texture;
+      // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
+      m.two_sided = from.two_sided && !emits ? 1u : 0u;
+      return m;
+    };
     std::string name = b.name;
     if (emitter_node) name += "+" + attr(emitter_node, "id").value_or("emitter");
+    Material m = with_emission(b);
+    if (b.blend) {  // the partner first: Material.blend is 1 + its index
+      scene_.materials.push_back(with_emission(*b.blend));
+      scene_.material_names.push_back(name + " (blended " + b.blend->name + ")");
+      m.blend = uint32_t(scene_.materials.size());
+    }
+    uint32_t index = uint32_t(scene_.materials.size());
+    scene_.materials.push_back(m);
     scene_.material_names.push_back(name);
     materials_.emplace(key, index);
     return index;
@@ -1008,7 +1020,8 @@ class MitsubaLoader {
         {"roughplastic", &MitsubaLoader::bsdf_plastic},     {"dielectric", &MitsubaLoader::bsdf_dielectric},
         {"roughdielectric", &MitsubaLoader::bsdf_dielectric}, {"thindielectric", &MitsubaLoader::bsdf_dielectric},
         {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
-        {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap}};
+        {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap},
+        {"blendbsdf", &MitsubaLoader::bsdf_blend}};
     return plugins;
   }
 
@@ -1032,6 +1045,18 @@ class MitsubaLoader {
       if (!ok)
         warn(p.node, "bsdf:" + e.type + ":" + name,
              "property '" + name + "' of bsdf '" + e.type + "' is not supported; ignored");
+    }
+  }
+
+  // f applied to the material of `b` and to that of its blend partner, if any
+  // (a wrapper around a blendbsdf wraps both of its BSDFs).
+  template <class F>
+  static void for_each_part(Bsdf& b, F&& f) {
+    f(b.m);
+    if (b.blend) {
+      auto partner = std::make_shared<Bsdf>(*b.blend);
+      f(partner->m);
+      b.blend = partner;
     }
   }
 
@@ -1240,6 +1265,43 @@ class MitsubaLoader {
         type == PSF_MATERIAL_THIN_DIELECTRIC)
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
     b.two_sided = true;
+    if (b.blend) {
+      auto partner = std::make_shared<Bsdf>(*b.blend);
+      partner->two_sided = true;
+      b.blend = partner;
+    }
+    b.name.clear();
+    return b;
+  }
+
+  // blendbsdf: the first nested BSDF, or with probability `weight` (a float or a
+  // texture's luminance, default 0.5) the second, chosen per shading point
+  // (Material.blend, kernels/surface.cl); in expectation Mitsuba's
+  // (1 - weight) f_0 + weight f_1. A blend nested in a blend keeps its first BSDF.
+  Bsdf bsdf_blend(const Element& e) {
+    check_properties(e, {"weight"});
+    std::vector<pugi::xml_node> nested = objects(e, "bsdf");
+    if (nested.size() != 2) fail(e.node, "<bsdf type=\"blendbsdf\"> takes two nested BSDFs, not " +
+                                             std::to_string(nested.size()));
+    Bsdf b = bsdf(nested[0]);
+    Bsdf partner = bsdf(nested[1]);
+    for (Bsdf* inner : {&b, &partner})
+      if (inner->blend) {
+        warn(e.node, "bsdf:blendbsdf-nested", "a blendbsdf inside a blendbsdf is not supported; its first BSDF is used");
+        inner->blend.reset();
+        inner->m.blend = 0;
+        inner->m.tex_blend = PSF_NO_TEXTURE;
+      }
+    const Property* p = find(e, "weight");
+    b.m.blend_weight = 0.5f;
+    if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
+      b.m.blend_weight = 1.0f;
+      b.m.tex_blend = texture(p->object, TextureUse::Height, "using 0.5 for 'weight'");
+      if (b.m.tex_blend == PSF_NO_TEXTURE) b.m.blend_weight = 0.5f;
+    } else if (p) {
+      b.m.blend_weight = std::clamp(float(get_float(e, "weight", 0.5)), 0.0f, 1.0f);
+    }
+    b.blend = std::make_shared<const Bsdf>(partner);
     b.name.clear();
     return b;
   }
@@ -1264,10 +1326,12 @@ class MitsubaLoader {
     if (b.m.tex_bump != PSF_NO_TEXTURE)
       warn(e.node, "bsdf:bumpmap-nested", "nested bump maps are not supported; the outer one is used");
     uint32_t index = texture(tex, TextureUse::Height, "no bump mapping");
-    if (index != PSF_NO_TEXTURE) {
-      b.m.tex_bump = index;
-      b.m.bump_scale = scale;
-    }
+    if (index != PSF_NO_TEXTURE)
+      for_each_part(b, [&](Material& m) {
+        m.tex_bump = index;
+        m.bump_scale = scale;
+        m.flags &= ~PSF_MATFLAG_NORMALMAP;
+      });
     b.name.clear();
     return b;
   }
@@ -1285,11 +1349,12 @@ class MitsubaLoader {
     if (b.m.tex_bump != PSF_NO_TEXTURE)
       warn(e.node, "bsdf:bumpmap-nested", "nested bump or normal maps are not supported; the outer one is used");
     uint32_t index = texture(p->object, TextureUse::Color, "no normal mapping");
-    if (index != PSF_NO_TEXTURE) {
-      b.m.tex_bump = index;
-      b.m.bump_scale = 1.0f;
-      b.m.flags |= PSF_MATFLAG_NORMALMAP;
-    }
+    if (index != PSF_NO_TEXTURE)
+      for_each_part(b, [&](Material& m) {
+        m.tex_bump = index;
+        m.bump_scale = 1.0f;
+        m.flags |= PSF_MATFLAG_NORMALMAP;
+      });
     b.name.clear();
     return b;
   }
@@ -1323,7 +1388,7 @@ class MitsubaLoader {
   }
 
   // A diffuse stand-in for a BSDF type the renderer does not support yet:
-  // wrappers (coating, blendbsdf, ...) average their nested BSDFs' colour terms;
+  // wrappers (coating, ...) average their nested BSDFs' colour terms;
   // otherwise the first of reflectance, diffuse_reflectance,
   // specular_reflectance, else 0.5 grey.
   Bsdf approximate_bsdf(const Element& e) {
