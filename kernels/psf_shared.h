@@ -168,10 +168,11 @@ typedef struct {
   psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
   psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes), or none */
   psf_uint tex_emission;    /* texture (rgb) multiplying the emission where it is hit or sampled, or PSF_NO_TEXTURE */
-  /* A blend of two BSDFs (glTF's metallic between 0 and 1 or from a texture):
-   * 1 + the index of the material that scatters instead of this one with
-   * probability blend_weight (times tex_blend's x channel at the hit), 0 for
-   * none; the choice is made per shading point (surface.cl surface_blend). */
+  /* A blend of BSDFs (glTF's metallic and transmission between 0 and 1,
+   * Mitsuba's blendbsdf): 1 + the index of the material that scatters instead of
+   * this one with probability blend_weight (times tex_blend's x channel at the
+   * hit), 0 for none; that one may blend in turn (a chain of up to three). The
+   * choice is made per shading point (surface.cl surface_blend). */
   psf_uint blend;
   float blend_weight;
   psf_uint tex_blend;       /* texture (x channel) multiplying blend_weight, or PSF_NO_TEXTURE */

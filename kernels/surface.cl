@@ -21,7 +21,8 @@
  * probability blend_weight (times tex_blend's x channel there), u uniform in
  * [0, 1). Light sampling, BSDF sampling and their MIS weights at the point then
  * all use the one chosen, so each choice's estimate is unbiased for its BSDF and
- * the expectation is the weighted sum of the two (stochastic material selection). */
+ * the expectation is the weighted sum of the two (stochastic material selection).
+ * The partner may blend in turn (a chain of up to three materials). */
 
 /* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */
 inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
@@ -31,16 +32,22 @@ inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
 
 /* The material that scatters at a hit on material m (see the header): m, or with
  * probability blend_weight (times tex_blend) its partner, which keeps m's
- * emission (already added by the caller) and m's vertex-normal flag. */
+ * vertex-normal flag (m's emission is added by the caller). A partner may blend
+ * in turn (up to PSF_BLEND_CHAIN materials in all): u, rescaled to [0, 1) by
+ * each choice taken, decides the next. */
+#define PSF_BLEND_CHAIN 3
 inline Material surface_blend(Material m, __global const Material* materials, __global const TriAttrib* a, float b1,
                               float b2, __global const TextureInfo* textures, __global const half* texels, float u) {
-  if (m.blend == 0u) return m;
-  float w = m.blend_weight;
-  if (m.tex_blend != PSF_NO_TEXTURE) w *= texture_eval(textures, texels, m.tex_blend, surface_uv(a, b1, b2)).x;
-  if (!(u < w)) return m;
-  Material b = materials[m.blend - 1u];
-  b.flags = (b.flags & ~PSF_MATFLAG_NORMALS) | (m.flags & PSF_MATFLAG_NORMALS);
-  return b;
+  const uint normals = m.flags & PSF_MATFLAG_NORMALS;
+  for (int k = 1; k < PSF_BLEND_CHAIN && m.blend != 0u; ++k) {
+    float w = m.blend_weight;
+    if (m.tex_blend != PSF_NO_TEXTURE) w *= texture_eval(textures, texels, m.tex_blend, surface_uv(a, b1, b2)).x;
+    if (!(u < w)) break;
+    u /= w;
+    m = materials[m.blend - 1u];
+    m.flags = (m.flags & ~PSF_MATFLAG_NORMALS) | normals;
+  }
+  return m;
 }
 
 /* A material's emission at barycentrics (b1, b2) of the triangle (its emission

@@ -657,6 +657,21 @@ TEST_CASE("Render: a blended material scatters as the weighted sum of its two BS
     CHECK(mean.y == Approx(expected.y).epsilon(0.02));
     CHECK(mean.z == Approx(expected.z).epsilon(0.02));
   }
+  // A chain: b blends in turn with c (weight 0.5): a 0.75, b 0.125, c 0.125.
+  psf::Scene chain = scene(0.25f, 0u, {});
+  Material c{};
+  c.type = PSF_MATERIAL_DIFFUSE;
+  c.albedo = {{0.4f, 0.9f, 0.0f, 0}};
+  chain.materials.push_back(c);
+  chain.material_names.push_back("c");
+  chain.materials[1].blend = 3;
+  chain.materials[1].blend_weight = 0.5f;
+  glm::dvec3 mean = mean_of(render(chain, 64));
+  const glm::dvec3 chained = 0.75 * glm::dvec3(0.2, 0.6, 0.1) + 0.125 * glm::dvec3(0.8, 0.1, 0.5) +
+                             0.125 * glm::dvec3(0.4, 0.9, 0.0);
+  CHECK(mean.x == Approx(chained.x).epsilon(0.02));
+  CHECK(mean.y == Approx(chained.y).epsilon(0.02));
+  CHECK(mean.z == Approx(chained.z).epsilon(0.02));
   for (float weight : {0.0f, 1.0f}) {
     INFO("weight " << weight);
     psf::Scene alone = scene(0.0f, 0u, {});

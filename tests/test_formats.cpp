@@ -642,6 +642,34 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
                               "{\"KHR_materials_ior\": {\"ior\": 1.7}}")));
     CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_ROUGH_PLASTIC);
     CHECK(t.materials[t.tri_material[0]].eta.s[0] == Approx(1.7f));
+    // A transmission factor between 0 and 1 blends the plastic with the glass; with
+    // metallic M too, a chain: plastic -> glass with M + (1 - M) t -> metal with
+    // M / (M + (1 - M) t), so that P(metal) = M and P(glass) = (1 - M) t.
+    for (float metallic : {0.0f, 0.25f}) {
+      INFO("metallic " << metallic);
+      psf::Scene u = psf::load_scene(dir.write(
+          "part.gltf", replaced(gltf_json(embedded), m0,
+                                "\"metallicFactor\": " + std::to_string(metallic) +
+                                    "}, \"doubleSided\": true, \"extensions\": "
+                                    "{\"KHR_materials_transmission\": {\"transmissionFactor\": 0.4}}")));
+      CHECK(u.warnings.empty());
+      const Material& top = u.materials[u.tri_material[0]];
+      CHECK(top.type == PSF_MATERIAL_ROUGH_PLASTIC);
+      const float w1 = metallic + (1 - metallic) * 0.4f;
+      CHECK(top.blend_weight == Approx(w1));
+      REQUIRE(top.blend >= 1);
+      const Material& glass = u.materials[top.blend - 1];
+      CHECK(glass.type == PSF_MATERIAL_ROUGH_DIELECTRIC);
+      if (metallic == 0.0f) {
+        CHECK(glass.blend == 0);
+        continue;
+      }
+      CHECK(glass.blend_weight == Approx(metallic / w1));
+      REQUIRE(glass.blend >= 1);
+      CHECK(u.materials[glass.blend - 1].type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+      CHECK(top.blend_weight * glass.blend_weight == Approx(metallic));
+      CHECK(top.blend_weight * (1 - glass.blend_weight) == Approx((1 - metallic) * 0.4f));
+    }
   }
   SECTION("emissiveTexture: multiplies the emissive factor, sRGB-decoded") {
     const unsigned char px[] = {128, 64, 0};

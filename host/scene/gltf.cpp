@@ -364,9 +364,9 @@ class GltfLoader {
       if (normal_map == PSF_NO_TEXTURE) left_out.push_back("normalTexture (not decoded)");
       if (g.normalTexture.texCoord != 0) left_out.push_back("normalTexture.texCoord != 0 (using TEXCOORD_0)");
     }
-    // KHR_materials_ior (default 1.5) and KHR_materials_transmission: a
-    // dielectric that transmits (factor >= 0.5; no blend) is a (rough)dielectric
-    // whose transmission the base colour tints (blended with a metal as above).
+    // KHR_materials_ior (default 1.5) and KHR_materials_transmission: the
+    // dielectric transmits as a (rough)dielectric whose transmission the base
+    // colour tints; a factor between 0 and 1 blends it with the plastic.
     auto ext_number = [&](const char* ext, const char* name, float fallback) {
       auto it = g.extensions.find(ext);
       if (it == g.extensions.end() || !it->second.Has(name)) return fallback;
@@ -377,10 +377,7 @@ class GltfLoader {
     if (!(ior >= 1.0f)) ior = 1.5f;  // 0 (or nonsense): the default
     const float transmission =
         std::clamp(ext_number("KHR_materials_transmission", "transmissionFactor", 0.0f), 0.0f, 1.0f);
-    const bool transmits = !metal_only && transmission >= 0.5f && ior > 1.0f;
-    if (transmission > 0.0f && transmission < 1.0f && !metal_only)
-      left_out.push_back("transmissionFactor (a blend; shaded as " +
-                         std::string(transmits ? "transmitting)" : "not transmitting)"));
+    const bool transmits = !metal_only && transmission > 0.0f && ior > 1.0f;
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
     // The emission: emissiveFactor (times KHR_materials_emissive_strength) times
@@ -444,33 +441,59 @@ class GltfLoader {
       }
       return m;
     };
-    auto dielectric_part = [&]() {
+    auto glass_part = [&]() {
       Material m = part();
-      if (transmits) {
-        m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
-        m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
-        m.specular = {{1, 1, 1, 0}};
-        m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
-        m.tex_color = PSF_NO_TEXTURE;
-      } else {
-        m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
-        m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
-        m.specular = {{1, 1, 1, 0}};
-        m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
-        detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
-      }
+      m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
+      m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
+      m.specular = {{1, 1, 1, 0}};
+      m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
+      m.tex_color = PSF_NO_TEXTURE;
       return m;
     };
+    auto plastic_part = [&]() {
+      Material m = part();
+      m.type = rough ? PSF_MATERIAL_ROUGH_PLASTIC : PSF_MATERIAL_PLASTIC;
+      m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
+      m.specular = {{1, 1, 1, 0}};
+      m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
+      detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
+      return m;
+    };
+    // `m` hands the shading point to `partner` (pushed here) with probability
+    // `weight` times texture `tex` (Material.blend).
+    auto blend = [&](Material& m, const Material& partner, const std::string& part_name, float weight, uint32_t tex) {
+      m.blend = 1 + push_material(partner, part_name);
+      m.blend_weight = weight;
+      m.tex_blend = tex;
+    };
     const std::string name = g.name.empty() ? "material" + std::to_string(index) : g.name;
-    if (metal_only || (has_metal && metallic_map == PSF_NO_TEXTURE && has_mr_texture && metallic >= 1.0f))
+    const bool metal_texture = metallic_map != PSF_NO_TEXTURE;
+    if (metal_only || (has_metal && !metal_texture && metallic >= 1.0f))
       return materials_[size_t(index)] = push_material(metal_part(), name);
-    Material m = dielectric_part();
-    if (has_metal) {
-      m.blend = 1 + push_material(metal_part(), name + " (metal)");
-      m.blend_weight = metallic;
-      m.tex_blend = metallic_map;
+    Material top = transmits && transmission >= 1.0f ? glass_part() : plastic_part();
+    if (!transmits || transmission >= 1.0f) {
+      if (has_metal) blend(top, metal_part(), name + " (metal)", metallic, metallic_map);
+    } else if (!has_metal) {
+      blend(top, glass_part(), name + " (transmission)", transmission, PSF_NO_TEXTURE);
+    } else {
+      // Metal with probability M (metallic), glass with (1 - M) t, plastic with
+      // (1 - M)(1 - t): the plastic hands over to the glass with w1 = M + (1 - M) t,
+      // the glass to the metal with M / w1; per texel where M comes from the texture.
+      const float t = transmission;
+      auto w1 = [t](float m) { return m + (1.0f - m) * t; };
+      Material glass = glass_part();
+      if (metal_texture) {
+        const auto& info = pbr.metallicRoughnessTexture;
+        blend(glass, metal_part(), name + " (metal)", 1.0f,
+              metallic_texture(info, where, [&](float b) { return metallic * b / w1(metallic * b); }));
+        blend(top, glass, name + " (transmission)", 1.0f,
+              metallic_texture(info, where, [&](float b) { return w1(metallic * b); }));
+      } else {
+        blend(glass, metal_part(), name + " (metal)", metallic / w1(metallic), PSF_NO_TEXTURE);
+        blend(top, glass, name + " (transmission)", w1(metallic), PSF_NO_TEXTURE);
+      }
     }
-    return materials_[size_t(index)] = push_material(m, name);
+    return materials_[size_t(index)] = push_material(top, name);
   }
 
   // Texture `index` decoded (sRGB unless `srgb` is false), each texel's 4 floats
@@ -505,10 +528,12 @@ class GltfLoader {
     });
   }
 
-  // The metallic channel (blue) of a metallicRoughnessTexture in the x channel.
-  uint32_t metallic_texture(const tinygltf::TextureInfo& info, const std::string& where) {
+  // The metallic channel (blue) of a metallicRoughnessTexture, through `f`, in
+  // the x channel.
+  uint32_t metallic_texture(const tinygltf::TextureInfo& info, const std::string& where,
+                            const std::function<float(float)>& f = [](float b) { return b; }) {
     return make_texture(info.index, info.extensions, where, false, false, [&](float* t) {
-      t[0] = t[1] = t[2] = t[2];
+      t[0] = t[1] = t[2] = f(t[2]);
       t[3] = 1.0f;
     });
   }
