@@ -1497,6 +1497,36 @@ TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "
   CHECK(bumpy.tex_bump != PSF_NO_TEXTURE);  // bumpmap wraps both
   CHECK(plastic.tex_bump == bumpy.tex_bump);
 
+  // A blend as the second BSDF makes a chain of three; as the first it is not
+  // supported (one warning, its first BSDF used).
+  std::string chain = dir.write(
+      "chain.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.5\"/>"
+      "<bsdf type=\"diffuse\"/><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.25\"/>"
+      "<bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\"><bsdf type=\"blendbsdf\">"
+      "<bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf><bsdf type=\"diffuse\"/></bsdf></shape>\n"
+      "</scene>\n");
+  psf::Scene c = psf::load_scene(chain);
+  const Material& top = c.materials[c.tri_material.front()];
+  CHECK(top.type == PSF_MATERIAL_DIFFUSE);
+  CHECK(top.blend_weight == Approx(0.5f));
+  REQUIRE(top.blend >= 1);
+  const Material& middle = c.materials[top.blend - 1];
+  CHECK(middle.type == PSF_MATERIAL_PLASTIC);
+  CHECK(middle.blend_weight == Approx(0.25f));
+  REQUIRE(middle.blend >= 1);
+  CHECK(c.materials[middle.blend - 1].type == PSF_MATERIAL_CONDUCTOR);
+  CHECK(c.materials[middle.blend - 1].blend == 0);
+  const Material& left = c.materials[c.tri_material.back()];
+  CHECK(left.type == PSF_MATERIAL_PLASTIC);
+  REQUIRE(left.blend >= 1);
+  CHECK(c.materials[left.blend - 1].type == PSF_MATERIAL_DIFFUSE);
+  size_t nested_warnings = 0;
+  for (const std::string& wmsg : c.warnings) nested_warnings += wmsg.find(":3: a blendbsdf as the first") != std::string::npos;
+  CHECK(nested_warnings == 1);
+
   // Not two nested BSDFs: an error at the blend's line.
   std::string one = dir.write("one.xml",
                               "<scene version=\"3.0.0\">\n<shape type=\"rectangle\">\n"

@@ -23,6 +23,7 @@
 #include <fstream>
 #include <glm/gtc/matrix_transform.hpp>
 #include <map>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <pugixml.hpp>
@@ -996,15 +997,15 @@ class MitsubaLoader {
     };
     std::string name = b.name;
     if (emitter_node) name += "+" + attr(emitter_node, "id").value_or("emitter");
-    Material m = with_emission(b);
-    if (b.blend) {  // the partner first: Material.blend is 1 + its index
-      scene_.materials.push_back(with_emission(*b.blend));
-      scene_.material_names.push_back(name + " (blended " + b.blend->name + ")");
-      m.blend = uint32_t(scene_.materials.size());
-    }
-    uint32_t index = uint32_t(scene_.materials.size());
-    scene_.materials.push_back(m);
-    scene_.material_names.push_back(name);
+    // A blend's partners first (Material.blend is 1 + the partner's index), then the material.
+    std::function<uint32_t(const Bsdf&, const std::string&)> push = [&](const Bsdf& x, const std::string& as) {
+      Material m = with_emission(x);
+      if (x.blend) m.blend = 1 + push(*x.blend, name + " (blended " + x.blend->name + ")");
+      scene_.materials.push_back(m);
+      scene_.material_names.push_back(as);
+      return uint32_t(scene_.materials.size() - 1);
+    };
+    uint32_t index = push(b, name);
     materials_.emplace(key, index);
     return index;
   }
@@ -1048,14 +1049,14 @@ class MitsubaLoader {
     }
   }
 
-  // f applied to the material of `b` and to that of its blend partner, if any
-  // (a wrapper around a blendbsdf wraps both of its BSDFs).
+  // f applied to `b` and to each BSDF of its blend chain (a wrapper around a
+  // blendbsdf wraps all of its BSDFs).
   template <class F>
   static void for_each_part(Bsdf& b, F&& f) {
-    f(b.m);
+    f(b);
     if (b.blend) {
       auto partner = std::make_shared<Bsdf>(*b.blend);
-      f(partner->m);
+      for_each_part(*partner, f);
       b.blend = partner;
     }
   }
@@ -1264,12 +1265,7 @@ class MitsubaLoader {
     if (type == PSF_MATERIAL_DIELECTRIC || type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
         type == PSF_MATERIAL_THIN_DIELECTRIC)
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
-    b.two_sided = true;
-    if (b.blend) {
-      auto partner = std::make_shared<Bsdf>(*b.blend);
-      partner->two_sided = true;
-      b.blend = partner;
-    }
+    for_each_part(b, [](Bsdf& x) { x.two_sided = true; });
     b.name.clear();
     return b;
   }
@@ -1277,7 +1273,8 @@ class MitsubaLoader {
   // blendbsdf: the first nested BSDF, or with probability `weight` (a float or a
   // texture's luminance, default 0.5) the second, chosen per shading point
   // (Material.blend, kernels/surface.cl); in expectation Mitsuba's
-  // (1 - weight) f_0 + weight f_1. A blend nested in a blend keeps its first BSDF.
+  // (1 - weight) f_0 + weight f_1. The second may be a blend of two itself (a
+  // chain of three); a blend as the first BSDF, or deeper, keeps its first BSDF.
   Bsdf bsdf_blend(const Element& e) {
     check_properties(e, {"weight"});
     std::vector<pugi::xml_node> nested = objects(e, "bsdf");
@@ -1285,13 +1282,20 @@ class MitsubaLoader {
                                              std::to_string(nested.size()));
     Bsdf b = bsdf(nested[0]);
     Bsdf partner = bsdf(nested[1]);
-    for (Bsdf* inner : {&b, &partner})
-      if (inner->blend) {
-        warn(e.node, "bsdf:blendbsdf-nested", "a blendbsdf inside a blendbsdf is not supported; its first BSDF is used");
-        inner->blend.reset();
-        inner->m.blend = 0;
-        inner->m.tex_blend = PSF_NO_TEXTURE;
-      }
+    auto unblend = [&](Bsdf& inner) {
+      warn(e.node, "bsdf:blendbsdf-nested",
+           "a blendbsdf as the first BSDF of a blendbsdf, or nested deeper than its second, is not supported; its "
+           "first BSDF is used");
+      inner.blend.reset();
+      inner.m.blend = 0;
+      inner.m.tex_blend = PSF_NO_TEXTURE;
+    };
+    if (b.blend) unblend(b);
+    if (partner.blend && partner.blend->blend) {
+      auto second = std::make_shared<Bsdf>(*partner.blend);
+      unblend(*second);
+      partner.blend = second;
+    }
     const Property* p = find(e, "weight");
     b.m.blend_weight = 0.5f;
     if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
@@ -1327,10 +1331,10 @@ class MitsubaLoader {
       warn(e.node, "bsdf:bumpmap-nested", "nested bump maps are not supported; the outer one is used");
     uint32_t index = texture(tex, TextureUse::Height, "no bump mapping");
     if (index != PSF_NO_TEXTURE)
-      for_each_part(b, [&](Material& m) {
-        m.tex_bump = index;
-        m.bump_scale = scale;
-        m.flags &= ~PSF_MATFLAG_NORMALMAP;
+      for_each_part(b, [&](Bsdf& x) {
+        x.m.tex_bump = index;
+        x.m.bump_scale = scale;
+        x.m.flags &= ~PSF_MATFLAG_NORMALMAP;
       });
     b.name.clear();
     return b;
@@ -1350,10 +1354,10 @@ class MitsubaLoader {
       warn(e.node, "bsdf:bumpmap-nested", "nested bump or normal maps are not supported; the outer one is used");
     uint32_t index = texture(p->object, TextureUse::Color, "no normal mapping");
     if (index != PSF_NO_TEXTURE)
-      for_each_part(b, [&](Material& m) {
-        m.tex_bump = index;
-        m.bump_scale = 1.0f;
-        m.flags |= PSF_MATFLAG_NORMALMAP;
+      for_each_part(b, [&](Bsdf& x) {
+        x.m.tex_bump = index;
+        x.m.bump_scale = 1.0f;
+        x.m.flags |= PSF_MATFLAG_NORMALMAP;
       });
     b.name.clear();
     return b;
