@@ -672,6 +672,11 @@ TEST_CASE("Render: a blended material scatters as the weighted sum of its two BS
   CHECK(mean.x == Approx(chained.x).epsilon(0.02));
   CHECK(mean.y == Approx(chained.y).epsilon(0.02));
   CHECK(mean.z == Approx(chained.z).epsilon(0.02));
+  // A partner outside the material table is dropped before upload.
+  psf::Scene bad = scene(0.5f, 0u, {});
+  bad.materials[0].blend = 3;
+  CHECK(psf::device_materials(bad, psf::triangle_attributes(bad))[0].blend == 0);
+  CHECK(psf::device_materials(chain, psf::triangle_attributes(chain))[1].blend == 3);
   for (float weight : {0.0f, 1.0f}) {
     INFO("weight " << weight);
     psf::Scene alone = scene(0.0f, 0u, {});

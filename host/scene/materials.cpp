@@ -42,7 +42,10 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
 
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes) {
   std::vector<Material> out = scene.materials;
-  for (Material& m : out) m.flags &= ~PSF_MATFLAG_NORMALS;
+  for (Material& m : out) {
+    m.flags &= ~PSF_MATFLAG_NORMALS;
+    if (m.blend > out.size()) m.blend = 0;  // a partner outside the table: no blend
+  }
   for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i)
     if ((attributes[i].flags & PSF_TRI_NORMALS) && scene.tri_material[i] < out.size())
       out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;

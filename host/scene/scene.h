@@ -64,7 +64,8 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
 std::vector<TriAttrib> triangle_attributes(const Scene& scene);
 
 // The materials as the device gets them: PSF_MATFLAG_NORMALS set on those with
-// a triangle with vertex normals in `attributes` (so that the others skip reading them).
+// a triangle with vertex normals in `attributes` (so that the others skip reading
+// them); a blend whose partner lies outside the table is dropped.
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes);
 
 // Per triangle: whether its material is alpha-tested (PSF_MATFLAG_MASKED).
