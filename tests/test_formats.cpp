@@ -642,6 +642,21 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
                               "{\"KHR_materials_ior\": {\"ior\": 1.7}}")));
     CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_ROUGH_PLASTIC);
     CHECK(t.materials[t.tri_material[0]].eta.s[0] == Approx(1.7f));
+    // The glass takes the texture's roughness per texel, as a metal does.
+    const unsigned char px[] = {0, 128, 0};  // roughness (green) 128/255
+    psf::Scene r = psf::load_scene(dir.write(
+        "rough-glass.gltf",
+        with_image(replaced(gltf_json(embedded), m0,
+                            "\"metallicFactor\": 0, \"roughnessFactor\": 0.5, \"metallicRoughnessTexture\": "
+                            "{\"index\": 0}}, \"doubleSided\": true, \"extensions\": "
+                            "{\"KHR_materials_transmission\": {\"transmissionFactor\": 1}}"),
+                   png_bytes(1, 1, 3, px))));
+    CHECK(r.warnings.empty());
+    const Material& rg = r.materials[r.tri_material[0]];
+    CHECK(rg.type == PSF_MATERIAL_ROUGH_DIELECTRIC);
+    REQUIRE(rg.tex_alpha != PSF_NO_TEXTURE);
+    const float rough = 0.5f * 128.0f / 255.0f;
+    CHECK(texel_x(r, rg.tex_alpha, 0) == Approx(rough * rough).margin(1e-3));
     // A transmission factor between 0 and 1 blends the plastic with the glass; with
     // metallic M too, a chain: plastic -> glass with M + (1 - M) t -> metal with
     // M / (M + (1 - M) t), so that P(metal) = M and P(glass) = (1 - M) t.

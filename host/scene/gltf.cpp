@@ -346,17 +346,11 @@ class GltfLoader {
     const float roughness = std::clamp(float(pbr.roughnessFactor), 0.0f, 1.0f);
     const bool has_mr_texture = pbr.metallicRoughnessTexture.index >= 0;
     const bool metal_only = metallic >= 1.0f && !has_mr_texture, has_metal = metallic > 0.0f;
-    // The texture's roughness (green) per hit for the metal (roughconductor); a
-    // dielectric's roughness (roughplastic's tables are made for one alpha) takes
-    // the factor.
     uint32_t alpha_map = PSF_NO_TEXTURE, metallic_map = PSF_NO_TEXTURE;
     if (has_mr_texture && has_metal) {
-      if (roughness > 0.0f) alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
       metallic_map = metallic_texture(pbr.metallicRoughnessTexture, where);
       if (metallic_map == PSF_NO_TEXTURE) left_out.push_back("metallicRoughnessTexture (not decoded; using the factors)");
     }
-    if (has_mr_texture && !metal_only && roughness > 0.0f)
-      left_out.push_back("metallicRoughnessTexture's roughness on the dielectric (using roughnessFactor)");
     uint32_t normal_map = PSF_NO_TEXTURE;
     if (g.normalTexture.index >= 0) {
       // Linear (not sRGB-decoded): rgb = (n + 1) / 2 of the tangent-space normal n.
@@ -380,6 +374,14 @@ class GltfLoader {
     const bool transmits = !metal_only && transmission > 0.0f && ior > 1.0f;
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
+    // The texture's roughness (green) per hit for the metal and the glass
+    // (roughconductor, roughdielectric); the plastic's takes the factor
+    // (roughplastic's tables are made for one alpha).
+    const bool plastic_used = !metal_only && !(transmits && transmission >= 1.0f);
+    if (has_mr_texture && roughness > 0.0f && (has_metal || transmits))
+      alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
+    if (has_mr_texture && roughness > 0.0f && plastic_used)
+      left_out.push_back("metallicRoughnessTexture's roughness on the plastic (using roughnessFactor)");
     // The emission: emissiveFactor (times KHR_materials_emissive_strength) times
     // the emissive texture (sRGB-decoded), evaluated where it is hit or sampled.
     uint32_t emission_map = PSF_NO_TEXTURE;
@@ -448,6 +450,10 @@ class GltfLoader {
       m.specular = {{1, 1, 1, 0}};
       m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
       m.tex_color = PSF_NO_TEXTURE;
+      if (alpha_map != PSF_NO_TEXTURE) {
+        m.tex_alpha = alpha_map;
+        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
+      }
       return m;
     };
     auto plastic_part = [&]() {
