@@ -302,6 +302,8 @@ inline float3 plastic_base(Material m) {
 /* roughplastic's external transmittance T(cos) from its table; 1 - F(cos) (the
  * smooth coat's) for a material made without one. */
 inline float rough_transmittance(Material m, __global const half* table, float cos_t) {
+  if (m.flags & PSF_MATFLAG_ROUGH_TABLE2D) /* the two rows around the hit's roughness (surface.cl) */
+    return mix(table_lookup(table, cos_t), table_lookup(table + 4u * PSF_ROUGH_TABLE_WIDTH, cos_t), m.k.x);
   if (m.tex_table != PSF_NO_TEXTURE) return table_lookup(table, cos_t);
   float c, e;
   return 1.0f - fresnel_dielectric(cos_t, m.eta.x, &c, &e);

@@ -6,7 +6,7 @@
 
 inline __global const half* bsdf_test_table(Material m, __global const TextureInfo* textures,
                                             __global const half* texels) {
-  return m.tex_table != PSF_NO_TEXTURE ? texels + 4u * textures[m.tex_table].offset : texels;
+  return surface_table(m, textures, texels);
 }
 
 inline Frame bsdf_test_frame(void) {
@@ -80,4 +80,21 @@ __kernel void surface_test_frame(__global const Material* materials, __global co
   albedo_out[k] = m.albedo;
   specular_out[k] = m.specular;
   colour_out[k] = (float4)(bsdf_albedo(m), m.alpha_u);
+}
+
+/* surface_frame on triangle (p0, p1, p2) with attributes attribs[0] at
+ * barycentrics bary[k], material mat[k], then the roughplastic's coat as the
+ * BSDF reads it: out[k] = (external transmittance at cos_t[k], the internal and
+ * external reflectances eta.z and eta.w, alpha_u). */
+__kernel void surface_test_coat(__global const Material* materials, __global const TriAttrib* attribs,
+                                __global const TextureInfo* textures, __global const half* texels,
+                                __global const uint* mat, float4 p0, float4 p1, float4 p2,
+                                __global const float2* bary, __global const float* cos_t, __global float4* out,
+                                uint count) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  Material m = materials[mat[k]];
+  float3 ng = normalize(cross(p1.xyz - p0.xyz, p2.xyz - p0.xyz));
+  surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, ng, textures, texels);
+  out[k] = (float4)(rough_transmittance(m, surface_table(m, textures, texels), cos_t[k]), m.eta.z, m.eta.w, m.alpha_u);
 }

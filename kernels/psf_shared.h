@@ -138,6 +138,14 @@ typedef struct {
 /* tex_bump is a tangent-space normal map (rgb = (n + 1) / 2, glTF's normalTexture,
  * Mitsuba 3's normalmap) instead of a height map; bump_scale scales its x and y. */
 #define PSF_MATFLAG_NORMALMAP 32u
+/* roughplastic with a roughness texture (tex_alpha): tex_table holds
+ * PSF_ROUGH_TABLE_ROWS rows of PSF_ROUGH_TABLE_WIDTH texels, row r for the
+ * roughness sqrt(alpha) = r / (PSF_ROUGH_TABLE_ROWS - 1): the external
+ * transmittance by cos theta, then the internal and the external reflectance
+ * (eta.z, eta.w). Each hit interpolates between the two rows around its alpha
+ * (surface.cl rough_table_rows, which keeps the lower row in k.y and the upper
+ * row's weight in k.x). */
+#define PSF_MATFLAG_ROUGH_TABLE2D 64u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 
@@ -154,7 +162,8 @@ typedef struct {
   psf_float4 eta;           /* conductors: xyz real part of the relative IOR; plastics, dielectrics: x int/ext IOR,
                                y 1/x^2; plastics: z the coat's internal reflectance (F_dr(1/eta); roughplastic:
                                Mitsuba 3's), w its reflectance under uniform illumination (F_dr(eta)) */
-  psf_float4 k;             /* conductors: xyz imaginary part (absorption) of the relative IOR */
+  psf_float4 k;             /* conductors: xyz imaginary part (absorption) of the relative IOR; roughplastic with
+                               PSF_MATFLAG_ROUGH_TABLE2D: x the upper table row's weight, y the lower row */
   float alpha_u;            /* microfacet roughness along the shading tangent (rough types) */
   float alpha_v;            /* microfacet roughness along the bitangent */
   psf_uint type;            /* PSF_MATERIAL_* */
@@ -197,6 +206,9 @@ typedef struct {
 
 /* Entries of roughplastic's external transmittance table over cos theta in [0, 1] (as Mitsuba 3). */
 #define PSF_ROUGH_TABLE_RES 64
+/* The textured-roughness table (PSF_MATFLAG_ROUGH_TABLE2D): rows and their width. */
+#define PSF_ROUGH_TABLE_ROWS 16
+#define PSF_ROUGH_TABLE_WIDTH (PSF_ROUGH_TABLE_RES + 2)
 
 /* TextureInfo.flags */
 #define PSF_TEX_BILINEAR 1u /* bilinear filtering (else nearest texel) */

@@ -171,7 +171,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
                       bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)));
   Frame frame = surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels);
   float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
-  __global const half* table = m.tex_table != PSF_NO_TEXTURE ? texels + 4u * textures[m.tex_table].offset : texels;
+  __global const half* table = surface_table(m, textures, texels);
   uint segments = st.depth + 1u; /* segments of the path up to this vertex */
   bool scatter = depth_allows(params, segments + 1u) && bsdf_scatters(m);
 

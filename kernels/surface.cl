@@ -50,6 +50,31 @@ inline Material surface_blend(Material m, __global const Material* materials, __
   return m;
 }
 
+/* roughplastic with a roughness texture (PSF_MATFLAG_ROUGH_TABLE2D): the rows of
+ * its table around sqrt(alpha_u), the lower in k.y and the upper's weight in k.x,
+ * and the coat's internal and external reflectances (eta.z, eta.w) between them. */
+inline void rough_table_rows(Material* m, __global const TextureInfo* textures, __global const half* texels) {
+  float f = clamp(sqrt(m->alpha_u), 0.0f, 1.0f) * (float)(PSF_ROUGH_TABLE_ROWS - 1);
+  uint r = min((uint)f, (uint)(PSF_ROUGH_TABLE_ROWS - 2));
+  float w = f - (float)r;
+  __global const half* lo = texels + 4u * (textures[m->tex_table].offset + r * PSF_ROUGH_TABLE_WIDTH);
+  __global const half* hi = lo + 4u * PSF_ROUGH_TABLE_WIDTH;
+  m->eta.z = mix(vload_half(4u * PSF_ROUGH_TABLE_RES, lo), vload_half(4u * PSF_ROUGH_TABLE_RES, hi), w);
+  m->eta.w = mix(vload_half(4u * (PSF_ROUGH_TABLE_RES + 1), lo), vload_half(4u * (PSF_ROUGH_TABLE_RES + 1), hi), w);
+  m->k.x = w;
+  m->k.y = (float)r;
+}
+
+/* The row of the texel buffer the BSDF reads as m's table (roughplastic's; the
+ * lower of the two rows with PSF_MATFLAG_ROUGH_TABLE2D); the buffer's start for
+ * a material without one. */
+inline __global const half* surface_table(Material m, __global const TextureInfo* textures,
+                                          __global const half* texels) {
+  if (m.tex_table == PSF_NO_TEXTURE) return texels;
+  uint row = (m.flags & PSF_MATFLAG_ROUGH_TABLE2D) ? (uint)m.k.y * PSF_ROUGH_TABLE_WIDTH : 0u;
+  return texels + 4u * (textures[m.tex_table].offset + row);
+}
+
 /* A material's emission at barycentrics (b1, b2) of the triangle (its emission
  * texture, if any, multiplies it). */
 inline float3 surface_emission(Material m, __global const TriAttrib* a, float b1, float b2,
@@ -81,8 +106,10 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
     }
-    if (m->tex_alpha != PSF_NO_TEXTURE) /* textured roughness, at Mitsuba's lower bound */
+    if (m->tex_alpha != PSF_NO_TEXTURE) { /* textured roughness, at Mitsuba's lower bound */
       m->alpha_u = m->alpha_v = fmax(texture_eval(textures, texels, m->tex_alpha, uv).x, 1e-4f);
+      if (m->flags & PSF_MATFLAG_ROUGH_TABLE2D) rough_table_rows(m, textures, texels);
+    }
     /* dp/du and dp/dv of the triangle's uv parametrisation. */
     float2 d1 = uv1 - uv0, d2 = uv2 - uv0;
     float det = d1.x * d2.y - d1.y * d2.x;

@@ -1266,6 +1266,76 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(C[4].s[3] == Approx(0.1f));
 }
 
+TEST_CASE("Shading frame: a roughplastic's textured roughness reads its table's rows", "[bsdf]") {
+  // A roughplastic whose roughness texture holds alpha: at a hit its external
+  // transmittance T(cos) and its coat's internal and external reflectances
+  // match the one-row table finish_plastic makes for that alpha: exactly on a
+  // row (alpha = (6/15)^2) up to the halfs, between rows (alpha = 0.2) within
+  // the linear interpolation between neighbouring roughnesses.
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  psf::detail::TextureDesc flat;
+  flat.wrap = PSF_TEX_CLAMP;
+  auto plastic = [&](float alpha, uint32_t tex_alpha, bool beckmann) {
+    Material m{};
+    m.type = PSF_MATERIAL_ROUGH_PLASTIC;
+    m.albedo = {{0.5f, 0.5f, 0.5f, 0}};
+    m.specular = {{1, 1, 1, 0}};
+    m.eta = {{1.5f, 0, 0, 0}};
+    m.alpha_u = m.alpha_v = alpha;
+    m.tex_alpha = tex_alpha;
+    if (beckmann) m.flags |= PSF_MATFLAG_BECKMANN;
+    psf::detail::finish_plastic(m, 0.5f, 1.0f, store);
+    return m;
+  };
+  const float on_row = 0.16f, between = 0.2f;
+  uint32_t t_on = store.pixels(flat, 1, 1, {on_row, on_row, on_row, 1});
+  uint32_t t_between = store.pixels(flat, 1, 1, {between, between, between, 1});
+  std::vector<Material> mats;
+  for (bool beckmann : {false, true}) {
+    mats.push_back(plastic(on_row, PSF_NO_TEXTURE, beckmann));
+    mats.push_back(plastic(0.5f, t_on, beckmann));  // alpha 0.5 until the hit reads the texture
+    mats.push_back(plastic(between, PSF_NO_TEXTURE, beckmann));
+    mats.push_back(plastic(0.5f, t_between, beckmann));
+  }
+  CHECK((mats[1].flags & PSF_MATFLAG_ROUGH_TABLE2D) != 0u);
+  CHECK((mats[0].flags & PSF_MATFLAG_ROUGH_TABLE2D) == 0u);
+  REQUIRE(scene.textures[mats[1].tex_table].height == PSF_ROUGH_TABLE_ROWS);
+  TriAttrib a{};
+  a.uv01 = {{0, 0, 1, 0}};
+  a.v2 = 1;
+  auto& rt = psf::test::runtime();
+  cl::Buffer bm = rt.upload(mats), ba = rt.upload(std::vector<TriAttrib>{a});
+  cl::Buffer bt = rt.upload(scene.textures), bx = rt.upload(scene.texels);
+  std::vector<uint32_t> mi;
+  std::vector<cl_float2> bary;
+  std::vector<float> cosines;
+  for (uint32_t m = 0; m < mats.size(); ++m)
+    for (float c : {0.05f, 0.3f, 0.6f, 1.0f}) {
+      mi.push_back(m);
+      bary.push_back({{0.3f, 0.3f}});
+      cosines.push_back(c);
+    }
+  const uint32_t n = uint32_t(mi.size());
+  cl::Buffer bmi = rt.upload(mi), bb = rt.upload(bary), bc = rt.upload(cosines);
+  cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * 16);
+  cl_float4 p0 = {{0, 0, 0, 0}}, p1 = {{1, 0, 0, 0}}, p2 = {{0, 1, 0, 0}};
+  rt.launch("surface_test_coat", n, 64, bm, ba, bt, bx, bmi, p0, p1, p2, bb, bc, out, n);
+  auto got = rt.download<cl_float4>(out, n);
+  for (uint32_t q = 0; q < n; ++q) {
+    const uint32_t m = mi[q];
+    if (m % 2 == 0) continue;  // the references
+    const uint32_t ref = q - 4;  // the same cosine of the untextured material before it
+    const bool on = (m % 4) == 1;
+    INFO("material " << m << " cos " << cosines[q] << (on ? " on a row" : " between rows"));
+    const double tol = on ? 2e-3 : 1e-2;
+    CHECK(got[q].s[3] == Approx(on ? on_row : between).margin(1e-4));  // alpha from the texture
+    CHECK(got[q].s[0] == Approx(got[ref].s[0]).margin(tol));           // T(cos)
+    CHECK(got[q].s[1] == Approx(got[ref].s[1]).margin(tol));           // internal reflectance
+    CHECK(got[q].s[2] == Approx(got[ref].s[2]).margin(tol));           // external reflectance
+  }
+}
+
 TEST_CASE("Textures: EXR and HDR images load linear, beyond 1", "[bsdf]") {
   TempDir dir;
   psf::Image img;

@@ -586,6 +586,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     // the blue channel, linear) the metal.
     const Material& d = s.materials[s.tri_material[0]];
     CHECK(d.type == PSF_MATERIAL_ROUGH_PLASTIC);
+    CHECK(s.warnings.empty());
     REQUIRE(d.blend > 0);
     REQUIRE(d.blend <= s.materials.size());
     CHECK(d.blend_weight == 1.0f);
@@ -599,6 +600,10 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(texel_x(s, m.tex_alpha, 0) == Approx(r * r).margin(1e-3));  // (factor x green)^2, green linear
     CHECK(m.alpha_u == Approx(r * r).margin(1e-3));
     CHECK(m.two_sided == d.two_sided);
+    // The plastic reads the same roughness per texel, through its table's rows.
+    CHECK(d.tex_alpha == m.tex_alpha);
+    CHECK((d.flags & PSF_MATFLAG_ROUGH_TABLE2D) != 0u);
+    CHECK(s.textures[d.tex_table].height == PSF_ROUGH_TABLE_ROWS);
   }
   SECTION("KHR_texture_transform: u' = offset + R(rotation) S(scale) u") {
     const unsigned char px[] = {200, 100, 50};

@@ -374,14 +374,10 @@ class GltfLoader {
     const bool transmits = !metal_only && transmission > 0.0f && ior > 1.0f;
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
-    // The texture's roughness (green) per hit for the metal and the glass
-    // (roughconductor, roughdielectric); the plastic's takes the factor
-    // (roughplastic's tables are made for one alpha).
-    const bool plastic_used = !metal_only && !(transmits && transmission >= 1.0f);
-    if (has_mr_texture && roughness > 0.0f && (has_metal || transmits))
+    // The texture's roughness (green) per hit, for every part (roughconductor,
+    // roughdielectric, and roughplastic through its table of rows by roughness).
+    if (has_mr_texture && roughness > 0.0f)
       alpha_map = roughness_texture(pbr.metallicRoughnessTexture, roughness, where);
-    if (has_mr_texture && roughness > 0.0f && plastic_used)
-      left_out.push_back("metallicRoughnessTexture's roughness on the plastic (using roughnessFactor)");
     // The emission: emissiveFactor (times KHR_materials_emissive_strength) times
     // the emissive texture (sRGB-decoded), evaluated where it is hit or sampled.
     uint32_t emission_map = PSF_NO_TEXTURE;
@@ -462,6 +458,10 @@ class GltfLoader {
       m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
       m.specular = {{1, 1, 1, 0}};
       m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
+      if (alpha_map != PSF_NO_TEXTURE) {
+        m.tex_alpha = alpha_map;
+        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
+      }
       detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
       return m;
     };

@@ -2,8 +2,10 @@
 // table) and the per-triangle shading attributes; textures are in textures.cpp.
 #include "scene/materials.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <thread>
 #include <utility>
 
 namespace psf {
@@ -219,24 +221,70 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
     return;
   }
   // roughplastic (Mitsuba 3): T(mu_i) = 1 - R(mu_i, eta) at mu_i = i / (N - 1)
-  // (at least 1e-6), internal reflectance 2 mean_i(R(mu_i, 1 / eta) mu_i).
+  // (at least 1e-6), internal reflectance 2 mean_i(R(mu_i, 1 / eta) mu_i). One
+  // row for the material's alpha; with a roughness texture (tex_alpha) a row per
+  // roughness r / (ROWS - 1), each followed by its internal and external
+  // reflectance, that the kernel interpolates per hit (PSF_MATFLAG_ROUGH_TABLE2D).
   const bool beckmann = (m.flags & PSF_MATFLAG_BECKMANN) != 0;
-  const double alpha = m.alpha_u;
+  auto row = [&](double alpha, double& internal, double& external) {
+    std::vector<float> t(PSF_ROUGH_TABLE_RES);
+    internal = external = 0.0;
+    for (int i = 0; i < PSF_ROUGH_TABLE_RES; ++i) {
+      double mu = std::max(1e-6, double(i) / (PSF_ROUGH_TABLE_RES - 1));
+      double r = rough_reflectance(mu, alpha, eta, beckmann);
+      t[size_t(i)] = float(1.0 - r);
+      internal += rough_reflectance(mu, alpha, 1.0 / eta, beckmann) * mu;
+      external += r * mu;
+    }
+    internal *= 2.0 / PSF_ROUGH_TABLE_RES;
+    external *= 2.0 / PSF_ROUGH_TABLE_RES;
+    return t;
+  };
   std::ostringstream key;
   key.precision(9);
-  key << "roughplastic " << (beckmann ? "beckmann " : "ggx ") << alpha << " " << eta;
-  std::vector<float> table(PSF_ROUGH_TABLE_RES);
+  key << "roughplastic " << (beckmann ? "beckmann " : "ggx ") << eta;
   double internal = 0.0, external = 0.0;
-  for (int i = 0; i < PSF_ROUGH_TABLE_RES; ++i) {
-    double mu = std::max(1e-6, double(i) / (PSF_ROUGH_TABLE_RES - 1));
-    double r = rough_reflectance(mu, alpha, eta, beckmann);
-    table[i] = float(1.0 - r);
-    internal += rough_reflectance(mu, alpha, 1.0 / eta, beckmann) * mu;
-    external += r * mu;
+  if (m.tex_alpha == PSF_NO_TEXTURE) {
+    key << " " << m.alpha_u;
+    m.flags &= ~PSF_MATFLAG_ROUGH_TABLE2D;
+    m.tex_table = store.table(key.str(), row(m.alpha_u, internal, external));
+    m.eta.s[2] = float(internal);
+    m.eta.s[3] = float(external);
+    return;
   }
-  m.eta.s[2] = float(2.0 * internal / PSF_ROUGH_TABLE_RES);
-  m.eta.s[3] = float(2.0 * external / PSF_ROUGH_TABLE_RES);
-  m.tex_table = store.table(key.str(), table);
+  // The rows (in parallel: each is a few hundred thousand microfacet integrand
+  // evaluations), then eta.z, eta.w and k for the texture's mean alpha, for what
+  // reads them before a hit sets its own (kernels/surface.cl rough_table_rows).
+  key << " rows " << PSF_ROUGH_TABLE_ROWS;
+  std::vector<float> table(size_t(PSF_ROUGH_TABLE_ROWS) * PSF_ROUGH_TABLE_WIDTH);
+  std::vector<double> in(PSF_ROUGH_TABLE_ROWS), ex(PSF_ROUGH_TABLE_ROWS);
+  auto fill = [&](int r) {
+    double rough = double(r) / (PSF_ROUGH_TABLE_ROWS - 1);
+    std::vector<float> t = row(std::max(rough * rough, 1e-4), in[size_t(r)], ex[size_t(r)]);
+    float* dst = &table[size_t(r) * PSF_ROUGH_TABLE_WIDTH];
+    std::copy(t.begin(), t.end(), dst);
+    dst[PSF_ROUGH_TABLE_RES] = float(in[size_t(r)]);
+    dst[PSF_ROUGH_TABLE_RES + 1] = float(ex[size_t(r)]);
+  };
+  if (!store.has_table(key.str())) {
+    std::vector<std::thread> workers;
+    const int n = int(std::max(1u, std::min(std::thread::hardware_concurrency(), unsigned(PSF_ROUGH_TABLE_ROWS))));
+    for (int w = 0; w < n; ++w)
+      workers.emplace_back([&, w] {
+        for (int r = w; r < PSF_ROUGH_TABLE_ROWS; r += n) fill(r);
+      });
+    for (auto& t : workers) t.join();
+  }
+  m.flags |= PSF_MATFLAG_ROUGH_TABLE2D;
+  m.tex_table = store.table(key.str(), table, PSF_ROUGH_TABLE_WIDTH);
+  const std::vector<float>& stored = store.table_values(m.tex_table);
+  double f = std::clamp(std::sqrt(double(m.alpha_u)), 0.0, 1.0) * (PSF_ROUGH_TABLE_ROWS - 1);
+  int r = std::min(int(f), PSF_ROUGH_TABLE_ROWS - 2);
+  double w = f - r;
+  auto at = [&](int row_index, int column) { return double(stored[size_t(row_index) * PSF_ROUGH_TABLE_WIDTH + column]); };
+  m.eta.s[2] = float((1 - w) * at(r, PSF_ROUGH_TABLE_RES) + w * at(r + 1, PSF_ROUGH_TABLE_RES));
+  m.eta.s[3] = float((1 - w) * at(r, PSF_ROUGH_TABLE_RES + 1) + w * at(r + 1, PSF_ROUGH_TABLE_RES + 1));
+  m.k = {{float(w), float(r), 0, 0}};
 }
 
 }  // namespace psf::detail

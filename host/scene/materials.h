@@ -52,8 +52,12 @@ class TextureStore {
   // rows from the top), with desc's filtering, wrapping and uv transform (desc.path is ignored).
   uint32_t pixels(const TextureDesc& desc, int width, int height, const std::vector<float>& rgba);
 
-  // A 1 x n table (x channel), reused for equal `key`s.
-  uint32_t table(const std::string& key, const std::vector<float>& values);
+  // A table (x channel) of `width` columns (0: one row of all the values),
+  // reused for equal `key`s.
+  uint32_t table(const std::string& key, const std::vector<float>& values, int width = 0);
+  // Whether table() holds one for `key`, and the values of table `index`.
+  bool has_table(const std::string& key) const { return cache_.count("table|" + key) != 0; }
+  const std::vector<float>& table_values(uint32_t index) const { return table_values_.at(index); }
 
   // Mean of the RGB channels of texture `index` over its texels.
   glm::vec3 mean(uint32_t index) const;
@@ -64,6 +68,7 @@ class TextureStore {
   Scene& scene_;
   std::map<std::string, uint32_t> cache_;  // file + use + sampling -> index; table keys
   std::map<uint32_t, glm::vec3> means_;    // texture -> mean RGB
+  std::map<uint32_t, std::vector<float>> table_values_;  // table() textures -> their values
 };
 
 // Mitsuba's named dielectric IORs ("bk7", "water", "air", ...); nullopt if unknown.

@@ -1126,9 +1126,10 @@ class MitsubaLoader {
       return float(get_float(e, name, 0.1));
     };
     // A texture for 'alpha' (Mitsuba 3) where the roughness is read per hit
-    // (kernels/surface.cl): roughconductor and roughdielectric; roughplastic's
-    // tables are made for one alpha.
-    const bool texturable = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC;
+    // (kernels/surface.cl): roughconductor, roughdielectric, and roughplastic
+    // through its table of rows by roughness (finish_plastic).
+    const bool texturable = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+                            m.type == PSF_MATERIAL_ROUGH_PLASTIC;
     if (a && a->kind == Property::Kind::Object && texturable)
       m.tex_alpha = texture(a->object, TextureUse::Height, "using 0.1");
     float alpha_u, alpha_v;

@@ -199,14 +199,18 @@ uint32_t TextureStore::pixels(const TextureDesc& d, int width, int height, const
   return append(d, width, height, rgba);
 }
 
-uint32_t TextureStore::table(const std::string& key, const std::vector<float>& values) {
+uint32_t TextureStore::table(const std::string& key, const std::vector<float>& values, int width) {
   auto it = cache_.find("table|" + key);
   if (it != cache_.end()) return it->second;
+  if (width <= 0) width = int(values.size());
+  if (values.empty() || values.size() % size_t(width) != 0)
+    throw std::invalid_argument("TextureStore::table: not a whole number of rows");
   std::vector<float> rgba(values.size() * 4, 1.0f);
   for (size_t i = 0; i < values.size(); ++i) rgba[i * 4] = values[i];
   TextureDesc d;
   d.wrap = PSF_TEX_CLAMP;
-  uint32_t index = append(d, int(values.size()), 1, rgba);
+  uint32_t index = append(d, width, int(values.size() / size_t(width)), rgba);
+  table_values_.emplace(index, values);
   cache_.emplace("table|" + key, index);
   return index;
 }
