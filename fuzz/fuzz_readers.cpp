@@ -4,6 +4,7 @@
 // folder and read from there. One source, one target per PSF_FUZZ_TARGET:
 //   xml: load_mitsuba   obj: load_obj_scene   mtl: an OBJ whose mtllib is the input
 //   ply: load_ply_scene  gltf / glb: load_gltf_scene  resume: read_exr_file + load_state
+//   serialized: read_serialized, its first and second mesh
 // A reader may reject an input only by throwing; anything else (a crash, a
 // sanitizer report, an exception of another type escaping) is a finding.
 #include <unistd.h>
@@ -66,6 +67,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     psf::detail::load_obj_scene(obj.string());
 #elif defined(PSF_FUZZ_PLY)
     psf::detail::load_ply_scene(write_input("mesh.ply", data, size).string());
+#elif defined(PSF_FUZZ_SERIALIZED)
+    const std::string path = write_input("mesh.serialized", data, size).string();
+    try {
+      psf::detail::read_serialized(path, 0);
+    } catch (const std::exception&) {
+    }
+    psf::detail::read_serialized(path, 1);
 #elif defined(PSF_FUZZ_GLTF)
     psf::detail::load_gltf_scene(write_input("scene.gltf", data, size).string());
 #elif defined(PSF_FUZZ_GLB)

@@ -14,6 +14,7 @@
 #include <optional>
 
 #include <stb_image_write.h>
+#include <zlib.h>
 
 #include "image.h"
 #include "scene/formats.h"
@@ -437,6 +438,163 @@ TEST_CASE("PLY: load_scene and Mitsuba's ply shape", "[formats]") {
   auto [line, msg] = error_of([&] { psf::load_scene(bad); });
   CHECK(line == 8);
   CHECK(contains(msg, "bad.ply"));
+}
+
+using psf::detail::read_serialized;
+using psf::detail::SerializedMesh;
+
+namespace {
+// A Mitsuba .serialized mesh, written here with zlib from the format's
+// description: header, then the zlib stream of flags, name (version 4), counts,
+// positions, normals, uvs (where given, in double precision if `dbl`) and
+// uint32 indices.
+struct SerialMesh {
+  std::vector<glm::vec3> p, n;
+  std::vector<glm::vec2> uv;
+  std::vector<uint32_t> idx;
+  std::string name;
+  bool dbl = false;
+  uint32_t extra_flags = 0;
+};
+template <class T>
+void put_le(std::string& out, T v) {
+  for (size_t i = 0; i < sizeof(T); ++i) out.push_back(char((uint64_t(v) >> (8 * i)) & 0xFF));
+}
+std::string serialized_stream(const SerialMesh& m, uint16_t version) {
+  std::string raw;
+  uint32_t flags = (m.n.empty() ? 0u : 0x0001u) | (m.uv.empty() ? 0u : 0x0002u) | (m.dbl ? 0x2000u : 0x1000u) | m.extra_flags;
+  put_le(raw, flags);
+  if (version == 4) raw += m.name + std::string(1, '\0');
+  put_le(raw, uint64_t(m.p.size()));
+  put_le(raw, uint64_t(m.idx.size() / 3));
+  auto real = [&](float v) {
+    if (m.dbl) {
+      double d = v;
+      uint64_t b;
+      std::memcpy(&b, &d, 8);
+      put_le(raw, b);
+    } else {
+      uint32_t b;
+      std::memcpy(&b, &v, 4);
+      put_le(raw, b);
+    }
+  };
+  for (const auto& v : m.p) real(v.x), real(v.y), real(v.z);
+  for (const auto& v : m.n) real(v.x), real(v.y), real(v.z);
+  for (const auto& v : m.uv) real(v.x), real(v.y);
+  for (uint32_t i : m.idx) put_le(raw, i);
+  uLongf size = compressBound(uLong(raw.size()));
+  std::string z(size, '\0');
+  REQUIRE(compress2(reinterpret_cast<Bytef*>(&z[0]), &size, reinterpret_cast<const Bytef*>(raw.data()), uLong(raw.size()),
+                    6) == Z_OK);
+  z.resize(size);
+  std::string out;
+  put_le(out, uint16_t(0x041C));
+  put_le(out, version);
+  return out + z;
+}
+std::string serialized_file(const std::vector<SerialMesh>& meshes, uint16_t version) {
+  std::string out;
+  std::vector<uint64_t> offsets;
+  for (const auto& m : meshes) {
+    offsets.push_back(out.size());
+    out += serialized_stream(m, version);
+  }
+  for (uint64_t o : offsets) version == 4 ? put_le(out, o) : put_le(out, uint32_t(o));
+  put_le(out, uint32_t(meshes.size()));
+  return out;
+}
+}  // namespace
+
+TEST_CASE("Serialized: Mitsuba's binary meshes, by shape_index, both versions", "[formats]") {
+  TempDir dir;
+  SerialMesh quad;  // single precision, normals and uvs
+  quad.name = "quad";
+  quad.p = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  quad.n = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+  quad.uv = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
+  quad.idx = {0, 1, 2, 0, 2, 3};
+  SerialMesh tri;  // double precision, no normals: smooth ones are computed
+  tri.name = "triangle";
+  tri.dbl = true;
+  tri.p = {{0, 0, 2}, {0.5f, 0, 2}, {0, 0.25f, 2}};
+  tri.idx = {0, 1, 2};
+  for (uint16_t version : {uint16_t(4), uint16_t(3)}) {
+    INFO("version " << version);
+    const std::string file = dir.write("m.serialized", serialized_file({quad, tri}, version));
+    SerializedMesh a = read_serialized(file, 0);
+    CHECK(a.name == (version == 4 ? "quad" : ""));
+    CHECK(a.mesh.positions == quad.p);
+    CHECK(a.mesh.normals == quad.n);
+    CHECK(a.mesh.uvs == quad.uv);
+    REQUIRE(a.mesh.triangles.size() == 2);
+    CHECK(a.mesh.triangles[1] == glm::uvec3(0, 2, 3));
+    SerializedMesh b = read_serialized(file, 1);
+    CHECK(b.mesh.positions == tri.p);
+    CHECK(b.mesh.normals.empty());
+    CHECK(b.mesh.uvs.empty());
+    CHECK(b.mesh.triangles.size() == 1);
+    // Through Mitsuba's serialized shape, with to_world.
+    std::string xml = dir.write(
+        "scene.xml", "<scene version=\"3.0.0\">\n"
+                     "<shape type=\"serialized\"><string name=\"filename\" value=\"m.serialized\"/>"
+                     "<transform name=\"to_world\"><translate x=\"10\"/></transform></shape>\n"
+                     "<shape type=\"serialized\"><string name=\"filename\" value=\"m.serialized\"/>"
+                     "<integer name=\"shape_index\" value=\"1\"/></shape>\n</scene>\n");
+    psf::Scene s = psf::load_scene(xml);
+    REQUIRE(s.triangles.size() == 3);
+    REQUIRE(s.positions.size() == 7);
+    CHECK(s.positions[2] == glm::vec3(11, 1, 0));
+    CHECK(s.positions[5] == glm::vec3(0.5f, 0, 2));
+    REQUIRE(s.normals.size() == 7);
+    CHECK(glm::length(s.normals[5] - glm::vec3(0, 0, 1)) < 1e-6f);  // computed for the triangle
+  }
+  // The file's face-normal flag drops its normals.
+  SerialMesh faceted = quad;
+  faceted.extra_flags = 0x0010;
+  CHECK(read_serialized(dir.write("f.serialized", serialized_file({faceted}, 4)), 0).face_normals);
+}
+
+TEST_CASE("Serialized: malformed files are errors naming the file", "[formats]") {
+  TempDir dir;
+  SerialMesh tri;
+  tri.p = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  tri.idx = {0, 1, 2};
+  const std::string good = serialized_file({tri}, 4);
+  auto error = [&](const std::string& bytes, int index = 0) {
+    return error_of([&] { read_serialized(dir.write("x.serialized", bytes), index); });
+  };
+  CHECK(contains(error("PK\x03\x04 not a mesh").second, "not a Mitsuba serialized mesh"));
+  std::string v9 = good;
+  v9[2] = 9;
+  CHECK(contains(error(v9).second, "version 9"));
+  CHECK(contains(error(good, 1).second, "shape_index 1 is out of range (the file holds 1 meshes)"));
+  CHECK(contains(error(good.substr(0, 20)).second, "compressed data"));
+  std::string corrupt = good;
+  corrupt[6] = char(corrupt[6] ^ 0x55);
+  CHECK(contains(error(corrupt).second, "compressed data"));
+  SerialMesh out_of_range = tri;
+  out_of_range.idx = {0, 1, 3};
+  CHECK(contains(error(serialized_file({out_of_range}, 4)).second, "triangle 0 refers to vertex 3 of 3"));
+  // A count larger than the data: checked before anything is allocated.
+  SerialMesh big = tri;
+  std::string lie = serialized_stream(big, 3);
+  std::string raw_counts;  // version 3: flags, then the counts at offset 4 of the stream
+  put_le(raw_counts, uint32_t(0x1000));
+  put_le(raw_counts, uint64_t(1) << 40);
+  put_le(raw_counts, uint64_t(1));
+  uLongf size = compressBound(uLong(raw_counts.size()));
+  std::string z(size, '\0');
+  REQUIRE(compress2(reinterpret_cast<Bytef*>(&z[0]), &size, reinterpret_cast<const Bytef*>(raw_counts.data()),
+                    uLong(raw_counts.size()), 6) == Z_OK);
+  z.resize(size);
+  std::string huge = lie.substr(0, 4) + z;
+  CHECK(contains(error(huge).second, "do not fit its data"));
+  // Through the XML loader: the error names the serialized file.
+  dir.write("bad.serialized", corrupt);
+  std::string xml = dir.write("bad.xml", "<scene version=\"3.0.0\">\n<shape type=\"serialized\"><string name=\"filename\" "
+                                         "value=\"bad.serialized\"/></shape>\n</scene>\n");
+  CHECK(contains(error_of([&] { psf::load_scene(xml); }).second, "bad.serialized"));
 }
 
 TEST_CASE("PLY: the shared Stanford bunny (binary)", "[formats]") {

@@ -1,5 +1,6 @@
-// Mesh file formats besides OBJ: PLY (host/scene/ply.cpp) and glTF 2.0
-// (host/scene/gltf.cpp), and the default lighting of bare mesh files.
+// Mesh file formats besides OBJ: PLY (host/scene/ply.cpp), Mitsuba's .serialized
+// (host/scene/serialized.cpp) and glTF 2.0 (host/scene/gltf.cpp), and the default
+// lighting of bare mesh files.
 #pragma once
 #include <string>
 #include <vector>
@@ -27,6 +28,23 @@ struct PlyMesh {
 // offset, or for ASCII data the line, of: a bad header, an unknown type, a
 // truncated body, an out-of-range index, a non-finite vertex.
 PlyMesh read_ply(const std::string& path);
+
+// One mesh of a Mitsuba .serialized file (Mitsuba 0.5 to 3: a little-endian
+// header 0x041C and version 3 or 4, then per mesh a zlib stream of flags, the
+// name (version 4), vertex and triangle counts, positions, and optional normals,
+// uvs and colours in single or double precision, then uint32 indices; at the end
+// of the file each mesh's offset and the mesh count).
+struct SerializedMesh {
+  TriMesh mesh;               // positions, triangles, and the normals and uvs the file has (file coordinates)
+  std::string name;           // the mesh's name (version 4), else empty
+  bool face_normals = false;  // the file asks for face normals (flag 0x0010)
+};
+
+// Reads mesh `shape_index` of a .serialized file. Throws SceneError naming the
+// file (line 0) for: a file that is not one, an unknown version, a shape index
+// outside the file's dictionary, a corrupt or truncated zlib stream, counts that
+// do not fit the data, an index outside the vertices.
+SerializedMesh read_serialized(const std::string& path, int shape_index);
 
 // Loads a PLY file as a scene: one diffuse material (albedo 0.5, two-sided),
 // smooth vertex normals unless the file has its own, camera_framing, a 512x512

@@ -901,7 +901,8 @@ class MitsubaLoader {
                                                                 {"cube", &MitsubaLoader::shape_cube},
                                                                 {"disk", &MitsubaLoader::shape_disk},
                                                                 {"sphere", &MitsubaLoader::shape_sphere},
-                                                                {"ply", &MitsubaLoader::shape_ply}};
+                                                                {"ply", &MitsubaLoader::shape_ply},
+                                                                {"serialized", &MitsubaLoader::shape_serialized}};
     return plugins;
   }
 
@@ -943,6 +944,20 @@ class MitsubaLoader {
     if (get_bool(e, "face_normals", false)) mesh.normals.clear();
     else if (mesh.normals.empty()) compute_vertex_normals(mesh);
     return mesh;
+  }
+
+  // serialized: mesh `shape_index` (default 0) of a Mitsuba .serialized file.
+  TriMesh shape_serialized(const Element& e) {
+    std::optional<std::string> name = get_string(e, "filename");
+    if (!name) fail(e.node, "<shape type=\"serialized\"> needs a 'filename'");
+    std::string path = resolve(e.node, *name);
+    if (!fs::is_regular_file(path)) fail(e.node, "cannot open serialized mesh file '" + path + "'");
+    SerializedMesh s = read_serialized(path, get_int(e, "shape_index", 0));
+    // As for OBJ: face normals (asked for by the file or by face_normals) discard
+    // the file's normals; without any, Mitsuba computes smooth ones.
+    if (s.face_normals || get_bool(e, "face_normals", false)) s.mesh.normals.clear();
+    else if (s.mesh.normals.empty()) compute_vertex_normals(s.mesh);
+    return std::move(s.mesh);
   }
 
   TriMesh shape_ply(const Element& e) {
