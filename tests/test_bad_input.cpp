@@ -78,6 +78,8 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"film-negative.xml", "film-negative.xml:5:"},
       {"nan-transform.xml", "nan-transform.xml:3:"},
       {"missing-mesh.xml", "no-such-mesh.obj"},
+      {"integer-overflow.xml", "integer-overflow.xml:4:"},
+      {"bad-serialized.xml", "index-out-of-range.serialized"},
       {"truncated.obj", "truncated.obj:6:"},
       {"nan-vertex.obj", "nan-vertex.obj:3:"},
       {"inf-vertex.obj", "inf-vertex.obj:3:"},

@@ -379,6 +379,33 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
     CHECK(glm::length(p - glm::vec3(10, 0, 0)) == Approx(2.0f).epsilon(1e-5));
 }
 
+TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {
+  // A group of a rectangle (its own to_world: scaled by 2) and a cube with a
+  // diffuse BSDF, drawn by two instances (translated by x = 10 and by y = 5);
+  // the group itself draws nothing.
+  psf::Scene s = load_text(
+      "<shape type=\"shapegroup\" id=\"g\">\n"
+      "  <shape type=\"rectangle\"><transform name=\"to_world\"><scale value=\"2\"/></transform></shape>\n"
+      "  <shape type=\"cube\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.3\"/></bsdf></shape>\n"
+      "</shape>\n"
+      "<shape type=\"instance\"><ref id=\"g\"/><transform name=\"to_world\"><translate x=\"10\"/></transform></shape>\n"
+      "<shape type=\"instance\"><ref id=\"g\"/><transform name=\"to_world\"><translate y=\"5\"/></transform></shape>\n");
+  REQUIRE(s.triangles.size() == 2 * (2 + 12));
+  REQUIRE(s.positions.size() == 2 * (4 + 24));
+  CHECK(s.positions[0] == glm::vec3(8, -2, 0));   // the first instance's rectangle: scaled, then moved by x
+  CHECK(s.positions[28] == glm::vec3(-2, 3, 0));  // the second's: scaled, then moved by y
+  // One material per (BSDF, emitter) pair, shared by the instances.
+  CHECK(s.tri_material[2] == s.tri_material[16]);
+  CHECK(near(albedo(s.materials[s.tri_material[2]]), glm::vec3(0.3f)));
+  // An instance needs a shapegroup; instances do not nest.
+  require_xml_error("<shape type=\"rectangle\" id=\"r\"/>\n<shape type=\"instance\"><ref id=\"r\"/></shape>\n", 3,
+                    "needs one reference to a shapegroup");
+  require_xml_error("<shape type=\"shapegroup\" id=\"a\"><shape type=\"cube\"/></shape>\n"
+                    "<shape type=\"shapegroup\" id=\"b\">\n<shape type=\"instance\"><ref id=\"a\"/></shape></shape>\n"
+                    "<shape type=\"instance\"><ref id=\"b\"/></shape>\n",
+                    4, "nested instancing");
+}
+
 TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
   psf::Scene s = load_text(
       "<bsdf type=\"principled\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"

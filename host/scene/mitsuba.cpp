@@ -17,13 +17,15 @@
 // Mitsuba 3's (to_world, fov_axis, max_depth, sample_count, ...).
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <glm/gtc/matrix_transform.hpp>
-#include <map>
 #include <functional>
+#include <glm/gtc/matrix_transform.hpp>
+#include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 #include <pugixml.hpp>
@@ -545,8 +547,11 @@ class MitsubaLoader {
       p.kind = Property::Kind::Integer;
       std::string v(trim(required_attr(node, "value")));
       char* end = nullptr;
+      errno = 0;
       long long x = std::strtoll(v.c_str(), &end, 10);
       if (v.empty() || end != v.c_str() + v.size()) fail(node, "'" + v + "' is not an integer");
+      if (errno == ERANGE || x < std::numeric_limits<int>::min() || x > std::numeric_limits<int>::max())
+        fail(node, "'" + v + "' is out of the range of an integer");
       p.number = double(x);
     } else if (tag == "boolean") {
       p.kind = Property::Kind::Boolean;
@@ -906,13 +911,35 @@ class MitsubaLoader {
     return plugins;
   }
 
-  void load_shape(pugi::xml_node node) {
+  void load_shape(pugi::xml_node node) { load_shape_at(node, glm::mat4(1.0f), 0); }
+
+  // A shape, its to_world after `parent` (the instance it is reached through,
+  // `depth` 1, else 0). A shapegroup is not drawn itself; an instance draws the
+  // shapes of the shapegroup it refers to, each copied into the scene with the
+  // instance's to_world applied after its own (as Mitsuba, no nested instancing).
+  void load_shape_at(pugi::xml_node node, const glm::mat4& parent, int depth) {
     Element e = parse_element(node);
+    if (e.type == "shapegroup") {
+      for (pugi::xml_node o : e.objects)
+        if (std::string(o.name()) != "shape")
+          warn(o, "shapegroup:" + std::string(o.name()), "<" + std::string(o.name()) + "> in a shapegroup is ignored");
+      return;
+    }
+    if (e.type == "instance") {
+      std::vector<pugi::xml_node> groups = objects(e, "shape");
+      if (groups.size() != 1 || attr(groups[0], "type").value_or("") != "shapegroup")
+        fail(node, "<shape type=\"instance\"> needs one reference to a shapegroup");
+      if (depth > 0) fail(node, "an instance inside a shapegroup (nested instancing) is not supported");
+      const glm::mat4 to_world = parent * get_transform(e, "to_world");
+      Element group = parse_element(groups[0]);
+      for (pugi::xml_node child : objects(group, "shape")) load_shape_at(child, to_world, depth + 1);
+      return;
+    }
     auto plugin = shape_plugins().find(e.type);
     if (plugin == shape_plugins().end()) {
       std::string known;
       for (const auto& entry : shape_plugins()) known += (known.empty() ? "" : ", ") + entry.first;
-      fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ")");
+      fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
 
@@ -925,8 +952,8 @@ class MitsubaLoader {
     }
     uint32_t mat =
         material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0], emitters.empty() ? pugi::xml_node() : emitters[0]);
-    append_mesh(scene_, mesh, get_transform(e, "to_world"), mat, get_bool(e, "flip_normals", false), file_of(node).path,
-                line_of(node));
+    append_mesh(scene_, mesh, parent * get_transform(e, "to_world"), mat, get_bool(e, "flip_normals", false),
+                file_of(node).path, line_of(node));
   }
 
   TriMesh shape_obj(const Element& e) {
