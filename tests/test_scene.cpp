@@ -406,6 +406,18 @@ TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance
                     4, "nested instancing");
 }
 
+TEST_CASE("<alias> gives an element a second id", "[scene]") {
+  psf::Scene s = load_text(
+      "<bsdf type=\"diffuse\" id=\"red\"><rgb name=\"reflectance\" value=\"0.8 0.1 0.1\"/></bsdf>\n"
+      "<alias id=\"red\" as=\"wall\"/>\n"
+      "<shape type=\"rectangle\"><ref id=\"wall\"/></shape>\n");
+  REQUIRE(s.materials.size() == 1);
+  CHECK(near(albedo(s.materials[0]), glm::vec3(0.8f, 0.1f, 0.1f)));
+  require_xml_error("<alias id=\"nothing\" as=\"x\"/>\n", 2, "alias of unknown id 'nothing'");
+  require_xml_error("<bsdf type=\"diffuse\" id=\"a\"/>\n<bsdf type=\"diffuse\" id=\"b\"/>\n<alias id=\"a\" as=\"b\"/>\n",
+                    4, "duplicate id 'b'");
+}
+
 TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
   psf::Scene s = load_text(
       "<bsdf type=\"principled\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"

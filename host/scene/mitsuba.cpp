@@ -304,12 +304,14 @@ class MitsubaLoader {
     std::vector<std::string> include_stack = {fs::weakly_canonical(path).string()};
     collect(root, top, include_stack);
     for (pugi::xml_node node : top) index_ids(node);
+    resolve_aliases();
 
     using Handler = void (MitsubaLoader::*)(pugi::xml_node);
     static const std::map<std::string, Handler> handlers = {
         {"integrator", &MitsubaLoader::load_integrator}, {"sensor", &MitsubaLoader::load_sensor},
         {"shape", &MitsubaLoader::load_shape},           {"bsdf", &MitsubaLoader::load_top_bsdf},
         {"emitter", &MitsubaLoader::load_top_emitter},   {"texture", &MitsubaLoader::skip},
+        {"alias", &MitsubaLoader::skip},
     };
     for (pugi::xml_node node : top) {
       auto it = handlers.find(node.name());
@@ -491,6 +493,10 @@ class MitsubaLoader {
   }
 
   void index_ids(pugi::xml_node node) {
+    if (std::string(node.name()) == "alias") {  // resolved once every id is known (resolve_aliases)
+      aliases_.push_back(node);
+      return;
+    }
     if (node.attribute("id") && std::string(node.name()) != "ref") {
       std::string id = required_attr(node, "id");
       auto [it, inserted] = ids_.emplace(id, node);
@@ -498,6 +504,17 @@ class MitsubaLoader {
     }
     for (pugi::xml_node child : node.children())
       if (child.type() == pugi::node_element) index_ids(child);
+  }
+
+  // <alias id="a" as="b"/>: b names the element a names.
+  void resolve_aliases() {
+    for (pugi::xml_node node : aliases_) {
+      std::string id = required_attr(node, "id"), as = required_attr(node, "as");
+      auto target = ids_.find(id);
+      if (target == ids_.end()) fail(node, "alias of unknown id '" + id + "'");
+      auto [it, inserted] = ids_.emplace(as, target->second);
+      if (!inserted) fail(node, "duplicate id '" + as + "' (first defined at " + where(it->second) + ")");
+    }
   }
 
   pugi::xml_node resolve_ref(pugi::xml_node ref) const {
@@ -1753,6 +1770,7 @@ class MitsubaLoader {
   std::vector<std::unique_ptr<XmlFile>> files_;                        // main file first, then includes
   std::unordered_map<const void*, const XmlFile*> roots_;              // document node -> its file
   std::map<std::string, pugi::xml_node> ids_;                          // id -> element
+  std::vector<pugi::xml_node> aliases_;                                // <alias> elements, resolved after the ids
   std::set<std::string> warned_;                                       // "file:line plugin" already warned about
   std::map<const void*, Bsdf> bsdfs_;                                  // BSDF element -> built BSDF
   TextureStore store_{scene_};                                         // scene_'s textures and texels
