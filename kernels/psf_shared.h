@@ -146,6 +146,10 @@ typedef struct {
  * (surface.cl rough_table_rows, which keeps the lower row in k.y and the upper
  * row's weight in k.x). */
 #define PSF_MATFLAG_ROUGH_TABLE2D 64u
+/* Material.blend names the BSDF of the back side (Mitsuba's twosided with two
+ * BSDFs) instead of a random choice: the partner scatters where the hit is on
+ * the back of the geometric normal, this material on the front. */
+#define PSF_MATFLAG_BACK_PARTNER 128u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 

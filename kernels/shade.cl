@@ -168,7 +168,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
    * two-sided) and the material's textures. */
   if (m.blend != 0u)
     m = surface_blend(m, materials, tri_attribs + hit.prim, hit.u, hit.v, textures, texels,
-                      bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)));
+                      bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)), front);
   Frame frame = surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels);
   float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
   __global const half* table = surface_table(m, textures, texels);

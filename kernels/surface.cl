@@ -16,13 +16,15 @@
  * dp/du. The tangent follows dp/du where it matters (bump maps, anisotropic
  * roughness).
  * Two-sided reflective materials turn the frame towards wo (Mitsuba's twosided).
- *   surface_blend(m, materials, attrib, b1, b2, textures, texels, u) -> the material that scatters
+ *   surface_blend(m, materials, attrib, b1, b2, textures, texels, u, front) -> the material that scatters
  * A blended material (Material.blend) hands the shading point to its partner with
  * probability blend_weight (times tex_blend's x channel there), u uniform in
  * [0, 1). Light sampling, BSDF sampling and their MIS weights at the point then
  * all use the one chosen, so each choice's estimate is unbiased for its BSDF and
  * the expectation is the weighted sum of the two (stochastic material selection).
- * The partner may blend in turn (a chain of up to three materials). */
+ * The partner may blend in turn (a chain of up to three materials). With
+ * PSF_MATFLAG_BACK_PARTNER the partner is instead the back side's BSDF, chosen
+ * where the hit is on the back (front false). */
 
 /* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */
 inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
@@ -37,8 +39,15 @@ inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
  * each choice taken, decides the next. */
 #define PSF_BLEND_CHAIN 3
 inline Material surface_blend(Material m, __global const Material* materials, __global const TriAttrib* a, float b1,
-                              float b2, __global const TextureInfo* textures, __global const half* texels, float u) {
+                              float b2, __global const TextureInfo* textures, __global const half* texels, float u,
+                              bool front) {
   const uint normals = m.flags & PSF_MATFLAG_NORMALS;
+  if (m.flags & PSF_MATFLAG_BACK_PARTNER) { /* twosided with a back BSDF: chosen by the side, not by u */
+    if (front || m.blend == 0u) return m;
+    m = materials[m.blend - 1u];
+    m.flags = (m.flags & ~PSF_MATFLAG_NORMALS) | normals;
+    return m;
+  }
   for (int k = 1; k < PSF_BLEND_CHAIN && m.blend != 0u; ++k) {
     float w = m.blend_weight;
     if (m.tex_blend != PSF_NO_TEXTURE) w *= texture_eval(textures, texels, m.tex_blend, surface_uv(a, b1, b2)).x;

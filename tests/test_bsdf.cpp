@@ -1597,6 +1597,21 @@ TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "
   for (const std::string& wmsg : c.warnings) nested_warnings += wmsg.find(":3: a blendbsdf as the first") != std::string::npos;
   CHECK(nested_warnings == 1);
 
+  // twosided with two BSDFs: the second on the back (chosen by the side).
+  std::string sides = dir.write(
+      "sides.xml", "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"twosided\">"
+                   "<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
+                   "<bsdf type=\"roughconductor\"/></bsdf></shape>\n</scene>\n");
+  psf::Scene t = psf::load_scene(sides);
+  const Material& front = t.materials[t.tri_material.front()];
+  CHECK(front.type == PSF_MATERIAL_DIFFUSE);
+  CHECK((front.flags & PSF_MATFLAG_BACK_PARTNER) != 0u);
+  REQUIRE(front.blend >= 1);
+  CHECK(t.materials[front.blend - 1].type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  CHECK(front.two_sided == 1u);
+  CHECK(t.materials[front.blend - 1].two_sided == 1u);
+  for (const std::string& wmsg : t.warnings) CHECK(wmsg.find("twosided") == std::string::npos);
+
   // Not two nested BSDFs: an error at the blend's line.
   std::string one = dir.write("one.xml",
                               "<scene version=\"3.0.0\">\n<shape type=\"rectangle\">\n"

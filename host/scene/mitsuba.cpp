@@ -1314,17 +1314,30 @@ class MitsubaLoader {
     return b;
   }
 
+  // twosided: the nested BSDF on both sides, or with two nested BSDFs the first
+  // on the front and the second on the back (Material.blend with
+  // PSF_MATFLAG_BACK_PARTNER, chosen by the side of the hit).
   Bsdf bsdf_twosided(const Element& e) {
     check_properties(e, {});
     std::vector<pugi::xml_node> nested = objects(e, "bsdf");
     Bsdf b = bsdf(nested_bsdf(e));
-    if (nested.size() > 1)
-      warn(e.node, "bsdf:twosided2", "twosided with separate front and back BSDFs is not supported; the front one "
-                                     "is used on both sides");
-    uint32_t type = b.m.type;
-    if (type == PSF_MATERIAL_DIELECTRIC || type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-        type == PSF_MATERIAL_THIN_DIELECTRIC)
+    auto transmissive = [](uint32_t type) {
+      return type == PSF_MATERIAL_DIELECTRIC || type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+             type == PSF_MATERIAL_THIN_DIELECTRIC;
+    };
+    if (transmissive(b.m.type))
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
+    if (nested.size() > 1) {
+      Bsdf back = bsdf(nested[1]);
+      if (b.blend || back.blend) {
+        warn(e.node, "bsdf:twosided2-blend", "twosided with separate front and back BSDFs, one of them a blendbsdf, "
+                                             "is not supported; the front one is used on both sides");
+      } else {
+        back.two_sided = true;
+        b.blend = std::make_shared<const Bsdf>(back);
+        b.m.flags |= PSF_MATFLAG_BACK_PARTNER;
+      }
+    }
     for_each_part(b, [](Bsdf& x) { x.two_sided = true; });
     b.name.clear();
     return b;
@@ -1344,13 +1357,15 @@ class MitsubaLoader {
     Bsdf partner = bsdf(nested[1]);
     auto unblend = [&](Bsdf& inner) {
       warn(e.node, "bsdf:blendbsdf-nested",
-           "a blendbsdf as the first BSDF of a blendbsdf, or nested deeper than its second, is not supported; its "
-           "first BSDF is used");
+           "a blendbsdf as the first BSDF of a blendbsdf, nested deeper than its second, or a twosided with a back "
+           "BSDF inside a blendbsdf is not supported; its first BSDF is used");
       inner.blend.reset();
       inner.m.blend = 0;
       inner.m.tex_blend = PSF_NO_TEXTURE;
+      inner.m.flags &= ~PSF_MATFLAG_BACK_PARTNER;
     };
     if (b.blend) unblend(b);
+    if (partner.m.flags & PSF_MATFLAG_BACK_PARTNER) unblend(partner);  // a twosided's back BSDF: its front is used
     if (partner.blend && partner.blend->blend) {
       auto second = std::make_shared<Bsdf>(*partner.blend);
       unblend(*second);
