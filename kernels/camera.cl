@@ -4,8 +4,9 @@
  * g mod (width * height) and is that pixel's sample number g div (width * height),
  * so a path gets the same samples whatever batch, device or work-group size
  * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
- * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole,
- * psf_shared.h Camera) and its index into the first queue of live paths. */
+ * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole or
+ * thin lens, psf_shared.h Camera; Sobol dimensions 2 and 3 place it on the lens)
+ * and its index into the first queue of live paths. */
 
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
 
@@ -24,8 +25,18 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   float s = ((float)(pixel % params.width) + u) / (float)params.width;
   float t = ((float)(pixel / params.width) + v) / (float)params.height;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
+  float3 org = camera.origin.xyz;
+  if (camera.aperture > 0.0f) {
+    /* A thin lens: a point of the lens disk (uniform by area), aimed at where
+     * the pinhole ray meets the plane in focus (dir has forward component 1). */
+    float r = camera.aperture * sqrt(sample_1d_keyed(sobol, key, sample, PSF_DIM_LENS));
+    float c, sn = psf_sincos(2.0f * 3.14159265358979f * sample_1d_keyed(sobol, key, sample, PSF_DIM_LENS + 1), &c);
+    float3 lens = r * (c * normalize(camera.right.xyz) + sn * normalize(camera.down.xyz));
+    dir = camera.focus * dir - lens;
+    org += lens;
+  }
   Ray r;
-  r.org = (float4)(camera.origin.xyz, 0.0f);
+  r.org = (float4)(org, 0.0f);
   r.dir = (float4)(normalize(dir), INFINITY);
   rays[j] = r;
   queue[j] = j;
@@ -34,7 +45,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   st.radiance = (float4)(0.0f);
   st.vertex_radiance = (float4)(0.0f);
   st.pending = (float4)(0.0f);
-  st.prev_pos = (float4)(camera.origin.xyz, 0.0f);
+  st.prev_pos = (float4)(org, 0.0f);
   st.pixel = pixel;
   st.sample = sample;
   st.depth = 0u;

@@ -22,7 +22,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = sizeof(Camera);
   out[i++] = PSF_OFFSET(Camera, down);
   out[i++] = PSF_OFFSET(Camera, width);
-  out[i++] = PSF_OFFSET(Camera, pad1);
+  out[i++] = PSF_OFFSET(Camera, focus);
   out[i++] = sizeof(Material);
   out[i++] = PSF_OFFSET(Material, emission);
   out[i++] = PSF_OFFSET(Material, type);

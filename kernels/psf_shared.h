@@ -27,9 +27,11 @@ typedef cl_uint psf_uint;
 /* Bits per Sobol coordinate (32: indices up to 2^32 per pixel). */
 #define PSF_SOBOL_BITS 32
 
-/* Sample dimensions: 0,1 pixel position; then PSF_DIMS_PER_BOUNCE per bounce. */
+/* Sample dimensions: 0,1 pixel position; 2,3 the point on a thin lens; then
+ * PSF_DIMS_PER_BOUNCE per bounce. */
 #define PSF_DIM_PIXEL 0
-#define PSF_DIM_BOUNCE0 2
+#define PSF_DIM_LENS 2
+#define PSF_DIM_BOUNCE0 4
 #define PSF_DIMS_PER_BOUNCE 7
 #define PSF_DIM_LIGHT_SELECT 0 /* offset within a bounce: which emitter */
 #define PSF_DIM_LIGHT_UV 1     /* two dimensions: point on the emitter */
@@ -103,16 +105,19 @@ typedef struct {
 } BvhNode;
 
 /* A pinhole camera: a ray through film point (s, t) in [0,1]^2 (s to the right,
- * t downwards) has direction forward + (2s-1) right + (2t-1) down. */
+ * t downwards) has direction forward + (2s-1) right + (2t-1) down. A thin lens
+ * (aperture > 0, Mitsuba's thinlens) starts the ray at a point of the lens disk
+ * of that radius around origin, perpendicular to forward, towards the point the
+ * pinhole ray reaches at distance `focus` along forward. */
 typedef struct {
-  psf_float4 origin;  /* xyz eye position */
+  psf_float4 origin;  /* xyz eye position (the lens's centre) */
   psf_float4 forward; /* xyz view direction, unit length */
   psf_float4 right;   /* xyz half-width of the film at distance 1 */
   psf_float4 down;    /* xyz half-height of the film at distance 1 */
   psf_uint width;     /* film width in pixels */
   psf_uint height;    /* film height in pixels */
-  psf_uint pad0;      /* padding */
-  psf_uint pad1;      /* padding */
+  float aperture;     /* lens radius; 0: a pinhole */
+  float focus;        /* distance of the plane in focus along forward (thin lens) */
 } Camera;
 
 /* Material types (Material.type): Mitsuba's BSDF plugins of the same names

@@ -715,6 +715,50 @@ TEST_CASE("Render: a two-sided material with a back BSDF shows each side's own",
   CHECK(view(-2.0f) == Approx(0.8).epsilon(0.02));
 }
 
+TEST_CASE("Render: a thin lens images its focal plane as a pinhole does and blurs the rest", "[emitter]") {
+  // An emitting square of radiance 1 (side 1) 4 units in front of the camera,
+  // emission only (max depth 1). Focused on it, every lens ray of a film point
+  // meets the point the pinhole ray meets, so the image is the pinhole's;
+  // focused at 2 units, its edges spread over many more pixels.
+  auto image = [](float aperture, float focus) {
+    psf::Scene s;
+    Material light{};
+    light.type = PSF_MATERIAL_DIFFUSE;
+    light.emission = {{1, 1, 1, 0}};
+    s.materials = {light};
+    s.material_names = {"light"};
+    add_quad(s, {-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}, 0);
+    s.camera.origin = {0, 0, 4};
+    s.camera.target = {0, 0, 0};
+    s.camera.fov_degrees = 30;
+    s.camera.aperture_radius = aperture;
+    s.camera.focus_distance = focus;
+    s.width = s.height = 32;
+    return render(s, 64, 1).image;
+  };
+  psf::Image pinhole = image(0.0f, 1e4f), focused = image(0.2f, 4.0f), blurred = image(0.2f, 2.0f);
+  auto partial = [](const psf::Image& im) {  // pixels neither empty nor full
+    int n = 0;
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        double v = pixel(im, x, y).x;
+        n += v > 0.02 && v < 0.98;
+      }
+    return n;
+  };
+  auto total = [](const psf::Image& im) {
+    double t = 0;
+    for (float v : im.rgb) t += v;
+    return t;
+  };
+  size_t differ = 0;
+  for (size_t i = 0; i < pinhole.rgb.size(); ++i) differ += std::fabs(pinhole.rgb[i] - focused.rgb[i]) > 1e-3f;
+  CHECK(differ == 0);
+  INFO("partial pixels: pinhole " << partial(pinhole) << ", defocused " << partial(blurred));
+  CHECK(partial(blurred) > 3 * partial(pinhole));
+  CHECK(total(blurred) == Approx(total(pinhole)).epsilon(0.03));  // the lens moves light, it does not lose it
+}
+
 // A diffuse floor (y = 0, albedo 0.5) seen from above under test_envmap(), 16x16.
 static psf::Scene envmap_floor() {
   psf::Scene s;

@@ -23,7 +23,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"sizeof(Camera)", sizeof(Camera)},
       {"offsetof(Camera, down)", offsetof(Camera, down)},
       {"offsetof(Camera, width)", offsetof(Camera, width)},
-      {"offsetof(Camera, pad1)", offsetof(Camera, pad1)},
+      {"offsetof(Camera, focus)", offsetof(Camera, focus)},
       {"sizeof(Material)", sizeof(Material)},
       {"offsetof(Material, emission)", offsetof(Material, emission)},
       {"offsetof(Material, type)", offsetof(Material, type)},

@@ -232,6 +232,25 @@ TEST_CASE("Sensor defaults and field of view", "[scene]") {
   CHECK(d.max_depth == 2);
 }
 
+TEST_CASE("Sensor thinlens: aperture radius and focus distance", "[scene]") {
+  psf::Scene s = load_text(
+      "<sensor type=\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>"
+      "<float name=\"focus_distance\" value=\"3.5\"/></sensor>\n<shape type=\"cube\"/>\n");
+  CHECK(s.camera.aperture_radius == Approx(0.1f));
+  CHECK(s.camera.focus_distance == Approx(3.5f));
+  for (const auto& w : s.warnings) CHECK(w.find("thinlens") == std::string::npos);
+  psf::Scene mitsuba05 = load_text(
+      "<sensor type=\"thinlens\"><float name=\"apertureRadius\" value=\"0.2\"/></sensor>\n<shape type=\"cube\"/>\n",
+      {}, "0.5.0");
+  CHECK(mitsuba05.camera.aperture_radius == Approx(0.2f));
+  CHECK(mitsuba05.camera.focus_distance == Approx(1e4f));  // far_clip, Mitsuba's default
+  CHECK(load_text("<shape type=\"cube\"/>\n").camera.aperture_radius == 0.0f);  // perspective: a pinhole
+  require_xml_error("<sensor type=\"thinlens\"/>\n", 2, "needs an 'aperture_radius'");
+  require_xml_error("<sensor type=\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>\n"
+                    "<float name=\"focus_distance\" value=\"-1\"/></sensor>\n",
+                    3, "focus distance must be positive");
+}
+
 TEST_CASE("$parameters and <default>", "[scene]") {
   const std::string body =
       "<default name=\"w\" value=\"64\"/>\n"

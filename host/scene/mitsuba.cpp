@@ -841,10 +841,20 @@ class MitsubaLoader {
     }
     has_sensor_ = true;
     Element e = parse_element(node);
-    if (e.type != "perspective")
+    if (e.type != "perspective" && e.type != "thinlens")
       warn(node, "sensor:" + e.type, "sensor '" + e.type + "' is not supported yet; using a perspective camera");
 
     CameraDesc& cam = scene_.camera;
+    if (e.type == "thinlens") {  // Mitsuba's: aperture_radius required, focus_distance by default far_clip
+      const Property* a = find(e, "aperture_radius");
+      if (!a) fail(node, "<sensor type=\"thinlens\"> needs an 'aperture_radius'");
+      cam.aperture_radius = float(get_float(e, "aperture_radius", 0.0));
+      cam.focus_distance = float(get_float(e, "focus_distance", get_float(e, "far_clip", 1e4)));
+      if (!(cam.aperture_radius >= 0.0f) || !std::isfinite(cam.aperture_radius))
+        fail(a->node, "the aperture radius must be a finite number >= 0");
+      if (!(cam.focus_distance > 0.0f) || !std::isfinite(cam.focus_distance))
+        fail(find(e, "focus_distance") ? find(e, "focus_distance")->node : node, "the focus distance must be positive");
+    }
     const Property* fov = find(e, "fov");
     const Property* focal = find(e, "focal_length");
     if (fov && focal) fail(focal->node, "give either 'fov' or 'focal_length', not both");

@@ -1,5 +1,6 @@
 #include "scene/scene.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <filesystem>
@@ -42,6 +43,8 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
   c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, 0}};
   c.width = uint32_t(width);
   c.height = uint32_t(height);
+  c.aperture = std::max(desc.aperture_radius, 0.0f);
+  c.focus = desc.focus_distance;
   return c;
 }
 

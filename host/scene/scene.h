@@ -32,6 +32,8 @@ struct CameraDesc {
   float fov_degrees = 39.3f;   // field of view along fov_axis
   std::string fov_axis = "x";  // Mitsuba's fovAxis: x, y, diagonal, smaller, larger
   bool mirrored = false;       // image mirrored left-right (a to_world with negative determinant): negate right
+  float aperture_radius = 0;   // thin lens radius (Mitsuba's thinlens); 0: a pinhole
+  float focus_distance = 1e4f; // distance of the plane in focus along the view direction (thin lens)
 };
 
 struct Scene {
