@@ -66,7 +66,7 @@ inline void rough_table_rows(Material* m, __global const TextureInfo* textures, 
   float f = clamp(sqrt(m->alpha_u), 0.0f, 1.0f) * (float)(PSF_ROUGH_TABLE_ROWS - 1);
   uint r = min((uint)f, (uint)(PSF_ROUGH_TABLE_ROWS - 2));
   float w = f - (float)r;
-  __global const half* lo = texels + 4u * (textures[m->tex_table].offset + r * PSF_ROUGH_TABLE_WIDTH);
+  __global const half* lo = texels + 4ul * ((ulong)textures[m->tex_table].offset + r * PSF_ROUGH_TABLE_WIDTH);
   __global const half* hi = lo + 4u * PSF_ROUGH_TABLE_WIDTH;
   m->eta.z = mix(vload_half(4u * PSF_ROUGH_TABLE_RES, lo), vload_half(4u * PSF_ROUGH_TABLE_RES, hi), w);
   m->eta.w = mix(vload_half(4u * (PSF_ROUGH_TABLE_RES + 1), lo), vload_half(4u * (PSF_ROUGH_TABLE_RES + 1), hi), w);
@@ -81,7 +81,7 @@ inline __global const half* surface_table(Material m, __global const TextureInfo
                                           __global const half* texels) {
   if (m.tex_table == PSF_NO_TEXTURE) return texels;
   uint row = (m.flags & PSF_MATFLAG_ROUGH_TABLE2D) ? (uint)m.k.y * PSF_ROUGH_TABLE_WIDTH : 0u;
-  return texels + 4u * (textures[m.tex_table].offset + row);
+  return texels + 4ul * ((ulong)textures[m.tex_table].offset + row);
 }
 
 /* A material's emission at barycentrics (b1, b2) of the triangle (its emission

@@ -245,6 +245,16 @@ TEST_CASE("Sensor thinlens: aperture radius and focus distance", "[scene]") {
   CHECK(mitsuba05.camera.aperture_radius == Approx(0.2f));
   CHECK(mitsuba05.camera.focus_distance == Approx(1e4f));  // far_clip, Mitsuba's default
   CHECK(load_text("<shape type=\"cube\"/>\n").camera.aperture_radius == 0.0f);  // perspective: a pinhole
+  // Both are camera-space lengths: a to_world that scales by 2 doubles them (as Mitsuba).
+  psf::Scene scaled = load_text(
+      "<sensor type=\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>"
+      "<float name=\"focus_distance\" value=\"3.5\"/><transform name=\"to_world\"><scale value=\"2\"/>"
+      "<lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform></sensor>\n<shape type=\"cube\"/>\n");
+  CHECK(scaled.camera.aperture_radius == Approx(0.2f));
+  CHECK(scaled.camera.focus_distance == Approx(7.0f));
+  require_xml_error("<shape type=\"rectangle\"><bsdf type=\"twosided\"><bsdf type=\"diffuse\"/><bsdf type=\"diffuse\"/>\n"
+                    "<bsdf type=\"diffuse\"/></bsdf></shape>\n",
+                    3, "one or two nested BSDFs");
   require_xml_error("<sensor type=\"thinlens\"/>\n", 2, "needs an 'aperture_radius'");
   require_xml_error("<sensor type=\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>\n"
                     "<float name=\"focus_distance\" value=\"-1\"/></sensor>\n",

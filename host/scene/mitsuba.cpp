@@ -878,6 +878,11 @@ class MitsubaLoader {
 
     // Mitsuba's camera frame: +z forward, +y up (and +x towards the image's left).
     glm::mat4 m = get_transform(e, "to_world");
+    // A thin lens's aperture and focus distance are camera-space lengths, which
+    // a scaling to_world scales (the aperture by its x-y scale, the focus by z).
+    const glm::mat3 axes(m);
+    cam.aperture_radius *= std::sqrt(glm::length(axes[0]) * glm::length(axes[1]));
+    cam.focus_distance *= glm::length(axes[2]);
     cam.origin = glm::vec3(m * glm::vec4(0, 0, 0, 1));
     cam.target = glm::vec3(m * glm::vec4(0, 0, 1, 1));
     glm::vec3 up = glm::mat3(m) * glm::vec3(0, 1, 0);
@@ -947,6 +952,7 @@ class MitsubaLoader {
   void load_shape_at(pugi::xml_node node, const glm::mat4& parent, int depth) {
     Element e = parse_element(node);
     if (e.type == "shapegroup") {
+      if (depth > 0) warn(node, "shapegroup-nested", "a shapegroup inside a shapegroup is not supported; ignored");
       for (pugi::xml_node o : e.objects)
         if (std::string(o.name()) != "shape")
           warn(o, "shapegroup:" + std::string(o.name()), "<" + std::string(o.name()) + "> in a shapegroup is ignored");
@@ -1337,8 +1343,11 @@ class MitsubaLoader {
     };
     if (transmissive(b.m.type))
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
+    if (nested.size() > 2) fail(nested[2], "bsdf 'twosided' takes one or two nested BSDFs");
     if (nested.size() > 1) {
       Bsdf back = bsdf(nested[1]);
+      if (transmissive(back.m.type))
+        warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
       if (b.blend || back.blend) {
         warn(e.node, "bsdf:twosided2-blend", "twosided with separate front and back BSDFs, one of them a blendbsdf, "
                                              "is not supported; the front one is used on both sides");
