@@ -289,7 +289,7 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   b->alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
   if (o.filter.enabled) b->filter = std::make_unique<PathSpaceFilter>(rt, b->size);
   // r0_i = d_i sqrt(dOmega / pi), dOmega the solid angle of footprint_pixels^2
-  // pixels at the image centre.
+  // pixels at the image centre (orthographic: the radius of their area).
   const Camera& cam = impl_->camera;
   const float pixel_w = 2.0f * glm::length(glm::vec3(cam.right.s[0], cam.right.s[1], cam.right.s[2])) / scene.width;
   const float pixel_h = 2.0f * glm::length(glm::vec3(cam.down.s[0], cam.down.s[1], cam.down.s[2])) / scene.height;
@@ -375,7 +375,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.values, b.ones, b.contrib_unfiltered);
   if (filtering) {
     FilterParams fp{};
-    fp.r0 = o.filter.r0;
+    // An orthographic camera's pixels have one world-space size: the footprint
+    // is then a global r0 (unless --r0 gives one).
+    fp.r0 = o.filter.r0 > 0.0f || !impl_->camera.orthographic ? o.filter.r0 : b.footprint;
     fp.footprint = b.footprint;
     // n: paths per pixel so far, so r0 is the radius of the first pass.
     double n = std::max(1.0, double(first + p.batch_size) / double(pixels));

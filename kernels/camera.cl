@@ -4,8 +4,8 @@
  * g mod (width * height) and is that pixel's sample number g div (width * height),
  * so a path gets the same samples whatever batch, device or work-group size
  * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
- * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole or
- * thin lens, psf_shared.h Camera; Sobol dimensions 2 and 3 place it on the lens)
+ * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole,
+ * thin lens or orthographic, psf_shared.h Camera; Sobol dimensions 2 and 3 place it on the lens)
  * and its index into the first queue of live paths. */
 
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
@@ -26,7 +26,10 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   float t = ((float)(pixel / params.width) + v) / (float)params.height;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
   float3 org = camera.origin.xyz;
-  if (camera.aperture > 0.0f) {
+  if (camera.orthographic) { /* parallel rays from the film's point */
+    org += dir - camera.forward.xyz;
+    dir = camera.forward.xyz;
+  } else if (camera.aperture > 0.0f) {
     /* A thin lens: a point of the lens disk (uniform by area), aimed at where
      * the pinhole ray meets the plane in focus (dir has forward component 1). */
     float r = camera.aperture * sqrt(sample_1d_keyed(sobol, key, sample, PSF_DIM_LENS));

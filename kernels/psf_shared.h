@@ -108,7 +108,8 @@ typedef struct {
  * t downwards) has direction forward + (2s-1) right + (2t-1) down. A thin lens
  * (aperture > 0, Mitsuba's thinlens) starts the ray at a point of the lens disk
  * of that radius around origin, perpendicular to forward, towards the point the
- * pinhole ray reaches at distance `focus` along forward. */
+ * pinhole ray reaches at distance `focus` along forward. An orthographic camera
+ * (Mitsuba's orthographic) sends parallel rays instead. */
 typedef struct {
   psf_float4 origin;  /* xyz eye position (the lens's centre) */
   psf_float4 forward; /* xyz view direction, unit length */
@@ -118,6 +119,11 @@ typedef struct {
   psf_uint height;    /* film height in pixels */
   float aperture;     /* lens radius; 0: a pinhole */
   float focus;        /* distance of the plane in focus along forward (thin lens) */
+  psf_uint orthographic; /* 1: parallel rays along forward from origin + (2s-1) right + (2t-1) down
+                            (right and down then the film's world-space half extents) */
+  psf_uint pad0;      /* padding */
+  psf_uint pad1;      /* padding */
+  psf_uint pad2;      /* padding */
 } Camera;
 
 /* Material types (Material.type): Mitsuba's BSDF plugins of the same names

@@ -715,25 +715,32 @@ TEST_CASE("Render: a two-sided material with a back BSDF shows each side's own",
   CHECK(view(-2.0f) == Approx(0.8).epsilon(0.02));
 }
 
+// An emitting square of radiance 1 and side 1 at z = 0 facing +z, seen from
+// (0, 0, camera_z) at 32x32.
+static psf::Scene emitting_square(float camera_z) {
+  psf::Scene s;
+  Material light{};
+  light.type = PSF_MATERIAL_DIFFUSE;
+  light.emission = {{1, 1, 1, 0}};
+  s.materials = {light};
+  s.material_names = {"light"};
+  add_quad(s, {-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}, 0);
+  s.camera.origin = {0, 0, camera_z};
+  s.camera.target = {0, 0, 0};
+  s.width = s.height = 32;
+  return s;
+}
+
 TEST_CASE("Render: a thin lens images its focal plane as a pinhole does and blurs the rest", "[emitter]") {
   // An emitting square of radiance 1 (side 1) 4 units in front of the camera,
   // emission only (max depth 1). Focused on it, every lens ray of a film point
   // meets the point the pinhole ray meets, so the image is the pinhole's;
   // focused at 2 units, its edges spread over many more pixels.
   auto image = [](float aperture, float focus) {
-    psf::Scene s;
-    Material light{};
-    light.type = PSF_MATERIAL_DIFFUSE;
-    light.emission = {{1, 1, 1, 0}};
-    s.materials = {light};
-    s.material_names = {"light"};
-    add_quad(s, {-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}, 0);
-    s.camera.origin = {0, 0, 4};
-    s.camera.target = {0, 0, 0};
+    psf::Scene s = emitting_square(4.0f);
     s.camera.fov_degrees = 30;
     s.camera.aperture_radius = aperture;
     s.camera.focus_distance = focus;
-    s.width = s.height = 32;
     return render(s, 64, 1).image;
   };
   psf::Image pinhole = image(0.0f, 1e4f), focused = image(0.2f, 4.0f), blurred = image(0.2f, 2.0f);
@@ -757,6 +764,24 @@ TEST_CASE("Render: a thin lens images its focal plane as a pinhole does and blur
   INFO("partial pixels: pinhole " << partial(pinhole) << ", defocused " << partial(blurred));
   CHECK(partial(blurred) > 3 * partial(pinhole));
   CHECK(total(blurred) == Approx(total(pinhole)).epsilon(0.03));  // the lens moves light, it does not lose it
+}
+
+TEST_CASE("Render: an orthographic camera images a square at the same size at any distance", "[emitter]") {
+  // The film spans [-1, 1]^2 (a square film, scale 1); an emitting square of
+  // side 1 covers a quarter of it whether 2 or 6 units away.
+  auto image = [](float distance) {
+    psf::Scene s = emitting_square(distance);
+    s.camera.orthographic = true;
+    return render(s, 16, 1).image;
+  };
+  psf::Image near_image = image(2.0f), far_image = image(6.0f);
+  CHECK(near_image.rgb == far_image.rgb);
+  double lit = 0;
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) lit += pixel(near_image, x, y).x / (32.0 * 32.0);
+  CHECK(lit == Approx(0.25).epsilon(0.01));
+  CHECK(pixel(near_image, 16, 16).x == Approx(1.0));  // the centre is lit, the corner is not
+  CHECK(pixel(near_image, 1, 1).x == 0.0);
 }
 
 // A diffuse floor (y = 0, albedo 0.5) seen from above under test_envmap(), 16x16.

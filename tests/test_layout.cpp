@@ -24,6 +24,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Camera, down)", offsetof(Camera, down)},
       {"offsetof(Camera, width)", offsetof(Camera, width)},
       {"offsetof(Camera, focus)", offsetof(Camera, focus)},
+      {"offsetof(Camera, orthographic)", offsetof(Camera, orthographic)},
       {"sizeof(Material)", sizeof(Material)},
       {"offsetof(Material, emission)", offsetof(Material, emission)},
       {"offsetof(Material, type)", offsetof(Material, type)},

@@ -232,7 +232,7 @@ TEST_CASE("Sensor defaults and field of view", "[scene]") {
   CHECK(d.max_depth == 2);
 }
 
-TEST_CASE("Sensor thinlens: aperture radius and focus distance", "[scene]") {
+TEST_CASE("Sensor thinlens and orthographic: aperture radius, focus distance, film extent", "[scene]") {
   psf::Scene s = load_text(
       "<sensor type=\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>"
       "<float name=\"focus_distance\" value=\"3.5\"/></sensor>\n<shape type=\"cube\"/>\n");
@@ -252,6 +252,14 @@ TEST_CASE("Sensor thinlens: aperture radius and focus distance", "[scene]") {
       "<lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform></sensor>\n<shape type=\"cube\"/>\n");
   CHECK(scaled.camera.aperture_radius == Approx(0.2f));
   CHECK(scaled.camera.focus_distance == Approx(7.0f));
+  // orthographic: to_world's x and y scales are the film's half extents.
+  psf::Scene ortho = load_text(
+      "<sensor type=\"orthographic\"><transform name=\"to_world\"><scale x=\"2\" y=\"3\"/>"
+      "<lookat origin=\"0, 0, 5\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform></sensor>\n<shape type=\"cube\"/>\n");
+  CHECK(ortho.camera.orthographic);
+  CHECK(ortho.camera.ortho_scale.x == Approx(2.0f));
+  CHECK(ortho.camera.ortho_scale.y == Approx(3.0f));
+  for (const auto& w : ortho.warnings) CHECK(w.find("orthographic") == std::string::npos);
   require_xml_error("<shape type=\"rectangle\"><bsdf type=\"twosided\"><bsdf type=\"diffuse\"/><bsdf type=\"diffuse\"/>\n"
                     "<bsdf type=\"diffuse\"/></bsdf></shape>\n",
                     3, "one or two nested BSDFs");

@@ -841,7 +841,7 @@ class MitsubaLoader {
     }
     has_sensor_ = true;
     Element e = parse_element(node);
-    if (e.type != "perspective" && e.type != "thinlens")
+    if (e.type != "perspective" && e.type != "thinlens" && e.type != "orthographic")
       warn(node, "sensor:" + e.type, "sensor '" + e.type + "' is not supported yet; using a perspective camera");
 
     CameraDesc& cam = scene_.camera;
@@ -883,6 +883,10 @@ class MitsubaLoader {
     const glm::mat3 axes(m);
     cam.aperture_radius *= std::sqrt(glm::length(axes[0]) * glm::length(axes[1]));
     cam.focus_distance *= glm::length(axes[2]);
+    // orthographic: the film spans camera-space x in [-1, 1] and y in [-1, 1] / aspect,
+    // so to_world's x and y scales are its world-space half extents.
+    cam.orthographic = e.type == "orthographic";
+    cam.ortho_scale = glm::vec2(glm::length(axes[0]), glm::length(axes[1]));
     cam.origin = glm::vec3(m * glm::vec4(0, 0, 0, 1));
     cam.target = glm::vec3(m * glm::vec4(0, 0, 1, 1));
     glm::vec3 up = glm::mat3(m) * glm::vec3(0, 1, 0);

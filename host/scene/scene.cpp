@@ -25,7 +25,10 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
   float half_w, half_h;
   const std::string& axis = desc.fov_axis;
   bool along_x = axis == "x" || (axis == "smaller" && width <= height) || (axis == "larger" && width >= height);
-  if (axis == "diagonal") {
+  if (desc.orthographic) {  // Mitsuba's orthographic: x in [-1, 1], y in [-1, 1] / aspect, then to_world's scale
+    half_w = desc.ortho_scale.x;
+    half_h = desc.ortho_scale.y / aspect;
+  } else if (axis == "diagonal") {
     float diag = tan_half;
     half_w = diag * aspect / std::sqrt(1 + aspect * aspect);
     half_h = half_w / aspect;
@@ -43,8 +46,9 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
   c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, 0}};
   c.width = uint32_t(width);
   c.height = uint32_t(height);
-  c.aperture = std::max(desc.aperture_radius, 0.0f);
+  c.aperture = desc.orthographic ? 0.0f : std::max(desc.aperture_radius, 0.0f);
   c.focus = desc.focus_distance;
+  c.orthographic = desc.orthographic ? 1u : 0u;
   return c;
 }
 

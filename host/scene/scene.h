@@ -34,6 +34,8 @@ struct CameraDesc {
   bool mirrored = false;       // image mirrored left-right (a to_world with negative determinant): negate right
   float aperture_radius = 0;   // thin lens radius (Mitsuba's thinlens); 0: a pinhole
   float focus_distance = 1e4f; // distance of the plane in focus along the view direction (thin lens)
+  bool orthographic = false;   // parallel rays (Mitsuba's orthographic); fov and the lens are unused
+  glm::vec2 ortho_scale{1.0f}; // orthographic: the film spans [-x, x] by [-y, y] / aspect in world units
 };
 
 struct Scene {
