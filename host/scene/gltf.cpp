@@ -399,11 +399,15 @@ class GltfLoader {
     if (texture != PSF_NO_TEXTURE) base = textures_.mean(texture);  // the texture already holds the factor
     const glm::vec3 albedo = glm::clamp(base, 0.0f, 1.0f);
     const bool rough = roughness > 0.0f;
-    // The parts' common settings: normal map, cut-out, emission, sides.
+    // The parts' common settings: roughness, normal map, cut-out, emission, sides.
     auto part = [&]() {
       Material m{};
       m.tex_color = texture;
       m.alpha_u = m.alpha_v = std::max(roughness * roughness, 1e-4f);  // Mitsuba's lower bound
+      if (alpha_map != PSF_NO_TEXTURE) {  // the roughness per texel; its mean until a hit reads it
+        m.tex_alpha = alpha_map;
+        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
+      }
       if (normal_map != PSF_NO_TEXTURE) {
         m.tex_bump = normal_map;
         m.bump_scale = float(g.normalTexture.scale);
@@ -433,10 +437,6 @@ class GltfLoader {
       m.k = {{k.x, k.y, k.z, 0}};
       m.specular = {{1, 1, 1, 0}};
       if (texture != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_REFLECTANCE;
-      if (alpha_map != PSF_NO_TEXTURE) {
-        m.tex_alpha = alpha_map;
-        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
-      }
       return m;
     };
     auto glass_part = [&]() {
@@ -446,10 +446,6 @@ class GltfLoader {
       m.specular = {{1, 1, 1, 0}};
       m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
       m.tex_color = PSF_NO_TEXTURE;
-      if (alpha_map != PSF_NO_TEXTURE) {
-        m.tex_alpha = alpha_map;
-        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
-      }
       return m;
     };
     auto plastic_part = [&]() {
@@ -458,10 +454,6 @@ class GltfLoader {
       m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
       m.specular = {{1, 1, 1, 0}};
       m.eta = {{ior > 1.0f ? ior : 1.5f, 0, 0, 0}};
-      if (alpha_map != PSF_NO_TEXTURE) {
-        m.tex_alpha = alpha_map;
-        m.alpha_u = m.alpha_v = std::max(textures_.mean(alpha_map).x, 1e-4f);
-      }
       detail::finish_plastic(m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, textures_);
       return m;
     };
