@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <stdexcept>
@@ -109,7 +110,22 @@ EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width,
   }
   d.marginal[h] = 1.0f;
   d.integral = total / double(w * h);
+  d.guide.reserve(h + h * nb);
+  cdf_guide_table(&d.marginal[1], h, d.guide);
+  for (size_t y = 0; y < h; ++y) cdf_guide_table(&d.blocks[y * (nb + 1) + 1], nb, d.guide);
   return d;
+}
+
+void cdf_guide_table(const float* upper, size_t n, std::vector<float>& out) {
+  size_t i = 0;
+  for (size_t k = 0; k < n; ++k) {
+    const double threshold = double(k) / double(n) - 1e-6;
+    while (i + 1 < n && double(upper[i]) <= threshold) ++i;
+    const uint32_t index = uint32_t(i);
+    float bits;
+    std::memcpy(&bits, &index, sizeof bits);  // the index's bits (emitter.cl reads them with as_uint)
+    out.push_back(bits);
+  }
 }
 
 namespace {
@@ -229,6 +245,7 @@ LightTable build_light_table(const Scene& scene) {
       t.env_data.insert(t.env_data.end(), d.blocks.begin(), d.blocks.end());
       t.env_data.resize((t.env_data.size() + PSF_ENV_BLOCK - 1) / PSF_ENV_BLOCK * PSF_ENV_BLOCK, 0.0f);
       t.env_data.insert(t.env_data.end(), d.within_block.begin(), d.within_block.end());
+      t.env_data.insert(t.env_data.end(), d.guide.begin(), d.guide.end());
     }
     double phi = disk * integral;
     if (phi > 0.0 && std::isfinite(phi)) {
@@ -255,6 +272,9 @@ LightTable build_light_table(const Scene& scene) {
     if (e.type == PSF_EMITTER_ENVIRONMENT) t.env.scale.s[3] = pmf;
   }
   if (!t.cdf.empty()) t.cdf.back() = 1.0f;
+  std::vector<float> guide;
+  cdf_guide_table(t.cdf.data(), t.cdf.size(), guide);
+  t.cdf.insert(t.cdf.end(), guide.begin(), guide.end());
   return t;
 }
 

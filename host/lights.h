@@ -14,7 +14,7 @@ namespace psf {
 
 struct LightTable {
   std::vector<Emitter> emitters;    // one entry per emissive triangle, delta light and the environment
-  std::vector<float> cdf;           // selection cdf over `emitters` (last entry 1), by power
+  std::vector<float> cdf;           // selection cdf over `emitters` by power (last entry 1), then its guide table
   std::vector<float> tri_light_pdf; // per scene triangle: selection probability / area if emissive, else 0
   Environment env{};                // the environment (env.present 0: none)
   std::vector<float> env_data;      // its texels and cdfs (layout in psf_shared.h); one 0 when none
@@ -39,13 +39,23 @@ LightTable build_light_table(const Scene& scene);
 // (psf_shared.h Environment): blocks, B + 1 entries per row with B =
 // ceil(width / PSF_ENV_BLOCK), and within_block, PSF_ENV_BLOCK upper values per
 // block (1 past the row's end). A row or block whose sum is zero gets a uniform
-// cdf (it is never chosen).
+// cdf (it is never chosen). guide: the guide tables of the marginal (height
+// entries) and of each row's block cdf (B entries per row) (cdf_guide_table).
 struct EnvDistribution {
   std::vector<float> marginal;
   std::vector<float> blocks;
   std::vector<float> within_block;
+  std::vector<float> guide;
   double integral = 0.0;  // sum of f times the cell's (du, dv) area: the mean of f over [0,1]^2
 };
 EnvDistribution build_env_distribution(const std::vector<float>& rgb, int width, int height);
+
+// The guide table of the n upper cdf values `upper` (non-decreasing, the last 1),
+// appended to `out` (kernels/emitter.cl sample_cdf_guided): entry k is the first
+// i with upper[i] > k/n - 1e-6 (n - 1 if none), a lower bound of the first
+// upper value above any u whose float bucket (uint)(u n) is k, so that a search
+// from there forward finds what a bisection of the whole cdf would, in about
+// one step. Each index is stored as its uint32 bits in a float.
+void cdf_guide_table(const float* upper, size_t n, std::vector<float>& out);
 
 }  // namespace psf

@@ -273,7 +273,9 @@ typedef struct {
  * in two levels: a cdf over its blocks of PSF_ENV_BLOCK cells (B + 1 entries per row,
  * B = ceil(width / PSF_ENV_BLOCK)), and, from the next multiple of
  * PSF_ENV_BLOCK floats on, each block's own cdf (PSF_ENV_BLOCK upper values per
- * block, row after row; 1 past the row's end). The block cdfs are small enough
+ * block, row after row; 1 past the row's end), then the guide tables of the
+ * marginal (height entries) and of each row's block cdf (B per row), each
+ * index as its uint bits (host/lights.h cdf_guide_table). The block cdfs are small enough
  * to stay in cache, and a block's texel cdf is one cache line: a sample reads
  * one line of the conditional where a search over the whole row would wait on
  * several. */

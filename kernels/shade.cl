@@ -57,7 +57,7 @@ inline void env_sample_slot(uint k, uint j, FrameParams params, __global const u
   if (params.num_emitters > 0u) {
     const uint key = pixel_seed(params.seed, pixel);
     float ul = sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_SELECT);
-    Emitter em = emitters[sample_cdf(emitter_cdf, params.num_emitters, ul)];
+    Emitter em = emitters[sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
       float pdf;
       float2 uv;

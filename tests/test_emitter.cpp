@@ -9,7 +9,9 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -335,6 +337,58 @@ TEST_CASE("Emitter: envmap samples follow luminance x sin(theta) (chi-square)", 
   check_envmap_sampling(37, 9);
 }
 
+TEST_CASE("Emitter: guide tables lead to the cdf entry a bisection finds", "[emitter]") {
+  // The kernel's search (emitter.cl sample_cdf_guided) in float arithmetic as
+  // there, against std::upper_bound over the whole cdf (the first entry above u,
+  // the last if none), for cdfs with flat runs, a jump over many buckets, many
+  // entries within one bucket, and for u on and beside every bucket boundary.
+  auto guided = [](const std::vector<float>& cdf, const std::vector<float>& guide, float u) {
+    const uint32_t n = uint32_t(cdf.size());
+    uint32_t i;
+    std::memcpy(&i, &guide[std::min(uint32_t(u * float(n)), n - 1)], sizeof i);  // the index's bits
+    while (i < n - 1 && cdf[i] <= u) ++i;
+    return i;
+  };
+  std::mt19937 rng(7);
+  std::vector<std::vector<float>> cdfs;
+  for (size_t n : {1u, 2u, 3u, 7u, 64u, 1000u}) {
+    std::vector<double> w(n);
+    std::uniform_real_distribution<double> U(0.0, 1.0);
+    for (double& x : w) x = U(rng) < 0.3 ? 0.0 : U(rng);      // flat runs
+    if (n > 2) w[n / 2] = 1000.0 * double(n);                  // a jump over many buckets
+    if (n > 8) std::fill(w.begin(), w.begin() + long(n / 4), 1e-7);  // many tiny entries in one bucket
+    double total = 0, acc = 0;
+    for (double x : w) total += x;
+    std::vector<float> cdf(n);
+    for (size_t i = 0; i < n; ++i) cdf[i] = float((acc += w[i]) / total);
+    cdf[n - 1] = 1.0f;
+    cdfs.push_back(cdf);
+  }
+  for (const auto& cdf : cdfs) {
+    const size_t n = cdf.size();
+    std::vector<float> guide;
+    psf::cdf_guide_table(cdf.data(), n, guide);
+    REQUIRE(guide.size() == n);
+    std::vector<float> us;
+    for (size_t k = 0; k <= n; ++k) {
+      float b = float(double(k) / double(n));
+      for (float u : {b, std::nextafter(b, 0.0f), std::nextafter(b, 1.0f)})
+        if (u >= 0.0f && u < 1.0f) us.push_back(u);
+    }
+    for (float c : cdf)
+      for (float u : {c, std::nextafter(c, 0.0f), std::nextafter(c, 1.0f)})
+        if (u >= 0.0f && u < 1.0f) us.push_back(u);
+    std::uniform_real_distribution<float> U(0.0f, 1.0f);
+    for (int i = 0; i < 10000; ++i) us.push_back(U(rng));
+    for (float u : us) {
+      const uint32_t bisection =
+          uint32_t(std::min<ptrdiff_t>(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin(), ptrdiff_t(n) - 1));
+      INFO("n = " << n << ", u = " << u);
+      REQUIRE(guided(cdf, guide, u) == bisection);
+    }
+  }
+}
+
 TEST_CASE("Emitter: envmap orientation follows Mitsuba's lat-long convention", "[emitter]") {
   auto& rt = psf::test::runtime();
   // Texel (x, y) holds x + 10 y + 1 in red: every texel is distinct.
@@ -459,7 +513,8 @@ TEST_CASE("Emitter: lights are chosen in proportion to their power", "[emitter]"
   CHECK(t.emitters[0].radiance.s[3] == Approx(kPi * area / total));
   CHECK(t.emitters[1].radiance.s[3] == Approx(4 * kPi / total));
   CHECK(t.emitters[2].radiance.s[3] == Approx(3 * kPi / total));
-  CHECK(t.cdf.back() == 1.0f);
+  REQUIRE(t.cdf.size() == 6);  // the cdf and its guide table
+  CHECK(t.cdf[2] == 1.0f);
   CHECK(t.tri_light_pdf[0] == Approx(kPi * area / total / area));
   CHECK(t.env.present == 0);
 }
