@@ -19,6 +19,12 @@ struct FilterOptions {
   float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
   float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)
   bool cells27 = false;           // cells of size r searched 3x3x3 instead of 2r searched 2x2x2
+  // Filtering switches itself off for the rest of the render after a batch in
+  // which it removed less than this fraction of the noise (render.h
+  // NoiseMonitor; --min-removed; 0: only when no vertex has a neighbour). It pays
+  // at equal time while (1 - removed) (1 + c) < 1, c its time relative to path
+  // tracing: 0.2 is the break-even at c = 0.25, the most it is meant to cost.
+  float min_removed = 0.2f;
 };
 
 // Bits of the cell keys for `count` tuples: a table of at least 2 * count cells.

@@ -251,6 +251,10 @@ int main(int argc, char** argv) {
   render->add_option("--albedo-threshold", ra.fopt.albedo_tol, "Similar vertices: |albedo_i - albedo_j| <= this (0.05)")
       ->check(CLI::NonNegativeNumber);
   render->add_flag("--cells27", ra.fopt.cells27, "Neighbour search in cells of size r (27 cells) instead of 2r (8 cells)");
+  render->add_option("--min-removed", ra.fopt.min_removed,
+                     "Filtering switches itself off after a batch where it removed less than this fraction of the "
+                     "noise; 0: only when no vertex has a neighbour (0.2)")
+      ->check(CLI::Range(0.0f, 1.0f));
   render->add_option("--aov", ra.aov,
                      "Extra EXR layers, comma-separated: unfiltered, neighbours, albedo, normal, depth");
   render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <thread>
 
@@ -136,6 +137,55 @@ void Accumulator::add(const BatchImages& b) {
   for (auto& t : pool) t.join();
   paths += n;
   next_batch += 1;
+}
+
+void NoiseMonitor::reset(uint64_t pixels) {
+  sum_.assign(pixels, 0.0);
+  sum2_.assign(pixels, 0.0);
+  count_.assign(pixels, 0);
+  batch_u_.assign(pixels, 0.0f);
+  batch_f_.assign(pixels, 0.0f);
+  batch_n_.assign(pixels, 0);
+}
+
+double NoiseMonitor::add(const BatchImages& b) {
+  const uint64_t pixels = sum_.size();
+  if (pixels == 0) throw std::logic_error("NoiseMonitor::add before reset");
+  auto lum = [](const cl_float4& c) { return 0.2126f * c.s[0] + 0.7152f * c.s[1] + 0.0722f * c.s[2]; };
+  const bool filtered = !b.filtered.empty();
+  for (size_t j = 0; j < b.unfiltered.size(); ++j) {
+    const float u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
+    if (!std::isfinite(u) || !std::isfinite(f)) continue;
+    const uint64_t p = (b.first + j) % pixels;
+    batch_u_[p] += u;
+    batch_f_[p] += f;
+    batch_n_[p] += 1;
+  }
+  // The batch is set against the variances before it, so that its own noise
+  // does not enter both sides.
+  double removed = 0.0, noise = 0.0;
+  for (uint64_t p = 0; p < pixels; ++p) {
+    const uint32_t n = batch_n_[p];
+    if (n == 0) continue;
+    if (filtered && count_[p] >= 2) {
+      const double m = sum_[p] / count_[p];
+      const double var = std::max(0.0, (sum2_[p] - m * sum_[p]) / double(count_[p] - 1));
+      const double w = 1.0 / (m * m + 0.01), d = (double(batch_f_[p]) - double(batch_u_[p])) / n;
+      removed += w * d * d;
+      noise += w * var / n;
+    }
+    batch_u_[p] = batch_f_[p] = 0.0f;
+    batch_n_[p] = 0;
+  }
+  for (size_t j = 0; j < b.unfiltered.size(); ++j) {
+    const double u = lum(b.unfiltered[j]);
+    if (!std::isfinite(u) || (filtered && !std::isfinite(lum(b.filtered[j])))) continue;
+    const uint64_t p = (b.first + j) % pixels;
+    sum_[p] += u;
+    sum2_[p] += u * u;
+    count_[p] += 1;
+  }
+  return noise > 0.0 ? removed / noise : std::numeric_limits<double>::quiet_NaN();
 }
 
 namespace {
@@ -418,12 +468,16 @@ RenderResult Renderer::render(const RenderOptions& o) {
   acc.reset(scene.width, scene.height, o.aovs);
   auto t0 = std::chrono::steady_clock::now();
   const uint64_t batches = (total + batch_size() - 1) / batch_size();
+  NoiseMonitor monitor;
+  if (filtering && o.filter.min_removed > 0.0f) monitor.reset(pixels);
   for (uint64_t index = 0; index < batches; ++index) {
     BatchImages b = trace_batch(index, total, filtering);
     acc.add(b);
-    if (filtering && b.max_count <= 1) {
+    const double removed = filtering && o.filter.min_removed > 0.0f ? monitor.add(b) : std::nan("");
+    if (filtering && (b.max_count <= 1 || removed < o.filter.min_removed)) {
       filtering = false;
       r.filter_off_after = acc.paths;
+      r.filter_removed = removed;
     }
     if (o.keep_last_batch && index + 1 == batches) {
       r.last_batch.params = b.params;

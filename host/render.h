@@ -61,6 +61,32 @@ struct Accumulator {
   uint64_t nonfinite() const;         // paths left out of the filtered image
 };
 
+// How much of a batch's noise the filter removed, for switching it off once it
+// no longer pays for its time. For each pixel p with b_p paths in the batch,
+// d_p = (mean filtered - mean unfiltered luminance of those paths)^2 is set
+// against the variance of the unfiltered mean, s_p^2 / b_p, where s_p^2 is the
+// variance of p's path luminances over all unfiltered paths so far; both are
+// weighted by 1 / (m_p^2 + 0.01), m_p the pixel's mean so far (relMSE's weights):
+//   removed = sum_p w_p d_p / sum_p w_p s_p^2 / b_p.
+// For an average over neighbours E[d_p] = Var(unfiltered) - Var(filtered) + bias^2,
+// so `removed` estimates the fraction of the batch's noise the filter took away.
+// Filtering a batch pays at equal time while (1 - removed) (1 + c) < 1, c the
+// filter's time relative to path tracing (FilterOptions::min_removed).
+class NoiseMonitor {
+ public:
+  void reset(uint64_t pixels);
+  // Adds the batch's unfiltered paths (path j in pixel (b.first + j) mod pixels)
+  // to the pixels' statistics and returns `removed` for it: NaN when the batch
+  // was not filtered or no pixel had two paths before it.
+  double add(const BatchImages& b);
+
+ private:
+  std::vector<double> sum_, sum2_;  // per pixel: luminance sums over the render
+  std::vector<uint32_t> count_;
+  std::vector<float> batch_u_, batch_f_;  // per pixel: the batch's sums
+  std::vector<uint32_t> batch_n_;
+};
+
 // The tuples of one batch, in path order (RenderOptions::keep_last_batch).
 struct BatchTuples {
   std::vector<PathVertex> vertices;  // filtering vertices (albedo.w 0: none)
@@ -73,6 +99,7 @@ struct RenderResult {
   Image unfiltered;               // the same paths without filtering (the image itself when not filtering)
   std::vector<float> neighbours;  // per pixel: mean number of tuples averaged (1 when not filtering)
   uint64_t filter_off_after = 0;  // paths after which filtering switched itself off (0: never)
+  double filter_removed = 0.0;    // then: the last batch's NoiseMonitor estimate (NaN: no neighbours)
   BatchTuples last_batch;         // with RenderOptions::keep_last_batch
   uint64_t paths = 0;             // paths traced
   uint64_t nonfinite = 0;         // paths with NaN/Inf radiance, left out of the image

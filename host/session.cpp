@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <map>
 #include <mutex>
@@ -50,7 +52,7 @@ std::string options_text(const RenderOptions& o) {
   if (o.filter.enabled)
     s << " alpha=" << o.filter.alpha << " r0=" << o.filter.r0 << " footprint=" << o.filter.footprint_pixels
       << " iterations=" << o.filter.iterations << " normal=" << o.filter.normal_cos << " albedo=" << o.filter.albedo_tol
-      << " cells27=" << o.filter.cells27;
+      << " cells27=" << o.filter.cells27 << " min_removed=" << o.filter.min_removed;
   s << " aovs=" << o.aovs;
   return s.str();
 }
@@ -332,6 +334,11 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   auto last_checkpoint = t0;
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   const uint64_t start_paths = acc.paths;
+  // Filtering's share of the noise, batch by batch (render.h); after a resume it
+  // starts again from the batches rendered since.
+  NoiseMonitor monitor;
+  const bool monitor_on = ro.filter.enabled && !filter_off && ro.filter.min_removed > 0.0f;
+  if (monitor_on) monitor.reset(uint64_t(scene.width) * scene.height);
 
   std::vector<std::thread> threads;
   for (size_t d = 0; d < D; ++d) threads.emplace_back(worker, d);
@@ -362,12 +369,22 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
       acc.add(img);
     }
     cv.notify_all();
-    if (ro.filter.enabled && !filter_off && img.max_count <= 1) {
-      filter_off = true;
-      filter_off_after = acc.paths;
-      if (!o.quiet)
-        std::cerr << (bar ? "\n" : "") << "psf: path space filtering switched itself off after " << acc.paths
-                  << " paths: no vertex had a neighbour any more\n";
+    if (ro.filter.enabled && !filter_off) {
+      const double removed = monitor_on ? monitor.add(img) : std::nan("");
+      if (img.max_count <= 1 || removed < ro.filter.min_removed) {
+        filter_off = true;
+        filter_off_after = acc.paths;
+        if (!o.quiet) {
+          std::cerr << (bar ? "\n" : "") << "psf: path space filtering switched itself off after " << acc.paths
+                    << " paths (" << acc.paths / (uint64_t(scene.width) * scene.height) << " spp): ";
+          if (img.max_count <= 1)
+            std::cerr << "no vertex had a neighbour any more\n";
+          else
+            std::cerr << "its last batch removed " << std::fixed << std::setprecision(1) << 100.0 * removed
+                      << std::defaultfloat << " % of the noise, less than --min-removed " << ro.filter.min_removed
+                      << "\n";
+        }
+      }
     }
     renderers[(img.index - first_batch) % D]->recycle(std::move(img));
     double t = elapsed();

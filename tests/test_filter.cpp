@@ -450,6 +450,69 @@ TEST_CASE("Filter: the filtered image approaches the unfiltered one as n grows",
   CHECK(d2 < 0.7 * d1);
 }
 
+TEST_CASE("Filter: the noise monitor estimates the fraction of a batch's noise the filter removed", "[filter]") {
+  // Synthetic batches of grey paths: pixel p's paths have mean m_p and standard
+  // deviation sigma_p (unfiltered). The filtered values are the unfiltered ones
+  // (nothing removed), the pixel means (all removed), or the mean of the path and
+  // one independent path of the same pixel (half the variance removed).
+  const uint64_t pixels = 4096, per_pixel = 2;
+  std::mt19937 rng(11);
+  std::normal_distribution<float> gauss(0.0f, 1.0f);
+  auto mean = [](uint64_t p) { return 0.2f + 0.8f * float(p % 7) / 6.0f; };
+  auto sigma = [](uint64_t p) { return 0.05f + 0.3f * float(p % 5) / 4.0f; };
+  auto grey = [](float v, float w) { return cl_float4{{v, v, v, w}}; };
+  auto batch = [&](uint64_t index, int mode) {
+    psf::BatchImages b;
+    b.index = index;
+    b.first = index * pixels * per_pixel;
+    for (uint64_t j = 0; j < pixels * per_pixel; ++j) {
+      const uint64_t p = (b.first + j) % pixels;
+      const float u = mean(p) + sigma(p) * gauss(rng), other = mean(p) + sigma(p) * gauss(rng);
+      b.unfiltered.push_back(grey(u, 1.0f));
+      if (mode == 1) b.filtered.push_back(grey(u, 1.0f));
+      if (mode == 2) b.filtered.push_back(grey(mean(p), 8.0f));
+      if (mode == 3) b.filtered.push_back(grey(0.5f * (u + other), 2.0f));
+    }
+    b.max_count = mode == 0 ? 0 : 8;
+    return b;
+  };
+  psf::NoiseMonitor m;
+  m.reset(pixels);
+  CHECK(std::isnan(m.add(batch(0, 1))));  // no variance known before the first batch
+  CHECK(std::isnan(m.add(batch(1, 0))));  // not filtered
+  for (int k = 2; k < 8; ++k) m.add(batch(k, 0));
+  CHECK(m.add(batch(8, 1)) == 0.0);
+  // With 16 paths per pixel known, the variance estimate's own scatter is about
+  // 1/sqrt(pixels * 15 / 2); the batch's d_p scatter about 1/sqrt(pixels / 2).
+  CHECK(m.add(batch(9, 2)) == Approx(1.0).margin(0.06));
+  CHECK(m.add(batch(10, 3)) == Approx(0.5).margin(0.04));
+  // A path with a non-finite value is left out on both sides.
+  psf::BatchImages bad = batch(11, 2);
+  bad.unfiltered[5].s[0] = NAN;
+  CHECK(m.add(bad) == Approx(1.0).margin(0.06));
+}
+
+TEST_CASE("Filter: switches itself off when it removes less than --min-removed of the noise", "[filter]") {
+  auto& rt = psf::test::runtime();
+  psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "24"}});
+  psf::Renderer renderer(rt, scene);
+  psf::RenderOptions o;
+  o.spp = 16;
+  o.batch_log2 = 10;  // 1.8 spp per batch: after the first, most pixels have two paths
+  o.filter.min_removed = 0.0f;
+  auto always = renderer.render(o);
+  CHECK(always.filter_off_after == 0);
+  o.filter.min_removed = 1.0f;  // the filter never removes all of the noise
+  auto off = renderer.render(o);
+  CHECK(off.filter_off_after == 2 * 1024);  // the first estimate comes with the second batch
+  CHECK(off.filter_removed > 0.0);
+  CHECK(off.filter_removed < 1.0);
+  // The batches before the switch are filtered as before, the rest not at all.
+  CHECK(off.unfiltered.rgb == always.unfiltered.rgb);
+  CHECK(off.image.rgb != always.image.rgb);
+  CHECK(off.image.rgb != off.unfiltered.rgb);
+}
+
 TEST_CASE("Filter: switches itself off when no vertex has a neighbour any more", "[filter]") {
   auto& rt = psf::test::runtime();
   psf::Scene scene = psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "24"}});
