@@ -369,6 +369,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.batch_size = uint32_t(std::min<uint64_t>(b.size, total - first));
   p.num_emitters = s.num_emitters;
   p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
+  p.dim_bounce0 = s.camera.aperture > 0.0f ? PSF_DIM_BOUNCE0_LENS : PSF_DIM_BOUNCE0;
   auto& states = b.states;
   auto& vertices = b.vertices;
   auto& hits = b.hits;

@@ -40,8 +40,8 @@ inline float power_heuristic(float a, float b) {
 }
 
 /* Dimension `offset` of this bounce of path `st`; key = pixel_seed(seed, st.pixel). */
-inline float bounce_sample(__global const uint* sobol, uint key, PathState st, uint offset) {
-  return sample_1d_keyed(sobol, key, st.sample, PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
+inline float bounce_sample(FrameParams params, __global const uint* sobol, uint key, PathState st, uint offset) {
+  return sample_1d_keyed(sobol, key, st.sample, params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
 }
 
 /* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
@@ -52,7 +52,7 @@ inline void env_sample_slot(uint k, uint j, FrameParams params, __global const u
                             __global const float* env_data, __global const PathState* states,
                             __global float4* env_samples) {
   uint pixel = states[j].pixel, sample = states[j].sample;
-  uint dim = PSF_DIM_BOUNCE0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
+  uint dim = params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
   if (params.num_emitters > 0u) {
     const uint key = pixel_seed(params.seed, pixel);
@@ -201,9 +201,9 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
       ls.delta = 0u;
     } else {
       ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
-                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_SELECT),
-                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV),
-                          bounce_sample(sobol, key, st, PSF_DIM_LIGHT_UV + 1u));
+                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_SELECT),
+                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_UV),
+                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_UV + 1u));
       if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
         ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
     }
@@ -226,15 +226,15 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
 
   /* BSDF sampling for the next segment, then Russian roulette. */
   if (scatter) {
-    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(sobol, key, st, PSF_DIM_BSDF_UV),
-                                bounce_sample(sobol, key, st, PSF_DIM_BSDF_UV + 1u),
-                                bsdf_chooses_lobe(m) ? bounce_sample(sobol, key, st, PSF_DIM_BSDF_LOBE) : 0.5f);
+    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_UV),
+                                bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_UV + 1u),
+                                bsdf_chooses_lobe(m) ? bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_LOBE) : 0.5f);
     beta *= bs.weight;
     if (segments >= params.rr_depth) {
       /* Survival by the throughput since the filtering vertex: any probability
        * keeps the estimate unbiased, and this one does not depend on alpha. */
       float q = fmin(max3(beta), 0.95f);
-      if (bounce_sample(sobol, key, st, PSF_DIM_RR) >= q) scatter = false;
+      if (bounce_sample(params, sobol, key, st, PSF_DIM_RR) >= q) scatter = false;
       else beta /= q;
     }
     if (scatter && max3(bs.weight) > 0.0f) {
