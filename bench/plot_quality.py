@@ -63,7 +63,7 @@ def main():
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()
-        path = os.path.join(args.out, "quality_convergence_%s%s.png" % (scene, args.suffix))
+        path = os.path.join(args.out, "quality-convergence-%s%s.png" % (scene, args.suffix))
         fig.savefig(path)
         print("wrote", path)
 
