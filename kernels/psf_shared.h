@@ -206,13 +206,18 @@ typedef struct {
 } Material;
 
 /* TriAttrib.flags */
-#define PSF_TRI_NORMALS 1u /* the triangle has per-vertex shading normals */
+#define PSF_TRI_NORMALS 1u  /* the triangle has per-vertex shading normals */
+#define PSF_TRI_TANGENTS 2u /* and tangents: n0.w, n1.w, n2.w hold each vertex's, packed (surface.cl tangent_unpack) */
 
 /* Shading attributes of one triangle, in scene order. A mesh without texture
  * coordinates has uv (0,0), (1,0), (0,1) at its corners, so that uv are the
  * barycentrics (b1, b2), as in Mitsuba. */
+/* With PSF_TRI_TANGENTS, n_k.w holds vertex k's unit tangent t and handedness s
+ * (the normal map's frame is (t, s n x t, n), glTF's TANGENT) as uint bits: the
+ * tangent's octahedral coordinates in [-1, 1], each as 15 bits (q + 16383, q =
+ * round(16383 x)), in bits 0-14 and 15-29, and bit 30 set where s = -1. */
 typedef struct {
-  psf_float4 n0;   /* xyz unit shading normal at vertex 0 (world space), with PSF_TRI_NORMALS */
+  psf_float4 n0;   /* xyz unit shading normal at vertex 0 (world space), with PSF_TRI_NORMALS; w a tangent */
   psf_float4 n1;   /* at vertex 1 */
   psf_float4 n2;   /* at vertex 2 */
   psf_float4 uv01; /* xy uv at vertex 0, zw uv at vertex 1 */

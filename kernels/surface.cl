@@ -93,6 +93,16 @@ inline float3 surface_emission(Material m, __global const TriAttrib* a, float b1
   return le;
 }
 
+/* The unit tangent packed into a TriAttrib normal's w (psf_shared.h): octahedral
+ * coordinates, 15 bits each. */
+inline float3 tangent_unpack(float w) {
+  uint bits = as_uint(w);
+  float2 o = (float2)((float)(bits & 0x7fffu), (float)((bits >> 15) & 0x7fffu)) / 16383.0f - 1.0f;
+  float3 d = (float3)(o, 1.0f - fabs(o.x) - fabs(o.y));
+  if (d.z < 0.0f) d.xy = (float2)((1.0f - fabs(o.y)) * (o.x < 0.0f ? -1.0f : 1.0f), (1.0f - fabs(o.x)) * (o.y < 0.0f ? -1.0f : 1.0f));
+  return normalize(d);
+}
+
 inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
                                    float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                                    __global const half* texels) {
@@ -135,11 +145,21 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     }
     if (bump && (m->flags & PSF_MATFLAG_NORMALMAP)) {
       /* Tangent space: t along dp/du made orthogonal to n, b = n x t (Mitsuba 3's
-       * normalmap, the glTF sample viewer's frame without stored tangents). */
+       * normalmap, the glTF sample viewer's frame without stored tangents), or
+       * the vertices' tangents interpolated, made orthogonal to n, and
+       * b = s n x t (glTF's TANGENT; s the handedness of vertex 0's). */
       float3 c = texture_eval(textures, texels, m->tex_bump, uv).xyz * 2.0f - 1.0f;
       c.xy *= m->bump_scale;
-      float3 t = normalize(dpdu - ns * dot(ns, dpdu));
-      float3 nb = normalize(c.x * t + c.y * cross(ns, t) + c.z * ns);
+      float3 tu = dpdu;
+      float b_sign = 1.0f;
+      if ((m->flags & PSF_MATFLAG_NORMALS) && (a->flags & PSF_TRI_TANGENTS)) {
+        float4 n0 = a->n0, n1 = a->n1, n2 = a->n2;
+        float3 tv = b0 * tangent_unpack(n0.w) + b1 * tangent_unpack(n1.w) + b2 * tangent_unpack(n2.w);
+        if (dot(tv, tv) > 0.0f) tu = tv;
+        b_sign = (as_uint(n0.w) & (1u << 30)) ? -1.0f : 1.0f;
+      }
+      float3 t = normalize(tu - ns * dot(ns, tu));
+      float3 nb = normalize(c.x * t + c.y * b_sign * cross(ns, t) + c.z * ns);
       if (isfinite(nb.x) && isfinite(nb.y) && isfinite(nb.z) && isfinite(t.x) && dot(nb, ns) > 0.0f) {
         ns = nb;
         dpdu = t;

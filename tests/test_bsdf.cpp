@@ -1266,6 +1266,76 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(C[4].s[3] == Approx(0.1f));
 }
 
+TEST_CASE("Shading frame: vertex tangents orient the normal map (glTF TANGENT)", "[bsdf]") {
+  // The triangle (0,0,0), (1,0,0), (0,1,0) with uv = (x, y) and normals z, so
+  // that dp/du = x; its tangents say otherwise. A normal map texel (a, b, c)
+  // gives n' = a t + b s (n x t) + c n, t the interpolated tangent made
+  // orthogonal to n, s its handedness. Tangents go through triangle_attributes'
+  // packing.
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  psf::detail::TextureDesc flat;
+  flat.wrap = PSF_TEX_CLAMP;
+  uint32_t normal_x = store.pixels(flat, 1, 1, {0.8f, 0.5f, 0.9f, 1});  // (0.6, 0, 0.8)
+  uint32_t normal_y = store.pixels(flat, 1, 1, {0.5f, 0.8f, 0.9f, 1});  // (0, 0.6, 0.8)
+  Material m{};
+  m.type = PSF_MATERIAL_DIFFUSE;
+  m.bump_scale = 1.0f;
+  m.flags = PSF_MATFLAG_NORMALMAP | PSF_MATFLAG_NORMALS;
+  std::vector<Material> mats(2, m);
+  mats[0].tex_bump = normal_x;
+  mats[1].tex_bump = normal_y;
+  scene.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  scene.triangles = {{0, 1, 2}};
+  scene.normals.assign(3, glm::vec3(0, 0, 1));
+  scene.uvs = {{0, 0}, {1, 0}, {0, 1}};
+  auto frame_normals = [&](const std::vector<glm::vec4>& tangents, glm::vec2 bary) {
+    scene.tangents = tangents;
+    std::vector<TriAttrib> attribs = psf::triangle_attributes(scene);
+    auto& rt = psf::test::runtime();
+    cl::Buffer bm = rt.upload(mats), ba = rt.upload(attribs);
+    cl::Buffer bt = rt.upload(scene.textures), bx = rt.upload(scene.texels);
+    std::vector<uint32_t> mi = {0, 1};
+    std::vector<cl_float2> b(2, cl_float2{{bary.x, bary.y}});
+    std::vector<cl_float4> wo(2, cl_float4{{0.1f, 0.2f, 0.97f, 0}});
+    cl::Buffer bmi = rt.upload(mi), bb = rt.upload(b), bw = rt.upload(wo);
+    std::vector<cl::Buffer> out;
+    for (int k = 0; k < 5; ++k) out.push_back(rt.buffer(CL_MEM_READ_WRITE, 2 * 16));
+    cl_float4 p0 = {{0, 0, 0, 0}}, p1 = {{1, 0, 0, 0}}, p2 = {{0, 1, 0, 0}};
+    rt.launch("surface_test_frame", 2, 64, bm, ba, bt, bx, bmi, p0, p1, p2, bb, bw, out[0], out[1], out[2], out[3],
+              out[4], 2u);
+    auto n = rt.download<cl_float4>(out[0], 2);
+    return std::pair<glm::vec3, glm::vec3>{{n[0].s[0], n[0].s[1], n[0].s[2]}, {n[1].s[0], n[1].s[1], n[1].s[2]}};
+  };
+  auto near = [](const glm::vec3& x, const glm::vec3& y) { return glm::length(x - y) < 2e-3f; };
+  // Without tangents: t = dp/du = x, n x t = y.
+  auto [x0, y0] = frame_normals({}, {0.3f, 0.3f});
+  CHECK(near(x0, {0.6f, 0, 0.8f}));
+  CHECK(near(y0, {0, 0.6f, 0.8f}));
+  // Tangent y, right-handed: n x t = -x.
+  auto [x1, y1] = frame_normals(std::vector<glm::vec4>(3, glm::vec4(0, 1, 0, 1)), {0.3f, 0.3f});
+  CHECK(near(x1, {0, 0.6f, 0.8f}));
+  CHECK(near(y1, {-0.6f, 0, 0.8f}));
+  // Left-handed: the bitangent turns, the tangent stays.
+  auto [x2, y2] = frame_normals(std::vector<glm::vec4>(3, glm::vec4(0, 1, 0, -1)), {0.3f, 0.3f});
+  CHECK(near(x2, {0, 0.6f, 0.8f}));
+  CHECK(near(y2, {0.6f, 0, 0.8f}));
+  // Tangents off the surface and below it (the octahedron's lower half) are made
+  // orthogonal to n; across the triangle they are interpolated: at the
+  // barycentrics (1/2, 0) the mean of vertex 0's and 1's, at (0, 1) vertex 2's.
+  const float h = std::sqrt(0.5f);
+  std::vector<glm::vec4> mixed = {{h, 0, -h, 1}, {0, 1, 0, 1}, {-0.6f, 0, 0.8f, 1}};
+  auto [x3, y3] = frame_normals(mixed, {0.5f, 0.0f});
+  const glm::vec3 t3 = glm::normalize(glm::vec3(0.5f * h, 0.5f, 0));
+  CHECK(near(x3, 0.6f * t3 + glm::vec3(0, 0, 0.8f)));
+  auto [x4, y4] = frame_normals(mixed, {0.0f, 1.0f});
+  CHECK(near(x4, {-0.6f, 0, 0.8f}));
+  CHECK(near(y4, {0, -0.6f, 0.8f}));
+  // A vertex without a tangent (w = 0): the triangle falls back to dp/du.
+  auto [x5, y5] = frame_normals({{0, 1, 0, 1}, {0, 1, 0, 1}, {0, 0, 0, 0}}, {0.3f, 0.3f});
+  CHECK(near(x5, {0.6f, 0, 0.8f}));
+}
+
 TEST_CASE("Shading frame: a roughplastic's textured roughness reads its table's rows", "[bsdf]") {
   // A roughplastic whose roughness texture holds alpha: at a hit its external
   // transmittance T(cos) and its coat's internal and external reflectances

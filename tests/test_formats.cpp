@@ -645,6 +645,47 @@ TEST_CASE("glTF: meshes, node transforms, materials, camera and punctual lights"
   }
 }
 
+TEST_CASE("glTF: vertex tangents are read, transformed and mirrored with their node", "[formats]") {
+  TempDir dir;
+  // The quad gets tangents x (vertices 0, 1) and y (2, 3), right-handed, as accessor 5.
+  std::string bin = gltf_buffer();
+  for (int i = 0; i < 4; ++i)
+    for (float v : {i < 2 ? 1.f : 0.f, i < 2 ? 0.f : 1.f, 0.f, 1.f}) put<float>(bin, v, false);
+  auto json_with = [&](int tangent_count, const std::string& scale) {
+    std::string json = gltf_json(R"({"byteLength": 240, "uri": "data:application/octet-stream;base64,)" + base64(bin) + "\"}");
+    json = replaced(json, R"("NORMAL": 3, "TEXCOORD_0": 4})", R"("NORMAL": 3, "TEXCOORD_0": 4, "TANGENT": 5})");
+    json = replaced(json, R"({"bufferView": 4, "componentType": 5126, "type": "VEC2", "count": 4}])",
+                    R"({"bufferView": 4, "componentType": 5126, "type": "VEC2", "count": 4},
+    {"bufferView": 5, "componentType": 5126, "type": "VEC4", "count": )" + std::to_string(tangent_count) + "}]");
+    json = replaced(json, R"({"buffer": 0, "byteOffset": 144, "byteLength": 32}])",
+                    R"({"buffer": 0, "byteOffset": 144, "byteLength": 32},
+    {"buffer": 0, "byteOffset": 176, "byteLength": 64}])");
+    return replaced(json, R"("scale": [2, 2, 2])", "\"scale\": " + scale);
+  };
+  auto tangent_of = [](const psf::Scene& s, size_t tri, int corner) { return s.tangents.at(s.triangles.at(tri)[corner]); };
+  psf::Scene plain = psf::load_scene(dir.write("plain.gltf", json_with(4, "[2, 2, 2]")));
+  CHECK(plain.warnings.empty());
+  REQUIRE(plain.tangents.size() == plain.positions.size());
+  CHECK(tangent_of(plain, 0, 0) == glm::vec4(1, 0, 0, 1));  // quad vertex 0
+  CHECK(tangent_of(plain, 0, 2) == glm::vec4(0, 1, 0, 1));  // vertex 2
+  CHECK(tangent_of(plain, 2, 0) == glm::vec4(0));           // the triangle has none
+  // Mirrored along x: the tangent turns with the geometry and the handedness flips.
+  psf::Scene mirrored = psf::load_scene(dir.write("mirrored.gltf", json_with(4, "[-2, 2, 2]")));
+  REQUIRE(mirrored.tangents.size() == mirrored.positions.size());
+  CHECK(mirrored.tangents[0] == glm::vec4(-1, 0, 0, -1));
+  CHECK(mirrored.tangents[2] == glm::vec4(0, 1, 0, -1));
+  // The shading attributes carry them for the quad's triangles only.
+  std::vector<TriAttrib> a = psf::triangle_attributes(plain);
+  CHECK((a[0].flags & PSF_TRI_TANGENTS) != 0);
+  CHECK((a[2].flags & PSF_TRI_TANGENTS) == 0);
+  try {
+    psf::load_scene(dir.write("short.gltf", json_with(3, "[2, 2, 2]")));
+    FAIL("a TANGENT accessor shorter than POSITION was accepted");
+  } catch (const psf::SceneError& e) {
+    CHECK_THAT(e.what(), Catch::Contains("TANGENT and POSITION have different counts"));
+  }
+}
+
 TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   TempDir dir;
   std::string bin = gltf_buffer();

@@ -277,8 +277,22 @@ class GltfLoader {
         tm.uvs.resize(nv);
         for (size_t i = 0; i < nv; ++i) tm.uvs[i] = glm::vec2(float(t[2 * i]), float(t[2 * i + 1]));
       }
+      // Tangents (xyz, handedness w) give the normal map's frame; glTF ignores
+      // them without normals, and so do we.
+      auto tangent_attr = prim.attributes.find("TANGENT");
+      if (tangent_attr != prim.attributes.end() && !tm.normals.empty()) {
+        std::vector<double> t = read_accessor(tangent_attr->second, TINYGLTF_TYPE_VEC4, where + ".TANGENT", false, true);
+        if (t.size() != 4 * nv) fail(where, "TANGENT and POSITION have different counts");
+        tm.tangents.resize(nv);
+        for (size_t i = 0; i < nv; ++i) {
+          glm::vec3 v{float(t[4 * i]), float(t[4 * i + 1]), float(t[4 * i + 2])};
+          const bool ok = std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(t[4 * i + 3]);
+          tm.tangents[i] = ok ? glm::vec4(v, t[4 * i + 3] < 0.0 ? -1.0f : 1.0f) : glm::vec4(0.0f);
+        }
+      }
       for (const auto& a : prim.attributes)
-        if (a.first != "POSITION" && a.first != "NORMAL" && a.first != "TEXCOORD_0") ignored_attributes_.insert(a.first);
+        if (a.first != "POSITION" && a.first != "NORMAL" && a.first != "TEXCOORD_0" && a.first != "TANGENT")
+          ignored_attributes_.insert(a.first);
       if (!ignored_attributes_.empty()) {
         std::string list;
         for (const std::string& a : ignored_attributes_) list += (list.empty() ? "" : ", ") + a;

@@ -4,15 +4,34 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 #include <thread>
 #include <utility>
 
 namespace psf {
 
+namespace {
+
+// A unit tangent and its handedness packed as TriAttrib's n_k.w (psf_shared.h).
+float pack_tangent(const glm::vec4& t) {
+  glm::vec3 d = glm::vec3(t) / (std::fabs(t.x) + std::fabs(t.y) + std::fabs(t.z));
+  glm::vec2 o(d.x, d.y);
+  if (d.z < 0.0f)
+    o = glm::vec2((1.0f - std::fabs(d.y)) * (d.x < 0.0f ? -1.0f : 1.0f), (1.0f - std::fabs(d.x)) * (d.y < 0.0f ? -1.0f : 1.0f));
+  auto q = [](float v) { return uint32_t(std::lround(std::clamp(v, -1.0f, 1.0f) * 16383.0f) + 16383); };
+  const uint32_t bits = q(o.x) | (q(o.y) << 15) | (t.w < 0.0f ? 1u << 30 : 0u);
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+
+}  // namespace
+
 std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
   std::vector<TriAttrib> out(scene.triangles.size());
   const bool has_normals = scene.normals.size() == scene.positions.size();
+  const bool has_tangents = has_normals && scene.tangents.size() == scene.positions.size();
   const bool has_uvs = scene.uvs.size() == scene.positions.size();
   for (size_t i = 0; i < scene.triangles.size(); ++i) {
     const glm::uvec3& t = scene.triangles[i];
@@ -26,6 +45,17 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
         a.n1 = {{n[1].x, n[1].y, n[1].z, 0}};
         a.n2 = {{n[2].x, n[2].y, n[2].z, 0}};
         a.flags |= PSF_TRI_NORMALS;
+        if (has_tangents) {
+          glm::vec4 tv[3] = {scene.tangents[t.x], scene.tangents[t.y], scene.tangents[t.z]};
+          bool all = true;
+          for (const glm::vec4& v : tv) all = all && v.w != 0.0f;
+          if (all) {
+            a.n0.s[3] = pack_tangent(tv[0]);
+            a.n1.s[3] = pack_tangent(tv[1]);
+            a.n2.s[3] = pack_tangent(tv[2]);
+            a.flags |= PSF_TRI_TANGENTS;
+          }
+        }
       }
     }
     glm::vec2 uv[3] = {{0, 0}, {1, 0}, {0, 1}};  // barycentric (b1, b2), Mitsuba's uv without texcoords

@@ -43,6 +43,9 @@ struct Scene {
   std::vector<glm::uvec3> triangles;     // vertex indices of each triangle
   std::vector<glm::vec3> normals;        // per vertex shading normal (world space) or empty; (0,0,0): none, face normal
   std::vector<glm::vec2> uvs;            // per vertex uv (Mitsuba's: v = 0 at the image top) or empty; NaN: none
+  // Per vertex unit tangent (world space) and handedness w = +-1, the normal
+  // map's frame (t, w n x t, n) (glTF's TANGENT), or empty; w = 0: none.
+  std::vector<glm::vec4> tangents;
   std::vector<uint32_t> tri_material;    // material index of each triangle
   std::vector<Material> materials;       // albedo and emission (psf_shared.h)
   std::vector<std::string> material_names;  // per material: bsdf id or MTL name, for messages and tests

@@ -130,6 +130,23 @@ void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, u
       scene.normals.push_back(n);
     }
   }
+  // Tangents are directions in the surface: they transform as positions do. The
+  // bitangent w n x t turns with a mirroring transform and with flipped normals.
+  const bool has_tangents = mesh.tangents.size() == mesh.positions.size() && has_normals;
+  if (has_tangents || !scene.tangents.empty()) {
+    scene.tangents.resize(base, glm::vec4(0.0f));
+    const glm::mat3 m(to_world);
+    const float hand = (glm::determinant(m) < 0.0f ? -1.0f : 1.0f) * (flip ? -1.0f : 1.0f);
+    for (size_t i = 0; i < mesh.positions.size(); ++i) {
+      glm::vec4 t(0.0f);
+      if (has_tangents && (mesh.tangents[i].w == 1.0f || mesh.tangents[i].w == -1.0f)) {
+        glm::vec3 d = m * glm::vec3(mesh.tangents[i]);
+        float len = glm::length(d);
+        if (len > 0.0f && std::isfinite(len)) t = glm::vec4(d / len, mesh.tangents[i].w * hand);
+      }
+      scene.tangents.push_back(t);
+    }
+  }
   if (has_uvs || !scene.uvs.empty()) {
     scene.uvs.resize(base, no_uv);
     for (size_t i = 0; i < mesh.positions.size(); ++i) scene.uvs.push_back(has_uvs ? mesh.uvs[i] : no_uv);
