@@ -143,26 +143,28 @@ void NoiseMonitor::reset(uint64_t pixels) {
   sum_.assign(pixels, 0.0);
   sum2_.assign(pixels, 0.0);
   count_.assign(pixels, 0);
-  batch_u_.assign(pixels, 0.0f);
-  batch_f_.assign(pixels, 0.0f);
+  batch_u_.assign(pixels, 0.0);
+  batch_u2_.assign(pixels, 0.0);
+  batch_f_.assign(pixels, 0.0);
   batch_n_.assign(pixels, 0);
 }
 
 double NoiseMonitor::add(const BatchImages& b) {
   const uint64_t pixels = sum_.size();
   if (pixels == 0) throw std::logic_error("NoiseMonitor::add before reset");
-  auto lum = [](const cl_float4& c) { return 0.2126f * c.s[0] + 0.7152f * c.s[1] + 0.0722f * c.s[2]; };
+  auto lum = [](const cl_float4& c) { return 0.2126 * c.s[0] + 0.7152 * c.s[1] + 0.0722 * c.s[2]; };
   const bool filtered = !b.filtered.empty();
   for (size_t j = 0; j < b.unfiltered.size(); ++j) {
-    const float u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
+    const double u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
     if (!std::isfinite(u) || !std::isfinite(f)) continue;
     const uint64_t p = (b.first + j) % pixels;
     batch_u_[p] += u;
+    batch_u2_[p] += u * u;
     batch_f_[p] += f;
     batch_n_[p] += 1;
   }
   // The batch is set against the variances before it, so that its own noise
-  // does not enter both sides.
+  // does not enter both sides; then its sums join the pixel's.
   double removed = 0.0, noise = 0.0;
   for (uint64_t p = 0; p < pixels; ++p) {
     const uint32_t n = batch_n_[p];
@@ -170,20 +172,15 @@ double NoiseMonitor::add(const BatchImages& b) {
     if (filtered && count_[p] >= 2) {
       const double m = sum_[p] / count_[p];
       const double var = std::max(0.0, (sum2_[p] - m * sum_[p]) / double(count_[p] - 1));
-      const double w = 1.0 / (m * m + 0.01), d = (double(batch_f_[p]) - double(batch_u_[p])) / n;
+      const double w = 1.0 / (m * m + 0.01), d = (batch_f_[p] - batch_u_[p]) / n;
       removed += w * d * d;
       noise += w * var / n;
     }
-    batch_u_[p] = batch_f_[p] = 0.0f;
+    sum_[p] += batch_u_[p];
+    sum2_[p] += batch_u2_[p];
+    count_[p] += n;
+    batch_u_[p] = batch_u2_[p] = batch_f_[p] = 0.0;
     batch_n_[p] = 0;
-  }
-  for (size_t j = 0; j < b.unfiltered.size(); ++j) {
-    const double u = lum(b.unfiltered[j]);
-    if (!std::isfinite(u) || (filtered && !std::isfinite(lum(b.filtered[j])))) continue;
-    const uint64_t p = (b.first + j) % pixels;
-    sum_[p] += u;
-    sum2_[p] += u * u;
-    count_[p] += 1;
   }
   return noise > 0.0 ? removed / noise : std::numeric_limits<double>::quiet_NaN();
 }

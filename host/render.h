@@ -83,7 +83,7 @@ class NoiseMonitor {
  private:
   std::vector<double> sum_, sum2_;  // per pixel: luminance sums over the render
   std::vector<uint32_t> count_;
-  std::vector<float> batch_u_, batch_f_;  // per pixel: the batch's sums
+  std::vector<double> batch_u_, batch_u2_, batch_f_;  // per pixel: the batch's sums
   std::vector<uint32_t> batch_n_;
 };
 
