@@ -17,6 +17,22 @@ namespace {
 
 psf_float4 f4(const glm::vec3& v, float w = 0.0f) { return {{v.x, v.y, v.z, w}}; }
 
+// Host threads for a pass over a batch of n paths split into `parts` ranges:
+// one per 65536 paths, at most 8 and the machine's.
+uint64_t host_threads(uint64_t n, uint64_t parts) {
+  return std::max<uint64_t>(1, std::min<uint64_t>({std::thread::hardware_concurrency(), 8, n >> 16, parts}));
+}
+
+// f(begin, end) over `threads` contiguous ranges of [0, count), the first on this thread.
+template <typename F>
+void in_parallel(uint64_t count, uint64_t threads, F&& f) {
+  threads = std::max<uint64_t>(1, threads);
+  std::vector<std::thread> pool;
+  for (uint64_t t = 1; t < threads; ++t) pool.emplace_back(f, count * t / threads, count * (t + 1) / threads);
+  f(0, count / threads);
+  for (auto& t : pool) t.join();
+}
+
 }  // namespace
 
 struct Renderer::Impl {
@@ -129,12 +145,7 @@ void Accumulator::add(const BatchImages& b) {
       }
     }
   };
-  const uint64_t threads =
-      std::max<uint64_t>(1, std::min<uint64_t>({std::thread::hardware_concurrency(), 8, n >> 16, pixels >> 10}));
-  std::vector<std::thread> pool;
-  for (uint64_t t = 1; t < threads; ++t) pool.emplace_back(add_pixels, pixels * t / threads, pixels * (t + 1) / threads);
-  add_pixels(0, pixels / threads);
-  for (auto& t : pool) t.join();
+  in_parallel(pixels, host_threads(n, pixels >> 10), add_pixels);
   paths += n;
   next_batch += 1;
 }
@@ -143,10 +154,6 @@ void NoiseMonitor::reset(uint64_t pixels) {
   sum_.assign(pixels, 0.0);
   sum2_.assign(pixels, 0.0);
   count_.assign(pixels, 0);
-  batch_u_.assign(pixels, 0.0);
-  batch_u2_.assign(pixels, 0.0);
-  batch_f_.assign(pixels, 0.0);
-  batch_n_.assign(pixels, 0);
 }
 
 double NoiseMonitor::add(const BatchImages& b) {
@@ -154,33 +161,50 @@ double NoiseMonitor::add(const BatchImages& b) {
   if (pixels == 0) throw std::logic_error("NoiseMonitor::add before reset");
   auto lum = [](const cl_float4& c) { return 0.2126 * c.s[0] + 0.7152 * c.s[1] + 0.0722 * c.s[2]; };
   const bool filtered = !b.filtered.empty();
-  for (size_t j = 0; j < b.unfiltered.size(); ++j) {
-    const double u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
-    if (!std::isfinite(u) || !std::isfinite(f)) continue;
-    const uint64_t p = (b.first + j) % pixels;
-    batch_u_[p] += u;
-    batch_u2_[p] += u * u;
-    batch_f_[p] += f;
-    batch_n_[p] += 1;
-  }
-  // The batch is set against the variances before it, so that its own noise
-  // does not enter both sides; then its sums join the pixel's.
-  double removed = 0.0, noise = 0.0;
-  for (uint64_t p = 0; p < pixels; ++p) {
-    const uint32_t n = batch_n_[p];
-    if (n == 0) continue;
-    if (filtered && count_[p] >= 2) {
-      const double m = sum_[p] / count_[p];
-      const double var = std::max(0.0, (sum2_[p] - m * sum_[p]) / double(count_[p] - 1));
-      const double w = 1.0 / (m * m + 0.01), d = (batch_f_[p] - batch_u_[p]) / n;
-      removed += w * d * d;
-      noise += w * var / n;
+  const uint64_t n = b.unfiltered.size(), offset = b.first % pixels;
+  // Pixel by pixel over the pixel's paths of the batch (path j lies in pixel
+  // (first + j) mod pixels), in blocks of kBlock pixels whose partial sums are
+  // added in block order: the figure does not depend on the number of threads.
+  constexpr uint64_t kBlock = 4096;
+  const uint64_t blocks = (pixels + kBlock - 1) / kBlock;
+  std::vector<double> part_removed(blocks, 0.0), part_noise(blocks, 0.0);
+  auto run = [&](uint64_t b0, uint64_t b1) {
+    for (uint64_t blk = b0; blk < b1; ++blk) {
+      double removed = 0.0, noise = 0.0;
+      for (uint64_t p = blk * kBlock; p < std::min(pixels, (blk + 1) * kBlock); ++p) {
+        double su = 0.0, su2 = 0.0, sf = 0.0;
+        uint32_t cnt = 0;
+        for (uint64_t j = (p + pixels - offset) % pixels; j < n; j += pixels) {
+          const double u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
+          if (!std::isfinite(u) || !std::isfinite(f)) continue;
+          su += u;
+          su2 += u * u;
+          sf += f;
+          cnt += 1;
+        }
+        if (cnt == 0) continue;
+        // The batch is set against the variances before it, so that its own
+        // noise does not enter both sides; then its sums join the pixel's.
+        if (filtered && count_[p] >= 2) {
+          const double m = sum_[p] / count_[p];
+          const double var = std::max(0.0, (sum2_[p] - m * sum_[p]) / double(count_[p] - 1));
+          const double w = 1.0 / (m * m + 0.01), d = (sf - su) / cnt;
+          removed += w * d * d;
+          noise += w * var / cnt;
+        }
+        sum_[p] += su;
+        sum2_[p] += su2;
+        count_[p] += cnt;
+      }
+      part_removed[blk] = removed;
+      part_noise[blk] = noise;
     }
-    sum_[p] += batch_u_[p];
-    sum2_[p] += batch_u2_[p];
-    count_[p] += n;
-    batch_u_[p] = batch_u2_[p] = batch_f_[p] = 0.0;
-    batch_n_[p] = 0;
+  };
+  in_parallel(blocks, host_threads(n, blocks), run);
+  double removed = 0.0, noise = 0.0;
+  for (uint64_t blk = 0; blk < blocks; ++blk) {
+    removed += part_removed[blk];
+    noise += part_noise[blk];
   }
   return noise > 0.0 ? removed / noise : std::numeric_limits<double>::quiet_NaN();
 }
@@ -471,7 +495,9 @@ RenderResult Renderer::render(const RenderOptions& o) {
   for (uint64_t index = 0; index < batches; ++index) {
     BatchImages b = trace_batch(index, total, filtering);
     acc.add(b);
-    const double removed = filtering && o.filter.min_removed > 0.0f ? monitor.add(b) : std::nan("");
+    // The estimate decides for the batches after this one: the last needs none.
+    const double removed =
+        filtering && o.filter.min_removed > 0.0f && index + 1 < batches ? monitor.add(b) : std::nan("");
     if (filtering && (b.max_count <= 1 || removed < o.filter.min_removed)) {
       filtering = false;
       r.filter_off_after = acc.paths;

@@ -83,8 +83,6 @@ class NoiseMonitor {
  private:
   std::vector<double> sum_, sum2_;  // per pixel: luminance sums over the render
   std::vector<uint32_t> count_;
-  std::vector<double> batch_u_, batch_u2_, batch_f_;  // per pixel: the batch's sums
-  std::vector<uint32_t> batch_n_;
 };
 
 // The tuples of one batch, in path order (RenderOptions::keep_last_batch).
