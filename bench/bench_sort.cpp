@@ -13,9 +13,10 @@
 // Timing: one warm-up, then --trials sorts of fresh copies of the input; device
 // time from the launches' profiling events (Runtime::stats), wall time from a
 // steady clock around the launches and the queue's finish (uploads excluded).
-// psf runs with this device's digit width (radix_digit_bits) and, for
-// comparison, the other one. After timing every result is checked against
-// std::sort's.
+// psf runs each of its kernel variants: per-work-item chunks with 4-bit and
+// 8-bit digits, and per-work-group tiles with 4-bit digits (radix_kernels and
+// radix_digit_bits say which this device uses by default). After timing every
+// result is checked against std::sort's.
 //
 // Usage: bench_sort [benchmark flags] [--log2=N ...] [--trials=N] [--peer_trials=N]
 #include <benchmark/benchmark.h>
@@ -102,11 +103,13 @@ int main(int argc, char** argv) {
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
   psf::Runtime rt(dev);
   const unsigned threads = bench::peer_threads(dev);
-  const uint32_t own_digit = psf::radix_digit_bits(rt), other_digit = own_digit == 8 ? 4 : 8;
+  const bool own_tiles = psf::radix_kernels(rt) == psf::RadixKernels::tiles;
+  const uint32_t own_digit = own_tiles ? 4 : psf::radix_digit_bits(rt);
+  const std::string own_variant = (own_tiles ? "tiles" : "chunks") + std::to_string(own_digit);
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
   benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
-  benchmark::AddCustomContext("psf_digit_bits", std::to_string(own_digit));
+  benchmark::AddCustomContext("psf_sort_kernels", own_variant);
 #ifdef PSF_HAVE_PARALLEL_MODE
   benchmark::AddCustomContext(
       "peer", "std::sort, std::stable_sort (1 thread); __gnu_parallel::sort (" + std::to_string(threads) + " threads)");
@@ -117,10 +120,8 @@ int main(int argc, char** argv) {
 #endif
   bench::report("device: %s / %s, driver %s, %s, %u compute units\n", dev.platform.c_str(), dev.name.c_str(),
                 dev.driver.c_str(), dev.version.c_str(), dev.compute_units);
-  bench::report(
-      "psf: %u-bit digits on this device (and %u-bit for "
-      "comparison); trials %d, peer trials %d\n",
-      own_digit, other_digit, opt.trials, opt.peer_trials);
+  bench::report("psf: %s on this device (and the other variants for comparison); trials %d, peer trials %d\n",
+                own_variant.c_str(), opt.trials, opt.peer_trials);
 
   std::vector<std::unique_ptr<Bench>> benches;
   for (int l : opt.log2s) {
@@ -180,11 +181,14 @@ int main(int argc, char** argv) {
         ->Unit(benchmark::kMillisecond);
 #endif
 
-    for (uint32_t digit : {own_digit, other_digit}) {
-      const std::string name = "psf_radix_sort/" + size + "/digit" + std::to_string(digit);
+    for (const char* variant : {"chunks4", "chunks8", "tiles4"}) {
+      const bool tiles = variant[0] == 't';
+      const uint32_t digit = tiles ? 4 : variant[6] == '4' ? 4 : 8;
+      const bool own = variant == own_variant;
+      const std::string name = "psf_radix_sort/" + size + "/" + variant;
       benchmark::RegisterBenchmark(
           name.c_str(),
-          [b, &rt, &opt, digit, own_digit, name](benchmark::State& state) {
+          [b, &rt, &opt, digit, tiles, own, name](benchmark::State& state) {
             cl::Buffer keys = rt.buffer(CL_MEM_READ_WRITE, b->n * sizeof(uint32_t));
             cl::Buffer values = rt.buffer(CL_MEM_READ_WRITE, b->n * sizeof(uint32_t));
             cl::Buffer tmp_keys = rt.buffer(CL_MEM_READ_WRITE, b->n * sizeof(uint32_t));
@@ -197,7 +201,8 @@ int main(int argc, char** argv) {
               rt.finish();
               rt.reset_stats();
               auto t0 = Clock::now();
-              psf::radix_sort(rt, keys, values, tmp_keys, tmp_values, b->n, b->bits, 0, digit);
+              psf::radix_sort(rt, keys, values, tmp_keys, tmp_values, b->n, b->bits, 0, digit,
+                              tiles ? psf::RadixKernels::tiles : psf::RadixKernels::chunks);
               rt.finish();
               double wall = since_ms(t0);
               return std::make_pair(timed ? bench::kernel_ms(rt.stats(), {"radix_"}) : 0.0, wall);
@@ -229,7 +234,7 @@ int main(int argc, char** argv) {
                 "%s: %u passes of %u bits%s: device median %.2f ms, "
                 "min %.2f ms; wall median %.2f ms; %.0f M "
                 "pairs/s; %zu pairs out of place\n",
-                name.c_str(), (b->bits + digit - 1) / digit, digit, digit == own_digit ? " (this device's)" : "", ms,
+                name.c_str(), (b->bits + digit - 1) / digit, digit, own ? " (this device's)" : "", ms,
                 dt.min_s * 1e3, wall_ms, b->n / dt.median_s * 1e-6, wrong);
             if (b->std_sort_ms > 0)
               bench::report("%s: std::sort / psf = %.1f / %.2f ms wall = %.2fx", name.c_str(), b->std_sort_ms, wall_ms,

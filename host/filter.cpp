@@ -53,31 +53,56 @@ uint32_t radix_chunk(const Runtime& rt, uint32_t n, uint32_t digit_bits) {
   return (n + items - 1) / items;
 }
 
+RadixKernels radix_kernels(const Runtime& rt) {
+  return rt.device().type == "GPU" ? RadixKernels::tiles : RadixKernels::chunks;
+}
+
 // Each pass swaps the buffer handles, so `keys`/`values` name the result.
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits, uint32_t chunk, uint32_t digit_bits) {
+                uint32_t n, uint32_t bits, uint32_t chunk, uint32_t digit_bits, RadixKernels kernels,
+                RadixScratch* scratch) {
   if (n <= 1 || bits == 0) return;
-  if (digit_bits == 0) digit_bits = radix_digit_bits(rt);
+  if (kernels == RadixKernels::automatic) kernels = radix_kernels(rt);
+  const bool tiles = kernels == RadixKernels::tiles;
+  if (digit_bits == 0) digit_bits = tiles ? 4 : radix_digit_bits(rt);
   if (digit_bits != 4 && digit_bits != 8) throw std::invalid_argument("radix_sort: digits of 4 or 8 bits");
+  if (tiles && digit_bits != 4) throw std::invalid_argument("radix_sort: tiles sort 4-bit digits");
   bits = std::min(bits, 32u);
   if (chunk == 0) chunk = radix_chunk(rt, n, digit_bits);
-  const uint32_t items = (n + chunk - 1) / chunk;
+  // Chunks: one work-item each. Tiles: PSF_TILE pairs a work-group.
+  const uint32_t items = tiles ? (n + PSF_TILE - 1) / PSF_TILE : (n + chunk - 1) / chunk;
   const uint32_t table = (1u << digit_bits) * items;  // digit-major counts, then their scan
   // CPUs run a work-group on one thread: groups small enough that every compute
   // unit gets several.
   const size_t local =
       rt.device().type == "GPU" ? kLocal
                                 : std::clamp<size_t>(items / (4 * std::max(rt.device().compute_units, 1u)), 1, kLocal);
-  const std::string count = "radix_count" + std::to_string(digit_bits);
-  const std::string scatter = "radix_scatter" + std::to_string(digit_bits);
-  cl::Buffer counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * table);
-  cl::Buffer scratch = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * scan_scratch_entries(table));
+  const std::string count = tiles ? "radix_tile_count4" : "radix_count" + std::to_string(digit_bits);
+  const std::string scatter = tiles ? "radix_tile_scatter4" : "radix_scatter" + std::to_string(digit_bits);
+  RadixScratch own;
+  RadixScratch& tmp = scratch ? *scratch : own;
+  if (tmp.counts_entries < table) {
+    tmp.counts = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * table);
+    tmp.counts_entries = table;
+  }
+  if (tmp.sums_entries < scan_scratch_entries(table)) {
+    tmp.sums = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t) * scan_scratch_entries(table));
+    tmp.sums_entries = scan_scratch_entries(table);
+  }
+  cl::Buffer& counts = tmp.counts;
   for (uint32_t shift = 0; shift < bits; shift += digit_bits) {
     const uint32_t width = std::min(digit_bits, bits - shift);
     const uint32_t mask = (1u << width) - 1u;
-    rt.launch(count, items, local, keys, n, shift, mask, items, chunk, counts);
-    exclusive_scan(rt, counts, table, scratch);
-    rt.launch(scatter, items, local, keys, values, n, shift, mask, items, chunk, counts, tmp_keys, tmp_values);
+    if (tiles) {
+      const size_t global = size_t(items) * PSF_TILE_LOCAL;
+      rt.launch(count, global, PSF_TILE_LOCAL, keys, n, shift, mask, items, counts);
+      exclusive_scan(rt, counts, table, tmp.sums);
+      rt.launch(scatter, global, PSF_TILE_LOCAL, keys, values, n, shift, mask, items, counts, tmp_keys, tmp_values);
+    } else {
+      rt.launch(count, items, local, keys, n, shift, mask, items, chunk, counts);
+      exclusive_scan(rt, counts, table, tmp.sums);
+      rt.launch(scatter, items, local, keys, values, n, shift, mask, items, chunk, counts, tmp_keys, tmp_values);
+    }
     std::swap(keys, tmp_keys);
     std::swap(values, tmp_values);
   }
@@ -132,7 +157,8 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
   rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_);
-  radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1);
+  radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1, 0, 0, RadixKernels::automatic,
+             &sort_scratch_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
   dirty_count_ = n;
   dirty_bits_ = p.key_bits;

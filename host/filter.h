@@ -30,13 +30,28 @@ struct FilterOptions {
 // Bits of the cell keys for `count` tuples: a table of at least 2 * count cells.
 uint32_t filter_key_bits(uint32_t count);
 
+// How radix_sort's passes divide the pairs: each work-item a chunk (CPUs), or each
+// work-group a tile ranked in local memory, 4-bit digits only (GPUs).
+enum class RadixKernels { automatic, chunks, tiles };
+
 // Sorts `n` (key, value) pairs by the low `bits` bits of the keys, stably, using
 // `tmp_keys`/`tmp_values` of the same size; the handles are swapped as it goes,
 // so afterwards `keys` and `values` name the buffers holding the sorted pairs.
-// Each pass sorts by a digit of `digit_bits` (4 or 8) bits, each work-item a
-// chunk of `chunk` pairs; 0 picks this device's (radix_digit_bits, radix_chunk).
+// Each pass sorts by a digit of `digit_bits` (4 or 8) bits; with chunks, each
+// work-item sorts `chunk` pairs. 0 and automatic pick this device's
+// (radix_digit_bits, radix_chunk, radix_kernels).
+// `scratch`, when given, keeps the table of counts and the scan's block sums
+// between calls (grown as needed) instead of allocating them each time.
+struct RadixScratch {
+  cl::Buffer counts, sums;
+  size_t counts_entries = 0, sums_entries = 0;
+};
 void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& tmp_keys, cl::Buffer& tmp_values,
-                uint32_t n, uint32_t bits, uint32_t chunk = 0, uint32_t digit_bits = 0);
+                uint32_t n, uint32_t bits, uint32_t chunk = 0, uint32_t digit_bits = 0,
+                RadixKernels kernels = RadixKernels::automatic, RadixScratch* scratch = nullptr);
+
+// The kernels radix_sort uses on this device: tiles on GPUs, chunks on CPUs.
+RadixKernels radix_kernels(const Runtime& rt);
 
 // The digit radix_sort uses on this device: 8 bits on CPUs, 4 on GPUs (whose
 // 16 counters per work-item stay in registers).
@@ -81,6 +96,7 @@ class PathSpaceFilter {
   cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;
+  RadixScratch sort_scratch_;
   // The last run's tuples and key bits: keys_ holds its sorted keys, whose
   // entries of ranges_ the next run empties first.
   uint32_t dirty_count_ = 0, dirty_bits_ = 0;

@@ -491,13 +491,14 @@ RenderResult Renderer::render(const RenderOptions& o) {
   auto t0 = std::chrono::steady_clock::now();
   const uint64_t batches = (total + batch_size() - 1) / batch_size();
   NoiseMonitor monitor;
-  if (filtering && o.filter.min_removed > 0.0f) monitor.reset(pixels);
+  // The estimate decides for the batches after the one it is made for: a render
+  // of one batch needs none.
+  const bool monitoring = filtering && o.filter.min_removed > 0.0f && batches > 1;
+  if (monitoring) monitor.reset(pixels);
   for (uint64_t index = 0; index < batches; ++index) {
     BatchImages b = trace_batch(index, total, filtering);
     acc.add(b);
-    // The estimate decides for the batches after this one: the last needs none.
-    const double removed =
-        filtering && o.filter.min_removed > 0.0f && index + 1 < batches ? monitor.add(b) : std::nan("");
+    const double removed = monitoring && filtering && index + 1 < batches ? monitor.add(b) : std::nan("");
     if (filtering && (b.max_count <= 1 || removed < o.filter.min_removed)) {
       filtering = false;
       r.filter_off_after = acc.paths;

@@ -46,6 +46,11 @@ typedef cl_uint psf_uint;
  * PSF_SCAN_BLOCK entries, each by one work-group of PSF_SCAN_LOCAL work-items. */
 #define PSF_SCAN_LOCAL 256u
 #define PSF_SCAN_BLOCK 1024u
+/* GPUs' radix sort (sort.cl, radix_tile_*): tiles of PSF_TILE_LOCAL *
+ * PSF_TILE_PER_ITEM pairs, one a work-group, ranked by 4-bit digit in local memory. */
+#define PSF_TILE_LOCAL 256u
+#define PSF_TILE_PER_ITEM 8u
+#define PSF_TILE (PSF_TILE_LOCAL * PSF_TILE_PER_ITEM)
 /* filter.cl's filter_max_count: counts per work-item. */
 #define PSF_MAX_COUNT_CHUNK 256u
 

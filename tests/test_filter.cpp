@@ -182,33 +182,42 @@ TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
   auto& rt = psf::test::runtime();
   std::mt19937 rng(5);
   // Small keeps 65537 (257 work-items of 256 pairs: several work-groups and a
-  // tail) and drops only 300001 (the 1024 work-item cap). Chunk 0 is this
-  // device's choice (radix_chunk), 16 what GPUs use; digits of 4 bits (GPUs) and
-  // 8 (CPUs) on any device. Keys have random bits above the `bits` sorted by,
-  // which the sort must ignore (the reference compares the low bits only).
-  const std::vector<uint32_t> sizes = psf::test::pick<std::vector<uint32_t>>({0, 1, 2, 63, 1000, 65537, 300001},
-                                                                             {0, 1, 2, 63, 1000, 4097, 65537});
+  // tail; 33 tiles of 2048, the last of one pair) and drops only 300001 (the
+  // 1024 work-item cap). Every variant runs on any device: chunks with 4-bit
+  // and 8-bit digits, chunk 0 this device's choice (radix_chunk) and 16 what
+  // GPUs used before tiles; tiles (GPUs) with 4-bit digits. Keys have random
+  // bits above the `bits` sorted by, which the sort must ignore (the reference
+  // compares the low bits only).
+  struct Variant {
+    psf::RadixKernels kernels;
+    uint32_t digit, chunk;
+  };
+  const Variant variants[] = {{psf::RadixKernels::chunks, 4, 0},
+                              {psf::RadixKernels::chunks, 4, 16},
+                              {psf::RadixKernels::chunks, 8, 0},
+                              {psf::RadixKernels::chunks, 8, 16},
+                              {psf::RadixKernels::tiles, 4, 0}};
+  const std::vector<uint32_t> sizes = psf::test::pick<std::vector<uint32_t>>(
+      {0, 1, 2, 63, 1000, 2048, 65537, 300001}, {0, 1, 2, 63, 1000, 2048, 4097, 65537});
   for (uint32_t n : sizes) {
     for (uint32_t bits : {1u, 4u, 13u, 22u, 32u}) {
-      for (uint32_t digit : {4u, 8u}) {
-        for (uint32_t chunk : {0u, 16u}) {
-          std::vector<uint32_t> keys(n), idx(n);
-          uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
-          for (auto& k : keys) k = uint32_t(rng());
-          std::iota(idx.begin(), idx.end(), 0u);
-          std::vector<std::pair<uint32_t, uint32_t>> ref(n);
-          for (uint32_t i = 0; i < n; ++i) ref[i] = {keys[i], i};
-          std::stable_sort(ref.begin(), ref.end(),
-                           [&](auto& a, auto& b) { return (a.first & mask) < (b.first & mask); });
-          cl::Buffer kb = rt.upload(keys, CL_MEM_READ_WRITE), vb = rt.upload(idx, CL_MEM_READ_WRITE);
-          cl::Buffer tk = rt.buffer(CL_MEM_READ_WRITE, n * 4), tv = rt.buffer(CL_MEM_READ_WRITE, n * 4);
-          psf::radix_sort(rt, kb, vb, tk, tv, n, bits, chunk, digit);
-          auto sk = rt.download<uint32_t>(kb, n), sv = rt.download<uint32_t>(vb, n);
-          INFO("n " << n << " bits " << bits << " digit " << digit << " chunk " << chunk);
-          size_t wrong = 0;
-          for (uint32_t i = 0; i < n; ++i) wrong += sk[i] != ref[i].first || sv[i] != ref[i].second;
-          CHECK(wrong == 0);
-        }
+      for (const Variant& v : variants) {
+        std::vector<uint32_t> keys(n), idx(n);
+        uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
+        for (auto& k : keys) k = uint32_t(rng());
+        std::iota(idx.begin(), idx.end(), 0u);
+        std::vector<std::pair<uint32_t, uint32_t>> ref(n);
+        for (uint32_t i = 0; i < n; ++i) ref[i] = {keys[i], i};
+        std::stable_sort(ref.begin(), ref.end(), [&](auto& a, auto& b) { return (a.first & mask) < (b.first & mask); });
+        cl::Buffer kb = rt.upload(keys, CL_MEM_READ_WRITE), vb = rt.upload(idx, CL_MEM_READ_WRITE);
+        cl::Buffer tk = rt.buffer(CL_MEM_READ_WRITE, n * 4), tv = rt.buffer(CL_MEM_READ_WRITE, n * 4);
+        psf::radix_sort(rt, kb, vb, tk, tv, n, bits, v.chunk, v.digit, v.kernels);
+        auto sk = rt.download<uint32_t>(kb, n), sv = rt.download<uint32_t>(vb, n);
+        INFO("n " << n << " bits " << bits << " digit " << v.digit << " chunk " << v.chunk << " tiles "
+                  << (v.kernels == psf::RadixKernels::tiles));
+        size_t wrong = 0;
+        for (uint32_t i = 0; i < n; ++i) wrong += sk[i] != ref[i].first || sv[i] != ref[i].second;
+        CHECK(wrong == 0);
       }
     }
   }
