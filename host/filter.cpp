@@ -8,8 +8,6 @@ namespace psf {
 
 namespace {
 constexpr size_t kLocal = Runtime::kDefaultLocal;
-// exclusive_scan's single-group scan: up to 128 entries a work-item.
-constexpr uint32_t kScanGroupMax = 128 * PSF_SCAN_LOCAL;
 
 // Scans data[data_offset, + total) with its block sums in scratch from scratch_offset on.
 void scan_level(Runtime& rt, cl::Buffer& data, uint32_t data_offset, uint32_t total, cl::Buffer& scratch,
@@ -37,18 +35,9 @@ size_t scan_scratch_entries(uint32_t total) {
 }
 
 void exclusive_scan(Runtime& rt, cl::Buffer& data, uint32_t total, cl::Buffer& scratch) {
-  if (total == 0) return;
-  // A short table in one launch of one work-group (GPUs' tiles: 16 entries per
-  // 2048 pairs, 8192 for 2^20 pairs), where the launches of the levels below
-  // would cost more than the scan.
-  if (total <= kScanGroupMax) {
-    const uint32_t per = (total + PSF_SCAN_LOCAL - 1) / PSF_SCAN_LOCAL;
-    rt.launch("radix_scan_group", PSF_SCAN_LOCAL, PSF_SCAN_LOCAL, data, total, per);
-    return;
-  }
   // Scan each block in place, then the block sums (the next level, recursively),
   // then add each block's offset back.
-  scan_level(rt, data, 0, total, scratch, 0);
+  if (total > 0) scan_level(rt, data, 0, total, scratch, 0);
 }
 
 uint32_t radix_digit_bits(const Runtime& rt) { return rt.device().type == "GPU" ? 4 : 8; }

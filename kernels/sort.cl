@@ -76,32 +76,6 @@ __kernel __attribute__((reqd_work_group_size(PSF_SCAN_LOCAL, 1, 1))) void radix_
   if (l == PSF_SCAN_LOCAL - 1u) sums[g] = part[l];
 }
 
-/* Exclusive scan of data[0, total) in place by one work-group of PSF_SCAN_LOCAL,
- * each work-item `per` consecutive entries (per * PSF_SCAN_LOCAL >= total): one
- * launch where the table is short (GPUs' tiles: 16 entries per 2048 pairs). */
-__kernel __attribute__((reqd_work_group_size(PSF_SCAN_LOCAL, 1, 1))) void radix_scan_group(__global uint* data,
-                                                                                            uint total, uint per) {
-  __local uint part[PSF_SCAN_LOCAL];
-  uint l = get_local_id(0);
-  uint begin = min(total, l * per), end = min(total, begin + per);
-  uint own = 0u;
-  for (uint i = begin; i < end; ++i) own += data[i];
-  part[l] = own;
-  barrier(CLK_LOCAL_MEM_FENCE);
-  for (uint off = 1u; off < PSF_SCAN_LOCAL; off <<= 1) {
-    uint add = l >= off ? part[l - off] : 0u;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    part[l] += add;
-    barrier(CLK_LOCAL_MEM_FENCE);
-  }
-  uint run = part[l] - own;
-  for (uint i = begin; i < end; ++i) {
-    uint v = data[i];
-    data[i] = run;
-    run += v;
-  }
-}
-
 /* data[i] += offsets[i / PSF_SCAN_BLOCK]: the scanned block sums, added back. */
 __kernel void radix_scan_add(__global uint* data, uint data_offset, uint total, __global const uint* offsets,
                              uint offsets_offset) {
