@@ -63,7 +63,8 @@ __kernel void texture_test_eval(__global const TextureInfo* textures, __global c
 
 /* surface_frame on triangle (p0, p1, p2) with attributes attribs[0], for query k:
  * barycentrics bary[k].xy, wo[k]. Writes the frame's n and s and the material's
- * resolved albedo (xyz), specular (xyz), bsdf_albedo (xyz) and alpha_u (w). */
+ * resolved albedo (xyz), specular (xyz), bsdf_albedo (xyz) and alpha_u (w), and alpha_v
+ * (n's w). */
 __kernel void surface_test_frame(__global const Material* materials, __global const TriAttrib* attribs,
                                  __global const TextureInfo* textures, __global const half* texels,
                                  __global const uint* mat, float4 p0, float4 p1, float4 p2,
@@ -75,7 +76,7 @@ __kernel void surface_test_frame(__global const Material* materials, __global co
   Material m = materials[mat[k]];
   float3 ng = normalize(cross(p1.xyz - p0.xyz, p2.xyz - p0.xyz));
   Frame f = surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, wo[k].xyz, textures, texels);
-  n_out[k] = (float4)(f.n, 0.0f);
+  n_out[k] = (float4)(f.n, m.alpha_v);
   s_out[k] = (float4)(f.s, 0.0f);
   albedo_out[k] = m.albedo;
   specular_out[k] = m.specular;

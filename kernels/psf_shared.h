@@ -169,6 +169,9 @@ typedef struct {
  * BSDFs) instead of a random choice: the partner scatters where the hit is on
  * the back of the geometric normal, this material on the front. */
 #define PSF_MATFLAG_BACK_PARTNER 128u
+/* tex_alpha holds alpha_u in its x channel and alpha_v in y (anisotropic
+ * roughness textures, one of them perhaps a constant; TextureStore::combine_xy). */
+#define PSF_MATFLAG_ALPHA_UV 256u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 
@@ -198,7 +201,8 @@ typedef struct {
   float opacity;            /* with PSF_MATFLAG_MASKED: constant opacity, times tex_opacity (mask; 1 opaque) */
   float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
   psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
-  psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes), or none */
+  psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes; with
+                               PSF_MATFLAG_ALPHA_UV alpha_u, and y alpha_v), or none */
   psf_uint tex_emission;    /* texture (rgb) multiplying the emission where it is hit or sampled, or PSF_NO_TEXTURE */
   /* A blend of BSDFs (glTF's metallic and transmission between 0 and 1,
    * Mitsuba's blendbsdf): 1 + the index of the material that scatters instead of

@@ -126,7 +126,9 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
       else m->specular.xyz = c;
     }
     if (m->tex_alpha != PSF_NO_TEXTURE) { /* textured roughness, at Mitsuba's lower bound */
-      m->alpha_u = m->alpha_v = fmax(texture_eval(textures, texels, m->tex_alpha, uv).x, 1e-4f);
+      float2 t = texture_eval(textures, texels, m->tex_alpha, uv).xy;
+      m->alpha_u = fmax(t.x, 1e-4f);
+      m->alpha_v = (m->flags & PSF_MATFLAG_ALPHA_UV) ? fmax(t.y, 1e-4f) : m->alpha_u;
       if (m->flags & PSF_MATFLAG_ROUGH_TABLE2D) rough_table_rows(m, textures, texels);
     }
     /* dp/du and dp/dv of the triangle's uv parametrisation. */

@@ -1167,7 +1167,8 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   uint32_t normal_x = store.pixels(ramp, 1, 1, {0.8f, 0.5f, 0.9f, 1});
   uint32_t normal_y = store.pixels(ramp, 1, 1, {0.5f, 0.8f, 0.9f, 1});
   uint32_t roughness = store.pixels(ramp, 1, 1, {0.3f, 0.3f, 0.3f, 1});
-  std::vector<Material> mats(10);
+  uint32_t roughness_uv = store.pixels(ramp, 1, 1, {0.3f, 0.05f, 0.0f, 1});  // alpha_u, alpha_v
+  std::vector<Material> mats(11);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
   mats[1].two_sided = 1;
@@ -1200,6 +1201,9 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   mats[9].alpha_u = 0.1f;
   mats[9].alpha_v = 0.2f;
   mats[9].tex_alpha = roughness;
+  mats[10] = mats[9];  // anisotropic roughness textures: alpha_u in x, alpha_v in y
+  mats[10].tex_alpha = roughness_uv;
+  mats[10].flags = PSF_MATFLAG_ALPHA_UV;
   TriAttrib a{};
   glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
   a.n0 = {{n0.x, n0.y, n0.z, 0}};
@@ -1221,7 +1225,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   std::vector<Query> q = {{0, {0.3f, 0.3f}, up}, {0, {0.3f, 0.3f}, down}, {1, {0.3f, 0.3f}, down},
                           {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
                           {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up},  {7, {0.3f, 0.3f}, up},
-                          {8, {0.3f, 0.3f}, up},   {9, {0.3f, 0.3f}, up}};
+                          {8, {0.3f, 0.3f}, up},   {9, {0.3f, 0.3f}, up},   {10, {0.3f, 0.3f}, up}};
   uint32_t n = uint32_t(q.size());
   std::vector<uint32_t> mi;
   std::vector<cl_float2> bary;
@@ -1261,9 +1265,14 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(near(v3(N[8]), {0.6f, 0, 0.8f}));
   CHECK(near(v3(S[8]), {0.8f, 0, -0.6f}));  // dp/du made orthogonal to the new normal
   CHECK(near(v3(N[9]), glm::normalize(glm::vec3(0, 0.3f, 0.8f))));
-  // Roughness: alpha_u from the texture (both axes), else the material's.
+  // Roughness (alpha_u in C's w, alpha_v in N's): from the texture's x for
+  // both axes, or x and y with PSF_MATFLAG_ALPHA_UV, else the material's.
   CHECK(C[10].s[3] == Approx(0.3f).margin(1e-3));
+  CHECK(N[10].s[3] == Approx(0.3f).margin(1e-3));
+  CHECK(C[11].s[3] == Approx(0.3f).margin(1e-3));
+  CHECK(N[11].s[3] == Approx(0.05f).margin(1e-3));
   CHECK(C[4].s[3] == Approx(0.1f));
+  CHECK(N[4].s[3] == Approx(0.3f));
 }
 
 TEST_CASE("Shading frame: vertex tangents orient the normal map (glTF TANGENT)", "[bsdf]") {
@@ -1591,6 +1600,81 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
   CHECK(s3.materials[1].k.s[0] == Approx(1.0f / 1.000277f));
   CHECK(s3.materials[1].alpha_u == Approx(0.3f));
   CHECK((s3.materials[1].flags & PSF_MATFLAG_BECKMANN) == 0u);
+}
+
+TEST_CASE("Materials: textures for alpha_u and alpha_v share one texture, x and y", "[bsdf]") {
+  TempDir dir;
+  // Raw greys: 4x2 images of 50 and 150, a 2x2 of 100 (texel values v / 255).
+  auto grey = [&](const char* name, int w, int h, uint8_t v) {
+    std::vector<uint8_t> px(size_t(w) * h * 3, v);
+    REQUIRE(stbi_write_png(dir.path(name).c_str(), w, h, 3, px.data(), w * 3));
+  };
+  grey("u.png", 4, 2, 50);
+  grey("v.png", 4, 2, 150);
+  grey("small.png", 2, 2, 100);
+  auto bitmap = [](const char* name, const char* file) {
+    return std::string("<texture name=\"") + name + "\" type=\"bitmap\"><boolean name=\"raw\" value=\"true\"/>" +
+           "<string name=\"filename\" value=\"" + file + "\"/></texture>";
+  };
+  std::string xml = dir.write(
+      "scene.xml", "<scene version=\"3.0.0\">\n"
+                   "<shape type=\"rectangle\"><bsdf type=\"roughconductor\">" +
+                       bitmap("alpha_u", "u.png") +
+                       "<float name=\"alpha_v\" value=\"0.05\"/></bsdf></shape>\n"
+                       "<shape type=\"rectangle\"><bsdf type=\"roughdielectric\">" +
+                       bitmap("alpha_u", "u.png") + bitmap("alpha_v", "v.png") +
+                       "</bsdf></shape>\n"
+                       "<shape type=\"rectangle\"><bsdf type=\"roughconductor\">" +
+                       bitmap("alpha_u", "u.png") + bitmap("alpha_v", "small.png") +
+                       "</bsdf></shape>\n"
+                       "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  REQUIRE(s.materials.size() == 3);
+  auto texel = [&](uint32_t t, size_t i, int c) {
+    Imath::half h;
+    h.setBits(s.texels[(size_t(s.textures.at(t).offset) + i) * 4 + size_t(c)]);
+    return float(h);
+  };
+  const float u = 50.0f / 255.0f, v = 150.0f / 255.0f;
+  // A texture and a value: the value fills y.
+  const Material& a = s.materials[0];
+  REQUIRE(a.tex_alpha != PSF_NO_TEXTURE);
+  CHECK((a.flags & PSF_MATFLAG_ALPHA_UV) != 0u);
+  CHECK(s.textures[a.tex_alpha].width == 4u);
+  CHECK(s.textures[a.tex_alpha].height == 2u);
+  for (size_t i = 0; i < 8; ++i) {
+    CHECK(texel(a.tex_alpha, i, 0) == Approx(u).margin(1e-3));
+    CHECK(texel(a.tex_alpha, i, 1) == Approx(0.05f).margin(1e-3));
+  }
+  CHECK(a.alpha_u == Approx(u).margin(1e-3));  // the means, until a hit reads the texture
+  CHECK(a.alpha_v == Approx(0.05f).margin(1e-3));
+  // Two textures on one grid.
+  const Material& b = s.materials[1];
+  REQUIRE(b.tex_alpha != PSF_NO_TEXTURE);
+  CHECK((b.flags & PSF_MATFLAG_ALPHA_UV) != 0u);
+  CHECK(texel(b.tex_alpha, 5, 0) == Approx(u).margin(1e-3));
+  CHECK(texel(b.tex_alpha, 5, 1) == Approx(v).margin(1e-3));
+  CHECK(b.alpha_v == Approx(v).margin(1e-3));
+  // Grids that differ: alpha_u's texture for both axes, and a warning at its line.
+  const Material& c = s.materials[2];
+  REQUIRE(c.tex_alpha != PSF_NO_TEXTURE);
+  CHECK((c.flags & PSF_MATFLAG_ALPHA_UV) == 0u);
+  CHECK(texel(c.tex_alpha, 0, 0) == Approx(u).margin(1e-3));
+  CHECK(c.alpha_v == Approx(c.alpha_u));
+  CHECK(count_warnings(s, "scene.xml:4: textures for 'alpha_u' and 'alpha_v' of different sizes") == 1);
+  // A negative value beside a texture is an error at its line.
+  std::string negative = dir.write("negative.xml", "<scene version=\"3.0.0\">\n"
+                                                   "<shape type=\"rectangle\"><bsdf type=\"roughconductor\">" +
+                                                       bitmap("alpha_u", "u.png") +
+                                                       "\n<float name=\"alpha_v\" value=\"-0.5\"/></bsdf></shape>\n"
+                                                       "</scene>\n");
+  try {
+    psf::load_scene(negative);
+    FAIL("a negative alpha_v is an error");
+  } catch (const psf::SceneError& e) {
+    CHECK(e.line() == 3);
+    CHECK(std::string(e.what()).find("the roughness must not be negative") != std::string::npos);
+  }
 }
 
 TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "[bsdf]") {

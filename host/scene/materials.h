@@ -59,6 +59,12 @@ class TextureStore {
   bool has_table(const std::string& key) const { return cache_.count("table|" + key) != 0; }
   const std::vector<float>& table_values(uint32_t index) const { return table_values_.at(index); }
 
+  // A texture whose x channel is texture x's (the constant cx where x is
+  // PSF_NO_TEXTURE) and whose y channel is texture y's (or cy): anisotropic
+  // roughness. It takes the grid, filtering, wrapping and uv transform of the
+  // textures, which must agree where both are given (nullopt where they do not).
+  std::optional<uint32_t> combine_xy(uint32_t x, float cx, uint32_t y, float cy);
+
   // Mean of the RGB channels of texture `index` over its texels.
   glm::vec3 mean(uint32_t index) const;
 

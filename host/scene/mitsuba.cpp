@@ -1211,9 +1211,41 @@ class MitsubaLoader {
                             m.type == PSF_MATERIAL_ROUGH_PLASTIC;
     if (a && a->kind == Property::Kind::Object && texturable)
       m.tex_alpha = texture(a->object, TextureUse::Height, "using 0.1");
+    // Textures for alpha_u or alpha_v (anisotropic BSDFs): one texture whose x
+    // and y channels hold them (PSF_MATFLAG_ALPHA_UV), a constant in the channel
+    // of one that is a value.
+    const bool tex_u = au && au->kind == Property::Kind::Object, tex_v = av && av->kind == Property::Kind::Object;
+    if ((tex_u || tex_v) && texturable && !isotropic) {
+      auto axis = [&](const Property* p, bool tex, const char* name, float& constant) {
+        constant = 0.1f;
+        if (tex) return texture(p->object, TextureUse::Height, "using 0.1");
+        constant = value(p, name);
+        if (constant < 0.0f) fail(p->node, "the roughness must not be negative");
+        return PSF_NO_TEXTURE;
+      };
+      float cu, cv;
+      const uint32_t tu = axis(au, tex_u, "alpha_u", cu), tv = axis(av, tex_v, "alpha_v", cv);
+      if (tu != PSF_NO_TEXTURE || tv != PSF_NO_TEXTURE) {
+        std::optional<uint32_t> both = store_.combine_xy(tu, cu, tv, cv);
+        if (both) {
+          m.tex_alpha = *both;
+          m.flags |= PSF_MATFLAG_ALPHA_UV;
+        } else {
+          warn(au->node, "bsdf:" + e.type + ":alpha_uv",
+               "textures for 'alpha_u' and 'alpha_v' of different sizes, filtering or uv transforms are not "
+               "supported; using alpha_u's for both");
+          m.tex_alpha = tu;
+        }
+      }
+    }
     float alpha_u, alpha_v;
     if (m.tex_alpha != PSF_NO_TEXTURE) {  // the texture's mean, for what reads alpha before a hit
-      alpha_u = alpha_v = store_.mean(m.tex_alpha).x;
+      const glm::vec3 mean = store_.mean(m.tex_alpha);
+      alpha_u = mean.x;
+      alpha_v = m.flags & PSF_MATFLAG_ALPHA_UV ? mean.y : mean.x;
+    } else if ((tex_u || tex_v) && texturable && !isotropic) {  // the textures' files were missing (warned)
+      alpha_u = tex_u ? 0.1f : value(au, "alpha_u");
+      alpha_v = tex_v ? 0.1f : value(av, "alpha_v");
     } else {
       alpha_u = a ? value(a, "alpha") : value(au, "alpha_u");
       alpha_v = a ? alpha_u : value(av, "alpha_v");

@@ -215,6 +215,38 @@ uint32_t TextureStore::table(const std::string& key, const std::vector<float>& v
   return index;
 }
 
+std::optional<uint32_t> TextureStore::combine_xy(uint32_t x, float cx, uint32_t y, float cy) {
+  if (x == PSF_NO_TEXTURE && y == PSF_NO_TEXTURE) throw std::invalid_argument("TextureStore::combine_xy: no texture");
+  const TextureInfo& grid = scene_.textures.at(x != PSF_NO_TEXTURE ? x : y);
+  auto same = [](const psf_float4& a, const psf_float4& b) { return a.s[0] == b.s[0] && a.s[1] == b.s[1] && a.s[2] == b.s[2]; };
+  if (x != PSF_NO_TEXTURE && y != PSF_NO_TEXTURE) {
+    const TextureInfo& other = scene_.textures.at(y);
+    if (other.width != grid.width || other.height != grid.height || other.flags != grid.flags ||
+        !same(other.uv_u, grid.uv_u) || !same(other.uv_v, grid.uv_v))
+      return std::nullopt;
+  }
+  const size_t n = size_t(grid.width) * grid.height;
+  auto texel_x = [&](uint32_t t, size_t i) {
+    Imath::half h;
+    h.setBits(scene_.texels[(size_t(scene_.textures[t].offset) + i) * 4]);
+    return float(h);
+  };
+  std::vector<float> rgba(n * 4);
+  for (size_t i = 0; i < n; ++i) {
+    rgba[i * 4] = x != PSF_NO_TEXTURE ? texel_x(x, i) : cx;
+    rgba[i * 4 + 1] = y != PSF_NO_TEXTURE ? texel_x(y, i) : cy;
+    rgba[i * 4 + 2] = 0.0f;
+    rgba[i * 4 + 3] = 1.0f;
+  }
+  TextureDesc d;
+  d.bilinear = (grid.flags & PSF_TEX_BILINEAR) != 0;
+  d.wrap = grid.flags & (PSF_TEX_CLAMP | PSF_TEX_MIRROR);
+  d.uv_u = glm::vec3(grid.uv_u.s[0], grid.uv_u.s[1], grid.uv_u.s[2]);
+  d.uv_v = glm::vec3(grid.uv_v.s[0], grid.uv_v.s[1], grid.uv_v.s[2]);
+  const int width = int(grid.width), height = int(grid.height);  // `grid` dangles once append grows the table
+  return append(d, width, height, rgba);
+}
+
 glm::vec3 TextureStore::mean(uint32_t index) const {
   auto it = means_.find(index);
   return it == means_.end() ? glm::vec3(1.0f) : it->second;
