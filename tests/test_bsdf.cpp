@@ -1602,6 +1602,52 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
   CHECK((s3.materials[1].flags & PSF_MATFLAG_BECKMANN) == 0u);
 }
 
+TEST_CASE("Render: a blendbsdf whose first BSDF is a blend shows Mitsuba's mixture", "[bsdf]") {
+  // blendbsdf(w, blendbsdf(0.5, diffuse 0.8, diffuse 0.2), diffuse 0.1) on the
+  // rectangle under a constant sky of 1: (1 - w) 0.5 + w 0.1, w = 0.3 as a value
+  // and as a raw texture of 77/255. Dropping the inner blend would give 0.59, the
+  // swap without 1 - w 0.22.
+  TempDir dir;
+  std::vector<uint8_t> px(2 * 2 * 3, 77);
+  REQUIRE(stbi_write_png(dir.path("w.png").c_str(), 2, 2, 3, px.data(), 2 * 3));
+  auto scene = [&](const std::string& weight) {
+    return dir.write(
+        "blend.xml",
+        "<scene version=\"3.0.0\">\n"
+        "<sensor type=\"perspective\"><float name=\"fov\" value=\"30\"/><transform name=\"to_world\">"
+        "<lookat origin=\"0, 0, 2\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform><film type=\"hdrfilm\">"
+        "<integer name=\"width\" value=\"16\"/><integer name=\"height\" value=\"16\"/></film></sensor>\n"
+        "<emitter type=\"constant\"><rgb name=\"radiance\" value=\"1\"/></emitter>\n"
+        "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\">" +
+            weight +
+            "<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.8\"/></bsdf>"
+            "<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf></bsdf>"
+            "<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.1\"/></bsdf></bsdf></shape>\n"
+            "</scene>\n");
+  };
+  auto& rt = psf::test::runtime();
+  psf::RenderOptions o;
+  o.spp = 64;
+  o.filter.enabled = false;
+  const double w_texture = 77.0 / 255.0;
+  for (auto [weight, w] : {std::pair<std::string, double>{"<float name=\"weight\" value=\"0.3\"/>", 0.3},
+                           std::pair<std::string, double>{"<texture name=\"weight\" type=\"bitmap\"><boolean "
+                                                          "name=\"raw\" value=\"true\"/><string name=\"filename\" "
+                                                          "value=\"w.png\"/></texture>",
+                                                          w_texture}}) {
+    psf::Scene s = psf::load_scene(scene(weight));
+    INFO(weight);
+    REQUIRE(s.warnings.empty());
+    psf::Renderer r(rt, s);
+    psf::Image img = r.render(o).image;
+    double mean = 0;
+    for (float v : img.rgb) mean += v;
+    mean /= img.rgb.size();
+    // 16384 paths: the sky's and the choice's noise about 1 %; allow 3 %.
+    CHECK(mean == Approx((1.0 - w) * 0.5 + w * 0.1).epsilon(0.03));
+  }
+}
+
 TEST_CASE("Materials: textures for alpha_u and alpha_v share one texture, x and y", "[bsdf]") {
   TempDir dir;
   // Raw greys: 4x2 images of 50 and 150, a 2x2 of 100 (texel values v / 255).
@@ -1721,35 +1767,51 @@ TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "
   CHECK(bumpy.tex_bump != PSF_NO_TEXTURE);  // bumpmap wraps both
   CHECK(plastic.tex_bump == bumpy.tex_bump);
 
-  // A blend as the second BSDF makes a chain of three; as the first it is not
-  // supported (one warning, its first BSDF used).
+  // A blend as the second BSDF makes a chain of three, and so does one as the
+  // first (the two swapped, weight 1 - w: 0.8 here); as both it is not
+  // supported (one warning, the inner first BSDF used).
   std::string chain = dir.write(
       "chain.xml",
       "<scene version=\"3.0.0\">\n"
       "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.5\"/>"
       "<bsdf type=\"diffuse\"/><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.25\"/>"
       "<bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf></bsdf></shape>\n"
-      "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\"><bsdf type=\"blendbsdf\">"
-      "<bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf><bsdf type=\"diffuse\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.2\"/>"
+      "<bsdf type=\"blendbsdf\"><bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf>"
+      "<bsdf type=\"diffuse\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"blendbsdf\">"
+      "<bsdf type=\"blendbsdf\"><bsdf type=\"plastic\"/><bsdf type=\"conductor\"/></bsdf>"
+      "<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"/><bsdf type=\"dielectric\"/></bsdf></bsdf></shape>\n"
       "</scene>\n");
   psf::Scene c = psf::load_scene(chain);
-  const Material& top = c.materials[c.tri_material.front()];
-  CHECK(top.type == PSF_MATERIAL_DIFFUSE);
-  CHECK(top.blend_weight == Approx(0.5f));
-  REQUIRE(top.blend >= 1);
-  const Material& middle = c.materials[top.blend - 1];
-  CHECK(middle.type == PSF_MATERIAL_PLASTIC);
-  CHECK(middle.blend_weight == Approx(0.25f));
-  REQUIRE(middle.blend >= 1);
-  CHECK(c.materials[middle.blend - 1].type == PSF_MATERIAL_CONDUCTOR);
-  CHECK(c.materials[middle.blend - 1].blend == 0);
-  const Material& left = c.materials[c.tri_material.back()];
-  CHECK(left.type == PSF_MATERIAL_PLASTIC);
-  REQUIRE(left.blend >= 1);
-  CHECK(c.materials[left.blend - 1].type == PSF_MATERIAL_DIFFUSE);
-  size_t nested_warnings = 0;
-  for (const std::string& wmsg : c.warnings) nested_warnings += wmsg.find(":3: a blendbsdf as the first") != std::string::npos;
-  CHECK(nested_warnings == 1);
+  auto at = [&](size_t triangle) -> const Material& { return c.materials[c.tri_material.at(triangle)]; };
+  // The chain from a shape's material: each link's type, and the weight of
+  // handing over to the next.
+  auto chain_of = [&](const Material& m0) {
+    std::vector<std::pair<uint32_t, float>> links;
+    for (const Material* m = &m0; m; m = m->blend ? &c.materials.at(m->blend - 1) : nullptr)
+      links.emplace_back(m->type, m->blend ? m->blend_weight : 0.0f);
+    return links;
+  };
+  using Links = std::vector<std::pair<uint32_t, float>>;
+  CHECK(chain_of(at(0)) ==  // rectangles: two triangles each
+        Links{{PSF_MATERIAL_DIFFUSE, 0.5f}, {PSF_MATERIAL_PLASTIC, 0.25f}, {PSF_MATERIAL_CONDUCTOR, 0.0f}});
+  const Links swapped = chain_of(at(2));
+  REQUIRE(swapped.size() == 3);
+  CHECK(swapped[0].first == PSF_MATERIAL_DIFFUSE);
+  CHECK(swapped[0].second == Approx(0.8f));
+  CHECK(swapped[1] == std::pair<uint32_t, float>{PSF_MATERIAL_PLASTIC, 0.5f});
+  CHECK(swapped[2].first == PSF_MATERIAL_CONDUCTOR);
+  const Material& both = at(4);
+  CHECK(both.type == PSF_MATERIAL_PLASTIC);
+  REQUIRE(both.blend >= 1);
+  CHECK(c.materials[both.blend - 1].type == PSF_MATERIAL_DIFFUSE);
+  CHECK(c.materials[both.blend - 1].blend != 0);  // the second's chain stays
+  std::string all_chain;
+  for (const std::string& wmsg : c.warnings) all_chain += wmsg + "\n";
+  INFO(all_chain);
+  CHECK(count_warnings(c, "blendbsdfs as both BSDFs of a blendbsdf") == 1);
+  CHECK(count_warnings(c, "chain.xml:4:") == 1);
 
   // twosided with two BSDFs: the second on the back (chosen by the side).
   std::string sides = dir.write(

@@ -65,6 +65,10 @@ class TextureStore {
   // textures, which must agree where both are given (nullopt where they do not).
   std::optional<uint32_t> combine_xy(uint32_t x, float cx, uint32_t y, float cy);
 
+  // A texture whose x, y and z channels are 1 - texture t's x (blendbsdf's weight
+  // for the other BSDF), with t's grid, filtering, wrapping and uv transform.
+  uint32_t complement_x(uint32_t t);
+
   // Mean of the RGB channels of texture `index` over its texels.
   glm::vec3 mean(uint32_t index) const;
 

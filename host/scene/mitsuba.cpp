@@ -1410,10 +1410,16 @@ class MitsubaLoader {
                                              std::to_string(nested.size()));
     Bsdf b = bsdf(nested[0]);
     Bsdf partner = bsdf(nested[1]);
+    // A blend as the first BSDF and none as the second: the same mixture with
+    // the two swapped and the weight w replaced by 1 - w, which makes a chain
+    // (second, first's first, first's second). Two blends would need a tree.
+    const bool blended = [](const Bsdf& x) { return x.blend || (x.m.flags & PSF_MATFLAG_BACK_PARTNER); }(partner);
+    const bool swapped = b.blend && !(b.m.flags & PSF_MATFLAG_BACK_PARTNER) && !b.blend->blend && !blended;
+    if (swapped) std::swap(b, partner);
     auto unblend = [&](Bsdf& inner) {
       warn(e.node, "bsdf:blendbsdf-nested",
-           "a blendbsdf as the first BSDF of a blendbsdf, nested deeper than its second, or a twosided with a back "
-           "BSDF inside a blendbsdf is not supported; its first BSDF is used");
+           "blendbsdfs as both BSDFs of a blendbsdf, nested deeper than a chain of three, or a twosided with a back "
+           "BSDF inside a blendbsdf are not supported; the inner one's first BSDF is used");
       inner.blend.reset();
       inner.m.blend = 0;
       inner.m.tex_blend = PSF_NO_TEXTURE;
@@ -1432,8 +1438,10 @@ class MitsubaLoader {
       b.m.blend_weight = 1.0f;
       b.m.tex_blend = texture(p->object, TextureUse::Height, "using 0.5 for 'weight'");
       if (b.m.tex_blend == PSF_NO_TEXTURE) b.m.blend_weight = 0.5f;
+      else if (swapped) b.m.tex_blend = store_.complement_x(b.m.tex_blend);
     } else if (p) {
       b.m.blend_weight = std::clamp(float(get_float(e, "weight", 0.5)), 0.0f, 1.0f);
+      if (swapped) b.m.blend_weight = 1.0f - b.m.blend_weight;
     }
     b.blend = std::make_shared<const Bsdf>(partner);
     b.name.clear();

@@ -139,6 +139,27 @@ std::optional<std::string> find_file_nocase(const std::string& path) {
   return resolved.string();
 }
 
+namespace {
+
+// The filtering, wrapping and uv transform of a stored texture, for one made from it.
+TextureDesc sampling_of(const TextureInfo& t) {
+  TextureDesc d;
+  d.bilinear = (t.flags & PSF_TEX_BILINEAR) != 0;
+  d.wrap = t.flags & (PSF_TEX_CLAMP | PSF_TEX_MIRROR);
+  d.uv_u = glm::vec3(t.uv_u.s[0], t.uv_u.s[1], t.uv_u.s[2]);
+  d.uv_v = glm::vec3(t.uv_v.s[0], t.uv_v.s[1], t.uv_v.s[2]);
+  return d;
+}
+
+// The x channel of texel i of a stored texture.
+float stored_x(const Scene& scene, const TextureInfo& t, size_t i) {
+  Imath::half h;
+  h.setBits(scene.texels[(size_t(t.offset) + i) * 4]);
+  return float(h);
+}
+
+}  // namespace
+
 uint32_t TextureStore::append(const TextureDesc& d, int width, int height, const std::vector<float>& rgba) {
   if (scene_.textures.empty()) {  // the placeholder, PSF_NO_TEXTURE
     TextureInfo t{};
@@ -226,11 +247,7 @@ std::optional<uint32_t> TextureStore::combine_xy(uint32_t x, float cx, uint32_t 
       return std::nullopt;
   }
   const size_t n = size_t(grid.width) * grid.height;
-  auto texel_x = [&](uint32_t t, size_t i) {
-    Imath::half h;
-    h.setBits(scene_.texels[(size_t(scene_.textures[t].offset) + i) * 4]);
-    return float(h);
-  };
+  auto texel_x = [&](uint32_t t, size_t i) { return stored_x(scene_, scene_.textures[t], i); };
   std::vector<float> rgba(n * 4);
   for (size_t i = 0; i < n; ++i) {
     rgba[i * 4] = x != PSF_NO_TEXTURE ? texel_x(x, i) : cx;
@@ -238,13 +255,25 @@ std::optional<uint32_t> TextureStore::combine_xy(uint32_t x, float cx, uint32_t 
     rgba[i * 4 + 2] = 0.0f;
     rgba[i * 4 + 3] = 1.0f;
   }
-  TextureDesc d;
-  d.bilinear = (grid.flags & PSF_TEX_BILINEAR) != 0;
-  d.wrap = grid.flags & (PSF_TEX_CLAMP | PSF_TEX_MIRROR);
-  d.uv_u = glm::vec3(grid.uv_u.s[0], grid.uv_u.s[1], grid.uv_u.s[2]);
-  d.uv_v = glm::vec3(grid.uv_v.s[0], grid.uv_v.s[1], grid.uv_v.s[2]);
+  const TextureDesc d = sampling_of(grid);
   const int width = int(grid.width), height = int(grid.height);  // `grid` dangles once append grows the table
   return append(d, width, height, rgba);
+}
+
+uint32_t TextureStore::complement_x(uint32_t t) {
+  const std::string key = "complement|" + std::to_string(t);
+  auto it = cache_.find(key);
+  if (it != cache_.end()) return it->second;
+  const TextureInfo grid = scene_.textures.at(t);  // a copy: append grows the table
+  const size_t n = size_t(grid.width) * grid.height;
+  std::vector<float> rgba(n * 4, 1.0f);
+  for (size_t i = 0; i < n; ++i) {
+    rgba[i * 4] = rgba[i * 4 + 1] = rgba[i * 4 + 2] = 1.0f - stored_x(scene_, grid, i);
+  }
+  const TextureDesc d = sampling_of(grid);
+  const uint32_t index = append(d, int(grid.width), int(grid.height), rgba);
+  cache_.emplace(key, index);
+  return index;
 }
 
 glm::vec3 TextureStore::mean(uint32_t index) const {
