@@ -24,7 +24,8 @@
 // picks another).
 //
 // Usage: bench_render [benchmark flags] [--scene=PATH ...] [--spp=N] [--trials=N] [--no_filtered=1]
-//                     [--peer_variant=NAME]
+//                     [--peer_variant=NAME] [--tail_paths=N]
+// --tail_paths: RenderOptions::tail_paths (-1, the default: by device kind).
 // Without --scene: the living-room (1 spp, its 1280x720 film) and Mitsuba's cbox
 // (4 spp, 500x500) from $PSF_SHARED (else ../shared beside the source tree) and
 // scenes/cornell-box.xml (16 spp, 256x256); absent ones are skipped.
@@ -52,6 +53,7 @@ struct Options {
   int spp = 0;                      // 0: per scene (living-room 1, cbox 4, cornell-box 16, others 1)
   int trials = 3;                   // timed renders
   bool filtered = true;             // also time psf with path space filtering
+  int64_t tail_paths = -1;          // RenderOptions::tail_paths
 };
 
 struct Bench {
@@ -145,8 +147,9 @@ int default_spp(const std::string& name) {
   return 1;
 }
 
-psf::RenderOptions render_options(const Bench& b, bool filter) {
+psf::RenderOptions render_options(const Bench& b, bool filter, int64_t tail_paths) {
   psf::RenderOptions o;
+  o.tail_paths = tail_paths;
   o.spp = b.spp;
   o.seed = 0;
   o.max_depth = b.scene.max_depth;
@@ -163,6 +166,7 @@ int main(int argc, char** argv) {
   opt.scenes = args.take_all("scene");
   args.take_number("spp", opt.spp);
   args.take_number("trials", opt.trials);
+  args.take_number("tail_paths", opt.tail_paths);
   int no_filtered = 0;
   args.take_number("no_filtered", no_filtered);
   std::string peer_variant;  // Mitsuba 3 variant; default: auto on CPUs, cuda_ad_rgb on GPUs
@@ -285,14 +289,14 @@ int main(int argc, char** argv) {
       std::string bname = (filter ? "psf_render_filtered/" : "psf_render/") + b->name;
       benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, &opt, filter, bname](benchmark::State& state) {
         psf::Renderer renderer(rt, b->scene);
-        renderer.render(render_options(*b, filter));  // warm-up
+        renderer.render(render_options(*b, filter, opt.tail_paths));  // warm-up
         rt.finish();
         std::vector<double> wall, device;
         double mean = 0;
         size_t nonfinite = 0;
         for (auto _ : state) {
           rt.reset_stats();
-          psf::RenderResult r = renderer.render(render_options(*b, filter));
+          psf::RenderResult r = renderer.render(render_options(*b, filter, opt.tail_paths));
           rt.finish();
           state.SetIterationTime(r.seconds);
           wall.push_back(r.seconds);

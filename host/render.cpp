@@ -419,6 +419,8 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     // other queue. Path states and filtering vertices stay indexed by path.
     uint32_t n_live = p.batch_size;
     int in = 0;
+    const uint64_t tail = o.tail_paths >= 0 ? uint64_t(o.tail_paths)
+                          : rt.device().type == "GPU" ? uint64_t(b.size / 16) : 0;
     for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
       s.caster->closest(b.rays[in], hits, n_live);
       rt.zero(alive, sizeof(uint32_t));
@@ -435,6 +437,16 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
       rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
       rt.read(alive, &n_live, sizeof(n_live));
       in = 1 - in;
+      // The last few live paths: the rest of each in one launch (trace_tail)
+      // instead of a round of launches and a read of the count per bounce.
+      if (n_live > 0 && n_live <= tail && (o.max_depth < 0 || depth + 1 < o.max_depth)) {
+        rt.launch("trace_tail", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
+                  s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
+                  cl_uint(s.caster->masked() ? 1 : 0), b.rays[in], hits, states, vertices, shadow_rays, shadow_hits,
+                  s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, n_live, b.queue[in],
+                  cl_uint(depth + 1));
+        break;
+      }
     }
   }
 

@@ -1045,7 +1045,8 @@ TEST_CASE("Render: an emission texture multiplies the emission where it is hit a
 }
 
 TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[emitter]") {
-  // trace_paths runs the wavefront's stages on each path's own slot; a path's
+  // trace_paths (and trace_tail, the rest of the wavefront's last live paths)
+  // runs the wavefront's stages on each path's own slot; a path's
   // samples depend on its pixel, sample and depth alone, so the images must be
   // identical, filtered or not: area lights (our Cornell box), an environment map
   // (the floor scene), and with ../shared the living room (envmap, textures,
@@ -1054,6 +1055,8 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
   std::vector<std::pair<std::string, psf::Scene>> scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("envmap floor", envmap_floor());
+  scenes.emplace_back("cornell-box, max depth 3", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
+  scenes.back().second.max_depth = 3;  // where the tail starts counting its bounces matters
   if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
     scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
   else
@@ -1067,11 +1070,22 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
     o.spp = 4;
     o.max_depth = s.max_depth;
     o.per_path = 0;
+    o.tail_paths = 0;
     psf::RenderResult wave = r.render(o);
     o.per_path = 1;
     psf::RenderResult per = r.render(o);
     CHECK(per.image.rgb == wave.image.rgb);
     CHECK(per.unfiltered.rgb == wave.unfiltered.rgb);
+    // The wavefront handing its live paths to trace_tail: after the first
+    // bounce (every path), and once a tenth of the batch is left.
+    o.per_path = 0;
+    for (int64_t tail : {int64_t(s.width) * s.height * o.spp, int64_t(s.width) * s.height * o.spp / 10}) {
+      INFO("tail " << tail);
+      o.tail_paths = tail;
+      psf::RenderResult handed = r.render(o);
+      CHECK(handed.image.rgb == wave.image.rgb);
+      CHECK(handed.unfiltered.rgb == wave.unfiltered.rgb);
+    }
     double sum = 0;
     for (float v : wave.unfiltered.rgb) sum += v;
     CHECK(sum > 0);  // something was lit
