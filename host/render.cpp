@@ -335,8 +335,9 @@ uint64_t Renderer::fixed_bytes() const {
 void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   Runtime& rt = impl_->rt;
   const Scene& scene = impl_->scene;
-  batch_.reset();
   auto b = std::make_unique<Batch>();
+  if (batch_) b->spare = std::move(batch_->spare);  // download vectors already paged in, for the next render
+  batch_.reset();
   b->o = o;
   b->size = uint32_t(1) << batch_log2;
   const size_t n = b->size;
