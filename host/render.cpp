@@ -412,7 +412,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
               s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
               cl_uint(s.caster->masked() ? 1 : 0), b.rays[0], hits, states, vertices, shadow_rays, shadow_hits,
-              s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples);
+              s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, p.batch_size, b.queue[0], 0u);
   } else {
     // A compacted wavefront: each bounce launches only the paths still alive. The
     // queue holds their path indices (in any order: a path's result does not
@@ -438,10 +438,11 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
       rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
       rt.read(alive, &n_live, sizeof(n_live));
       in = 1 - in;
-      // The last few live paths: the rest of each in one launch (trace_tail)
-      // instead of a round of launches and a read of the count per bounce.
+      // The last few live paths: the rest of each in one launch (trace_paths
+      // over the queue) instead of a round of launches and a read of the count
+      // per bounce.
       if (n_live > 0 && n_live <= tail && (o.max_depth < 0 || depth + 1 < o.max_depth)) {
-        rt.launch("trace_tail", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
+        rt.launch("trace_paths", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
                   s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
                   cl_uint(s.caster->masked() ? 1 : 0), b.rays[in], hits, states, vertices, shadow_rays, shadow_hits,
                   s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, n_live, b.queue[in],

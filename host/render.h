@@ -22,7 +22,7 @@ struct RenderOptions {
   int per_path = -1;         // 1: each path in one work-item (trace_paths); 0: the wavefront; -1: per path
                              // on CPU devices for scenes without an environment map, else the wavefront.
                              // The image is the same either way.
-  int64_t tail_paths = -1;   // the wavefront hands its live paths to one trace_tail launch once at most this
+  int64_t tail_paths = -1;   // the wavefront hands its live paths to one trace_paths launch once at most this
                              // many are left (0: never; -1: by device kind, 1/16 of the batch on GPUs, never
                              // on CPUs). The image is the same either way.
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)

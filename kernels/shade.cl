@@ -26,9 +26,9 @@
  * cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility.
- * trace_paths (CPU devices): all of the above for one path per work-item, bounce
- * after bounce, from the same inline functions (env_sample_slot, env_texel_slot,
- * shade_path, shadow_slot). */
+ * trace_paths (CPU devices, and the wavefront's tail on GPUs): all of the above
+ * for one path per work-item, bounce after bounce, from the same inline functions
+ * (env_sample_slot, env_texel_slot, shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
 
@@ -309,18 +309,30 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
   shadow_slot(k, queue_in[k], shadow_hits, states, vertices);
 }
 
-/* The rest of path j from bounce depth0 on, in one work-item, on slot k of the
- * rays, hits, shadow rays and environment samples. */
-inline void trace_rest(uint k, uint j, uint depth0, FrameParams params, __global const uint* sobol,
-                       __global const float4* tri_pos, __global const uint* tri_material,
-                       __global const Material* materials, __global const Emitter* emitters,
-                       __global const float* emitter_cdf, __global const float* tri_light_pdf, Environment env,
-                       __global const float* env_data, __global const BvhNode* nodes,
-                       __global const BvhTriPack* packs, uint masked, __global Ray* rays, __global Hit* hits,
-                       __global PathState* states, __global PathVertex* vertices, __global Ray* shadow_rays,
-                       __global Hit* shadow_hits, __global const TriAttrib* tri_attribs,
-                       __global const TextureInfo* textures, __global const half* texels, uint env_presampled,
-                       __global float4* env_samples) {
+/* trace_paths: each path of queue[0, count) whole in one work-item, from bounce
+ * depth0 on, on slot k (its ray in rays[k]): the same stages as the wavefront
+ * (closest hit, environment samples, shade, shadow ray, shadow test) in the same
+ * order, so the result is the same, bit for bit. Two uses:
+ * - CPU devices, the whole batch (queue: camera_rays' path order, depth0 0): a
+ *   path's state, rays and hits stay in the core's cache from one bounce to the
+ *   next instead of streaming through memory at every bounce (on a GPU the paths'
+ *   different lengths would idle most lanes);
+ * - GPUs, the wavefront's last few live paths (its queue, the next bounce):
+ *   one launch instead of a round of launches and a read of the live count per
+ *   bounce while they die out (tens of bounces of a few thousand paths each). */
+__kernel void trace_paths(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
+                          __global const uint* tri_material, __global const Material* materials,
+                          __global const Emitter* emitters, __global const float* emitter_cdf,
+                          __global const float* tri_light_pdf, Environment env, __global const float* env_data,
+                          __global const BvhNode* nodes, __global const BvhTriPack* packs, uint masked,
+                          __global Ray* rays, __global Hit* hits, __global PathState* states,
+                          __global PathVertex* vertices, __global Ray* shadow_rays, __global Hit* shadow_hits,
+                          __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
+                          __global const half* texels, uint env_presampled, __global float4* env_samples, uint count,
+                          __global const uint* queue, uint depth0) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  uint j = queue[k];
   AlphaScene as = {tri_material, materials, tri_attribs, textures, texels};
   const AlphaScene* alpha = masked ? &as : 0;
   for (uint depth = depth0; (int)params.max_depth < 0 || depth < params.max_depth; ++depth) {
@@ -338,49 +350,4 @@ inline void trace_rest(uint k, uint j, uint depth0, FrameParams params, __global
     if (!go) break;
     rays[k] = next;
   }
-}
-
-/* trace_paths: the whole path of each of the batch's paths in one work-item, for
- * CPU devices: the same stages as the wavefront (closest hit, environment
- * samples, shade, shadow ray, shadow test) in the same order on the path's own
- * slot (k = j), so its state, rays and hits stay in the core's cache from one
- * bounce to the next instead of streaming through memory at every bounce; the
- * result is the same, bit for bit. On a GPU the paths' different lengths would
- * idle most lanes, so GPUs keep the wavefront. */
-__kernel void trace_paths(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
-                          __global const uint* tri_material, __global const Material* materials,
-                          __global const Emitter* emitters, __global const float* emitter_cdf,
-                          __global const float* tri_light_pdf, Environment env, __global const float* env_data,
-                          __global const BvhNode* nodes, __global const BvhTriPack* packs, uint masked,
-                          __global Ray* rays, __global Hit* hits, __global PathState* states,
-                          __global PathVertex* vertices, __global Ray* shadow_rays, __global Hit* shadow_hits,
-                          __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
-                          __global const half* texels, uint env_presampled, __global float4* env_samples) {
-  uint k = get_global_id(0);
-  if (k >= params.batch_size) return;
-  trace_rest(k, k, 0u, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf, env,
-             env_data, nodes, packs, masked, rays, hits, states, vertices, shadow_rays, shadow_hits, tri_attribs,
-             textures, texels, env_presampled, env_samples);
-}
-
-/* trace_tail: the wavefront's last few live paths (slot k of queue[0, count),
- * its ray in rays[k]) finished in one launch from bounce depth0 on, instead of a
- * round of launches and a read of the live count per bounce while they die out
- * (GPUs: tens of bounces of a few thousand paths each). The same computation per
- * path, so the same image. */
-__kernel void trace_tail(FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
-                         __global const uint* tri_material, __global const Material* materials,
-                         __global const Emitter* emitters, __global const float* emitter_cdf,
-                         __global const float* tri_light_pdf, Environment env, __global const float* env_data,
-                         __global const BvhNode* nodes, __global const BvhTriPack* packs, uint masked,
-                         __global Ray* rays, __global Hit* hits, __global PathState* states,
-                         __global PathVertex* vertices, __global Ray* shadow_rays, __global Hit* shadow_hits,
-                         __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
-                         __global const half* texels, uint env_presampled, __global float4* env_samples, uint count,
-                         __global const uint* queue, uint depth0) {
-  uint k = get_global_id(0);
-  if (k >= count) return;
-  trace_rest(k, queue[k], depth0, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
-             tri_light_pdf, env, env_data, nodes, packs, masked, rays, hits, states, vertices, shadow_rays,
-             shadow_hits, tri_attribs, textures, texels, env_presampled, env_samples);
 }

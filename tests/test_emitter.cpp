@@ -1045,8 +1045,8 @@ TEST_CASE("Render: an emission texture multiplies the emission where it is hit a
 }
 
 TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[emitter]") {
-  // trace_paths (and trace_tail, the rest of the wavefront's last live paths)
-  // runs the wavefront's stages on each path's own slot; a path's
+  // trace_paths (over the whole batch, or the rest of the wavefront's last live
+  // paths) runs the wavefront's stages on each path's own slot; a path's
   // samples depend on its pixel, sample and depth alone, so the images must be
   // identical, filtered or not: area lights (our Cornell box), an environment map
   // (the floor scene), and with ../shared the living room (envmap, textures,
@@ -1076,7 +1076,7 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
     psf::RenderResult per = r.render(o);
     CHECK(per.image.rgb == wave.image.rgb);
     CHECK(per.unfiltered.rgb == wave.unfiltered.rgb);
-    // The wavefront handing its live paths to trace_tail: after the first
+    // The wavefront handing its live paths to trace_paths: after the first
     // bounce (every path), and once a tenth of the batch is left.
     o.per_path = 0;
     for (int64_t tail : {int64_t(s.width) * s.height * o.spp, int64_t(s.width) * s.height * o.spp / 10}) {
