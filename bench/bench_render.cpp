@@ -291,7 +291,7 @@ int main(int argc, char** argv) {
         psf::Renderer renderer(rt, b->scene);
         renderer.render(render_options(*b, filter, opt.tail_paths));  // warm-up
         rt.finish();
-        std::vector<double> wall, device;
+        std::vector<double> wall, device, trace, download, add;
         double mean = 0;
         size_t nonfinite = 0;
         for (auto _ : state) {
@@ -300,6 +300,9 @@ int main(int argc, char** argv) {
           rt.finish();
           state.SetIterationTime(r.seconds);
           wall.push_back(r.seconds);
+          trace.push_back(r.trace_seconds);
+          download.push_back(r.download_seconds);
+          add.push_back(r.add_seconds);
           double d = 0;
           for (const auto& [name, t] : rt.stats()) d += t.ms;
           device.push_back(d * 1e-3);
@@ -317,6 +320,10 @@ int main(int argc, char** argv) {
                "ms); mean pixel %.4g\n",
                bname.c_str(), b->scene.width, b->scene.height, b->spp, t.median_s * 1e3, t.min_s * 1e3, pps * 1e-6,
                d.median_s * 1e3, mean);
+        report("%s: wall by phase (medians): tracing%s to the kernels' end %.1f ms, downloads %.1f ms, host "
+               "additions %.1f ms\n",
+               bname.c_str(), filter ? " and filtering" : "", bench::summarize(trace).median_s * 1e3,
+               bench::summarize(download).median_s * 1e3, bench::summarize(add).median_s * 1e3);
         if (nonfinite) report("%s: %zu paths with NaN/Inf radiance\n", bname.c_str(), nonfinite);
         if (b->mitsuba_paths_per_s > 0) {
           double ratio = pps / b->mitsuba_paths_per_s;

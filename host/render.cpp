@@ -295,6 +295,7 @@ struct Renderer::Batch {
         spare.pop_back();
       }
     }
+    v.reserve(size);  // a whole batch's, so that recycle() keeps it after a smaller batch too
     v.resize(n);
     rt.read(buf, v.data(), n * sizeof(cl_float4));
     return v;
@@ -380,6 +381,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   const uint64_t first = index * b.size;
   const size_t L = Runtime::kDefaultLocal;
   filtering = filtering && b.filter;
+  const auto t0 = std::chrono::steady_clock::now();
 
   FrameParams p{};
   p.width = width;
@@ -475,11 +477,15 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
     rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.filtered, b.counts, b.contrib);
-    out.filtered = b.download(rt, b.contrib, p.batch_size);
   }
+  rt.finish();
+  const auto t1 = std::chrono::steady_clock::now();
+  out.trace_seconds = std::chrono::duration<double>(t1 - t0).count();
+  if (filtering) out.filtered = b.download(rt, b.contrib, p.batch_size);
   out.unfiltered = b.download(rt, b.contrib_unfiltered, p.batch_size);
   if (o.aovs) out.vertices = rt.download<PathVertex>(vertices, p.batch_size);
   rt.finish();
+  out.download_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
   return out;
 }
 
@@ -511,8 +517,12 @@ RenderResult Renderer::render(const RenderOptions& o) {
   if (monitoring) monitor.reset(pixels);
   for (uint64_t index = 0; index < batches; ++index) {
     BatchImages b = trace_batch(index, total, filtering);
+    const auto added = std::chrono::steady_clock::now();
+    r.trace_seconds += b.trace_seconds;
+    r.download_seconds += b.download_seconds;
     acc.add(b);
     const double removed = monitoring && filtering && index + 1 < batches ? monitor.add(b) : std::nan("");
+    r.add_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - added).count();
     if (filtering && (b.max_count <= 1 || removed < o.filter.min_removed)) {
       filtering = false;
       r.filter_off_after = acc.paths;

@@ -42,6 +42,8 @@ struct BatchImages {
   std::vector<PathVertex> vertices;   // with RenderOptions::aovs: the filtering vertices
   uint32_t max_count = 0;             // largest number of tuples averaged (0: not filtered)
   FilterParams params{};              // the filter's parameters (when filtered)
+  double trace_seconds = 0.0;         // wall time of trace_batch up to its kernels' end (launches included)
+  double download_seconds = 0.0;      // then the downloads of the contributions
 };
 
 // Per-pixel sums of a render in progress: what an image, a checkpoint and a
@@ -106,6 +108,10 @@ struct RenderResult {
   uint64_t nonfinite = 0;         // paths with NaN/Inf radiance, left out of the image
   uint32_t batch_size = 0;        // paths per batch used
   double seconds = 0.0;           // wall time of the render, without the program build
+  // Where `seconds` went, summed over the batches: tracing and filtering up to
+  // the kernels' end, downloading the contributions, adding them on the host
+  // (Accumulator and NoiseMonitor).
+  double trace_seconds = 0.0, download_seconds = 0.0, add_seconds = 0.0;
 };
 
 class Renderer {
