@@ -122,30 +122,34 @@ void Accumulator::add(const BatchImages& b) {
     }
     sums[3] += c.s[3];
   };
-  // Path j belongs to pixel (first + j) mod pixels. Threads take disjoint pixel
-  // ranges and add each pixel's paths in path order: the sums are the same, bit
-  // for bit, as one thread adding the paths in order.
-  auto add_pixels = [&](uint64_t p0, uint64_t p1) {
-    for (uint64_t round = 0; round * pixels < n + pixels; ++round) {
-      for (uint64_t p = p0; p < p1; ++p) {
-        uint64_t j = (p + pixels - offset) % pixels + round * pixels;
-        if (j >= n) continue;
+  // Path j belongs to pixel (first + j) mod pixels: the batch covers the pixels
+  // first + k, k < min(n, pixels) (wrapping), pixel first + k has the paths k,
+  // k + pixels, ... Threads take disjoint ranges of k and add each pixel's paths
+  // in path order: the sums are the same, bit for bit, as one thread adding the
+  // paths in order. A batch smaller than the film touches only its own pixels.
+  const uint64_t covered = std::min(n, pixels);
+  auto add_pixels = [&](uint64_t k0, uint64_t k1) {
+    for (uint64_t round = 0; round * pixels < n; ++round) {
+      for (uint64_t k = k0; k < k1; ++k) {
+        const uint64_t j = k + round * pixels;
+        if (j >= n) break;  // and so for every later k of this round
+        const uint64_t p = offset + k < pixels ? offset + k : offset + k - pixels;
         add_one(&filtered[p * 4], bad_filtered[p], f[j]);
         add_one(&unfiltered[p * 4], bad_unfiltered[p], b.unfiltered[j]);
         if (aov.empty() || j >= b.vertices.size()) continue;
         const PathVertex& v = b.vertices[j];
         if (v.albedo.s[3] == 0.0f) continue;
         float* a = &aov[p * 8];  // albedo rgb, depth, normal xyz, vertices
-        for (int k = 0; k < 3; ++k) {
-          a[k] += v.albedo.s[k];
-          a[4 + k] += v.normal.s[k];
+        for (int c = 0; c < 3; ++c) {
+          a[c] += v.albedo.s[c];
+          a[4 + c] += v.normal.s[c];
         }
         a[3] += v.position.s[3];
         a[7] += 1.0f;
       }
     }
   };
-  in_parallel(pixels, host_threads(n, pixels >> 10), add_pixels);
+  in_parallel(covered, host_threads(n, covered >> 10), add_pixels);
   paths += n;
   next_batch += 1;
 }
@@ -162,19 +166,22 @@ double NoiseMonitor::add(const BatchImages& b) {
   auto lum = [](const cl_float4& c) { return 0.2126 * c.s[0] + 0.7152 * c.s[1] + 0.0722 * c.s[2]; };
   const bool filtered = !b.filtered.empty();
   const uint64_t n = b.unfiltered.size(), offset = b.first % pixels;
-  // Pixel by pixel over the pixel's paths of the batch (path j lies in pixel
-  // (first + j) mod pixels), in blocks of kBlock pixels whose partial sums are
+  // Pixel by pixel over the pixel's paths of the batch (the batch covers pixels
+  // first + k, k < min(n, pixels), wrapping; pixel first + k has the paths k,
+  // k + pixels, ...), in blocks of kBlock values of k whose partial sums are
   // added in block order: the figure does not depend on the number of threads.
   constexpr uint64_t kBlock = 4096;
-  const uint64_t blocks = (pixels + kBlock - 1) / kBlock;
+  const uint64_t covered = std::min(n, pixels);
+  const uint64_t blocks = (covered + kBlock - 1) / kBlock;
   std::vector<double> part_removed(blocks, 0.0), part_noise(blocks, 0.0);
   auto run = [&](uint64_t b0, uint64_t b1) {
     for (uint64_t blk = b0; blk < b1; ++blk) {
       double removed = 0.0, noise = 0.0;
-      for (uint64_t p = blk * kBlock; p < std::min(pixels, (blk + 1) * kBlock); ++p) {
+      for (uint64_t k = blk * kBlock; k < std::min(covered, (blk + 1) * kBlock); ++k) {
+        const uint64_t p = offset + k < pixels ? offset + k : offset + k - pixels;
         double su = 0.0, su2 = 0.0, sf = 0.0;
         uint32_t cnt = 0;
-        for (uint64_t j = (p + pixels - offset) % pixels; j < n; j += pixels) {
+        for (uint64_t j = k; j < n; j += pixels) {
           const double u = lum(b.unfiltered[j]), f = filtered ? lum(b.filtered[j]) : u;
           if (!std::isfinite(u) || !std::isfinite(f)) continue;
           su += u;
