@@ -54,7 +54,11 @@ uint32_t radix_chunk(const Runtime& rt, uint32_t n, uint32_t digit_bits) {
 }
 
 RadixKernels radix_kernels(const Runtime& rt) {
-  return rt.device().type == "GPU" ? RadixKernels::tiles : RadixKernels::chunks;
+  // The tiles' kernel holds a table of ranks, the tile's keys and a little more
+  // in local memory (kernels/sort.cl): 26.1 KiB, where OpenCL 1.2 promises 32.
+  constexpr uint64_t kTileLocalBytes = 4u * ((PSF_TILE_RANKS_PADDED) + PSF_TILE_LOCAL + PSF_TILE + 32u);
+  return rt.device().type == "GPU" && rt.device().local_mem >= kTileLocalBytes ? RadixKernels::tiles
+                                                                              : RadixKernels::chunks;
 }
 
 // Each pass swaps the buffer handles, so `keys`/`values` name the result.

@@ -51,6 +51,9 @@ typedef cl_uint psf_uint;
 #define PSF_TILE_LOCAL 256u
 #define PSF_TILE_PER_ITEM 8u
 #define PSF_TILE (PSF_TILE_LOCAL * PSF_TILE_PER_ITEM)
+/* The tile kernel's table of (digit, work-item) ranks: 16 digits, one word of
+ * padding every 16 entries. */
+#define PSF_TILE_RANKS_PADDED (16u * PSF_TILE_LOCAL + PSF_TILE_LOCAL)
 /* filter.cl's filter_max_count: counts per work-item. */
 #define PSF_MAX_COUNT_CHUNK 256u
 

@@ -134,16 +134,18 @@ __kernel __attribute__((reqd_work_group_size(PSF_TILE_LOCAL, 1, 1))) void radix_
 
 /* The ranks table: (digit, work-item) counts, digit-major, one word of padding
  * every 16 so that work-item l's 16 consecutive entries do not share a bank. */
-#define PSF_TILE_RANKS (16u * PSF_TILE_LOCAL)
-#define PSF_TILE_PAD(i) ((i) + ((i) >> 4))
+#define PSF_TILE_PAD(i) ((i) + ((i) >> 4)) /* PSF_TILE_PAD(16 * PSF_TILE_LOCAL) = PSF_TILE_RANKS_PADDED */
 
 __kernel __attribute__((reqd_work_group_size(PSF_TILE_LOCAL, 1, 1))) void radix_tile_scatter4(
     __global const uint* keys_in, __global const uint* values_in, uint n, uint shift, uint mask, uint tiles,
     __global const uint* offsets, __global uint* keys_out, __global uint* values_out) {
-  __local uint ranks[PSF_TILE_PAD(PSF_TILE_RANKS)];
+  /* 26.1 KiB of local memory in all (OpenCL 1.2 devices have at least 32): the
+   * tile's values reuse the ranks table once every work-item has read its ranks. */
+  __local uint ranks[PSF_TILE_RANKS_PADDED];
   __local uint part[PSF_TILE_LOCAL];
-  __local uint tile_keys[PSF_TILE], tile_values[PSF_TILE];
+  __local uint tile_keys[PSF_TILE];
   __local uint start[16], dest[16];
+  __local uint* tile_values = ranks; /* PSF_TILE_RANKS_PADDED >= PSF_TILE */
   uint l = get_local_id(0), g = get_group_id(0);
   uint base = g * PSF_TILE, count = min(n - base, PSF_TILE);
   /* 1. Work-item l's pairs are the tile's l * PER_ITEM, ... in input order: its
@@ -181,6 +183,7 @@ __kernel __attribute__((reqd_work_group_size(PSF_TILE_LOCAL, 1, 1))) void radix_
   /* 3. Each pair to its place in the tile, sorted by digit and stable. */
   if (l < 16u) start[l] = ranks[PSF_TILE_PAD(l * PSF_TILE_LOCAL)];
   for (uint d = 0u; d < 16u; ++d) c[d] = ranks[PSF_TILE_PAD(d * PSF_TILE_LOCAL + l)];
+  barrier(CLK_LOCAL_MEM_FENCE); /* the ranks are read: their memory takes the values */
   for (uint k = 0u; k < PSF_TILE_PER_ITEM; ++k) {
     uint t = l * PSF_TILE_PER_ITEM + k;
     if (t >= count) break;
