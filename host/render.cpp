@@ -18,9 +18,9 @@ namespace {
 psf_float4 f4(const glm::vec3& v, float w = 0.0f) { return {{v.x, v.y, v.z, w}}; }
 
 // Host threads for a pass over a batch of n paths split into `parts` ranges:
-// one per 65536 paths, at most 8 and the machine's.
+// one per 65536 paths, at most 16 and the machine's.
 uint64_t host_threads(uint64_t n, uint64_t parts) {
-  return std::max<uint64_t>(1, std::min<uint64_t>({std::thread::hardware_concurrency(), 8, n >> 16, parts}));
+  return std::max<uint64_t>(1, std::min<uint64_t>({std::thread::hardware_concurrency(), 16, n >> 16, parts}));
 }
 
 // f(begin, end) over `threads` contiguous ranges of [0, count), the first on this thread.
