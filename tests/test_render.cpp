@@ -104,58 +104,62 @@ TEST_CASE("Render: the image is a function of the seed alone, not of the batch s
 }
 
 TEST_CASE("Render: the accumulator's threads add each pixel's paths in path order", "[render]") {
-  // Batches of 2^20 paths over 300x200 pixels (17.5 rounds a batch, so batches
-  // start mid-round) with NaNs, an unfiltered batch and AOV vertices: the sums
-  // must equal, bit for bit, one loop adding the paths in order.
-  const int w = 300, h = 200;
-  const uint64_t pixels = uint64_t(w) * h, n = uint64_t(1) << 20;
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(0.0f, 2.0f);
-  psf::Accumulator acc;
-  acc.reset(w, h, true);
-  std::vector<float> sum_f(pixels * 4, 0.0f), sum_u(pixels * 4, 0.0f), aov(pixels * 8, 0.0f);
-  std::vector<uint32_t> bad_f(pixels, 0);
-  auto add = [](float* s, uint32_t* bad, const cl_float4& c) {
-    bool finite = std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2]);
-    if (finite)
-      for (int k = 0; k < 3; ++k) s[k] += c.s[k];
-    else if (bad)
-      *bad += 1;
-    s[3] += c.s[3];
-  };
-  for (uint64_t index = 0; index < 3; ++index) {
-    psf::BatchImages b;
-    b.index = index;
-    b.first = index * n;
-    b.unfiltered.resize(n);
-    b.vertices.resize(n);
-    if (index != 1) b.filtered.resize(n);  // batch 1: not filtered
-    for (uint64_t j = 0; j < n; ++j) {
-      b.unfiltered[j] = {{u(rng), u(rng), u(rng), 1.0f}};
-      if (index != 1) b.filtered[j] = {{u(rng), j % 1000 == 7 ? NAN : u(rng), u(rng), u(rng)}};
-      PathVertex& v = b.vertices[j];
-      v.albedo = {{u(rng), u(rng), u(rng), j % 3 == 0 ? 0.0f : 1.0f}};
-      v.normal = {{u(rng), u(rng), u(rng), 0.0f}};
-      v.position = {{0.0f, 0.0f, 0.0f, u(rng)}};
-    }
-    for (uint64_t j = 0; j < n; ++j) {  // the reference: one loop, in path order
-      uint64_t p = (b.first + j) % pixels;
-      add(&sum_f[p * 4], &bad_f[p], b.filtered.empty() ? b.unfiltered[j] : b.filtered[j]);
-      add(&sum_u[p * 4], nullptr, b.unfiltered[j]);
-      const PathVertex& v = b.vertices[j];
-      if (v.albedo.s[3] == 0.0f) continue;
-      for (int k = 0; k < 3; ++k) {
-        aov[p * 8 + k] += v.albedo.s[k];
-        aov[p * 8 + 4 + k] += v.normal.s[k];
+  // Batches of 2^20 paths with NaNs, an unfiltered batch and AOV vertices: the
+  // sums must equal, bit for bit, one loop adding the paths in order. Over
+  // 300x200 pixels (17.5 rounds a batch, so batches start mid-round), and over
+  // 1500x1000, more pixels than a batch has paths (each batch covers part of the
+  // film; the second wraps around its end).
+  for (auto [w, h] : {std::pair{300, 200}, std::pair{1500, 1000}}) {
+    INFO(w << "x" << h);
+    const uint64_t pixels = uint64_t(w) * h, n = uint64_t(1) << 20;
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> u(0.0f, 2.0f);
+    psf::Accumulator acc;
+    acc.reset(w, h, true);
+    std::vector<float> sum_f(pixels * 4, 0.0f), sum_u(pixels * 4, 0.0f), aov(pixels * 8, 0.0f);
+    std::vector<uint32_t> bad_f(pixels, 0);
+    auto add = [](float* s, uint32_t* bad, const cl_float4& c) {
+      bool finite = std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2]);
+      if (finite)
+        for (int k = 0; k < 3; ++k) s[k] += c.s[k];
+      else if (bad)
+        *bad += 1;
+      s[3] += c.s[3];
+    };
+    for (uint64_t index = 0; index < 3; ++index) {
+      psf::BatchImages b;
+      b.index = index;
+      b.first = index * n;
+      b.unfiltered.resize(n);
+      b.vertices.resize(n);
+      if (index != 1) b.filtered.resize(n);  // batch 1: not filtered
+      for (uint64_t j = 0; j < n; ++j) {
+        b.unfiltered[j] = {{u(rng), u(rng), u(rng), 1.0f}};
+        if (index != 1) b.filtered[j] = {{u(rng), j % 1000 == 7 ? NAN : u(rng), u(rng), u(rng)}};
+        PathVertex& v = b.vertices[j];
+        v.albedo = {{u(rng), u(rng), u(rng), j % 3 == 0 ? 0.0f : 1.0f}};
+        v.normal = {{u(rng), u(rng), u(rng), 0.0f}};
+        v.position = {{0.0f, 0.0f, 0.0f, u(rng)}};
       }
-      aov[p * 8 + 3] += v.position.s[3];
-      aov[p * 8 + 7] += 1.0f;
+      for (uint64_t j = 0; j < n; ++j) {  // the reference: one loop, in path order
+        uint64_t p = (b.first + j) % pixels;
+        add(&sum_f[p * 4], &bad_f[p], b.filtered.empty() ? b.unfiltered[j] : b.filtered[j]);
+        add(&sum_u[p * 4], nullptr, b.unfiltered[j]);
+        const PathVertex& v = b.vertices[j];
+        if (v.albedo.s[3] == 0.0f) continue;
+        for (int k = 0; k < 3; ++k) {
+          aov[p * 8 + k] += v.albedo.s[k];
+          aov[p * 8 + 4 + k] += v.normal.s[k];
+        }
+        aov[p * 8 + 3] += v.position.s[3];
+        aov[p * 8 + 7] += 1.0f;
+      }
+      acc.add(b);
     }
-    acc.add(b);
+    CHECK(acc.paths == 3 * n);
+    CHECK(acc.filtered == sum_f);
+    CHECK(acc.unfiltered == sum_u);
+    CHECK(acc.bad_filtered == bad_f);
+    CHECK(acc.aov == aov);
   }
-  CHECK(acc.paths == 3 * n);
-  CHECK(acc.filtered == sum_f);
-  CHECK(acc.unfiltered == sum_u);
-  CHECK(acc.bad_filtered == bad_f);
-  CHECK(acc.aov == aov);
 }
