@@ -470,11 +470,11 @@ TEST_CASE("Filter: the noise monitor estimates the fraction of a batch's noise t
   auto mean = [](uint64_t p) { return 0.2f + 0.8f * float(p % 7) / 6.0f; };
   auto sigma = [](uint64_t p) { return 0.05f + 0.3f * float(p % 5) / 4.0f; };
   auto grey = [](float v, float w) { return cl_float4{{v, v, v, w}}; };
-  auto batch = [&](uint64_t index, int mode) {
+  auto batch_of = [&](uint64_t index, int mode, uint64_t n) {
     psf::BatchImages b;
     b.index = index;
-    b.first = index * pixels * per_pixel;
-    for (uint64_t j = 0; j < pixels * per_pixel; ++j) {
+    b.first = index * n;
+    for (uint64_t j = 0; j < n; ++j) {
       const uint64_t p = (b.first + j) % pixels;
       const float u = mean(p) + sigma(p) * gauss(rng), other = mean(p) + sigma(p) * gauss(rng);
       b.unfiltered.push_back(grey(u, 1.0f));
@@ -485,6 +485,7 @@ TEST_CASE("Filter: the noise monitor estimates the fraction of a batch's noise t
     b.max_count = mode == 0 ? 0 : 8;
     return b;
   };
+  auto batch = [&](uint64_t index, int mode) { return batch_of(index, mode, pixels * per_pixel); };
   psf::NoiseMonitor m;
   m.reset(pixels);
   CHECK(std::isnan(m.add(batch(0, 1))));  // no variance known before the first batch
@@ -499,6 +500,16 @@ TEST_CASE("Filter: the noise monitor estimates the fraction of a batch's noise t
   psf::BatchImages bad = batch(11, 2);
   bad.unfiltered[5].s[0] = NAN;
   CHECK(m.add(bad) == Approx(1.0).margin(0.06));
+  // Batches of 3/4 of the pixels' count: each covers part of the film, and
+  // every fourth wraps around its end (the monitor visits only the pixels a
+  // batch covers). 24 batches give each pixel 18 paths before the test.
+  const uint64_t part = pixels * 3 / 4;
+  psf::NoiseMonitor q;
+  q.reset(pixels);
+  for (int k = 0; k < 24; ++k) q.add(batch_of(k, 0, part));
+  CHECK(q.add(batch_of(24, 1, part)) == 0.0);
+  CHECK(q.add(batch_of(25, 2, part)) == Approx(1.0).margin(0.07));
+  CHECK(q.add(batch_of(26, 3, part)) == Approx(0.5).margin(0.05));
 }
 
 TEST_CASE("Filter: switches itself off when it removes less than --min-removed of the noise", "[filter]") {
