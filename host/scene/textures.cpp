@@ -238,8 +238,10 @@ uint32_t TextureStore::table(const std::string& key, const std::vector<float>& v
 
 std::optional<uint32_t> TextureStore::combine_xy(uint32_t x, float cx, uint32_t y, float cy) {
   if (x == PSF_NO_TEXTURE && y == PSF_NO_TEXTURE) throw std::invalid_argument("TextureStore::combine_xy: no texture");
-  const TextureInfo& grid = scene_.textures.at(x != PSF_NO_TEXTURE ? x : y);
-  auto same = [](const psf_float4& a, const psf_float4& b) { return a.s[0] == b.s[0] && a.s[1] == b.s[1] && a.s[2] == b.s[2]; };
+  const TextureInfo grid = scene_.textures.at(x != PSF_NO_TEXTURE ? x : y);  // a copy: append grows the table
+  auto same = [](const psf_float4& a, const psf_float4& b) {
+    return a.s[0] == b.s[0] && a.s[1] == b.s[1] && a.s[2] == b.s[2];
+  };
   if (x != PSF_NO_TEXTURE && y != PSF_NO_TEXTURE) {
     const TextureInfo& other = scene_.textures.at(y);
     if (other.width != grid.width || other.height != grid.height || other.flags != grid.flags ||
@@ -255,9 +257,7 @@ std::optional<uint32_t> TextureStore::combine_xy(uint32_t x, float cx, uint32_t 
     rgba[i * 4 + 2] = 0.0f;
     rgba[i * 4 + 3] = 1.0f;
   }
-  const TextureDesc d = sampling_of(grid);
-  const int width = int(grid.width), height = int(grid.height);  // `grid` dangles once append grows the table
-  return append(d, width, height, rgba);
+  return append(sampling_of(grid), int(grid.width), int(grid.height), rgba);
 }
 
 uint32_t TextureStore::complement_x(uint32_t t) {
