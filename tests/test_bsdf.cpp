@@ -568,6 +568,17 @@ size_t count_warnings(const psf::Scene& s, const std::string& text) {
                               [&](const std::string& w) { return w.find(text) != std::string::npos; }));
 }
 
+// Loading `path` fails with a SceneError at `line` whose message holds `text`.
+void expect_scene_error(const std::string& path, int line, const std::string& text) {
+  try {
+    psf::load_scene(path);
+    FAIL("loading " << path << " is an error: " << text);
+  } catch (const psf::SceneError& e) {
+    CHECK(e.line() == line);
+    CHECK(std::string(e.what()).find(text) != std::string::npos);
+  }
+}
+
 dvec3 xyz(const psf_float4& v) { return {v.s[0], v.s[1], v.s[2]}; }
 
 }  // namespace
@@ -1556,13 +1567,7 @@ TEST_CASE("Materials: Mitsuba BSDF plugins load with their parameters", "[bsdf]"
                                "<shape type=\"rectangle\"><bsdf type=\"conductor\"><string name=\"material\" "
                                "value=\"Xx\"/></bsdf></shape>\n"
                                "</scene>\n");
-  try {
-    psf::load_scene(xml3);
-    FAIL("an unknown conductor material is an error");
-  } catch (const psf::SceneError& e) {
-    CHECK(e.line() == 4);
-    CHECK(std::string(e.what()).find("unknown conductor material 'Xx'") != std::string::npos);
-  }
+  expect_scene_error(xml3, 4, "unknown conductor material 'Xx'");
   std::string ok3 = dir.write("ok3.xml",
                               "<scene version=\"3.0.0\">\n"
                               "<shape type=\"rectangle\"><bsdf type=\"conductor\"/></shape>\n"
@@ -1714,13 +1719,7 @@ TEST_CASE("Materials: textures for alpha_u and alpha_v share one texture, x and 
                                                        bitmap("alpha_u", "u.png") +
                                                        "\n<float name=\"alpha_v\" value=\"-0.5\"/></bsdf></shape>\n"
                                                        "</scene>\n");
-  try {
-    psf::load_scene(negative);
-    FAIL("a negative alpha_v is an error");
-  } catch (const psf::SceneError& e) {
-    CHECK(e.line() == 3);
-    CHECK(std::string(e.what()).find("the roughness must not be negative") != std::string::npos);
-  }
+  expect_scene_error(negative, 3, "the roughness must not be negative");
 }
 
 TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "[bsdf]") {
@@ -1832,13 +1831,7 @@ TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "
   std::string one = dir.write("one.xml",
                               "<scene version=\"3.0.0\">\n<shape type=\"rectangle\">\n"
                               "<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"/></bsdf></shape>\n</scene>\n");
-  try {
-    psf::load_scene(one);
-    FAIL("a blendbsdf with one nested BSDF is an error");
-  } catch (const psf::SceneError& e) {
-    CHECK(e.line() == 3);
-    CHECK(std::string(e.what()).find("two nested BSDFs") != std::string::npos);
-  }
+  expect_scene_error(one, 3, "two nested BSDFs");
 }
 
 TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals and uvs", "[bsdf]") {
