@@ -10,7 +10,6 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
-#include <iomanip>
 #include <iostream>
 #include <map>
 #include <mutex>
@@ -379,10 +378,12 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
                     << " paths (" << acc.paths / (uint64_t(scene.width) * scene.height) << " spp): ";
           if (img.max_count <= 1)
             std::cerr << "no vertex had a neighbour any more\n";
-          else
-            std::cerr << "its last batch removed " << std::fixed << std::setprecision(1) << 100.0 * removed
-                      << std::defaultfloat << " % of the noise, less than --min-removed " << ro.filter.min_removed
-                      << "\n";
+          else {
+            char percent[32];  // formatted apart: a precision set on std::cerr would outlive this line
+            std::snprintf(percent, sizeof(percent), "%.1f", 100.0 * removed);
+            std::cerr << "its last batch removed " << percent << " % of the noise, less than --min-removed "
+                      << ro.filter.min_removed << "\n";
+          }
         }
       }
     }

@@ -160,3 +160,19 @@ TEST_CASE("CLI: --aov adds the unfiltered image and the neighbour count as EXR l
   Run off = run("render " + (dir / "tiny.xml").string() + " --spp 1 -q --filter bogus");
   CHECK(off.status == 2);
 }
+
+TEST_CASE("CLI: the log of filtering switching itself off leaves the summary's numbers whole", "[cli]") {
+  // The Cornell box at 32x32 pixels and 16 spp in batches of 2^8 paths: 64
+  // batches. With --min-removed 1 the first batch the noise monitor can judge
+  // (one whose pixels had two paths before it) switches filtering off, as the
+  // filter removes less than all the noise. The summary after that message must
+  // print 16 spp, not a number rounded to the message's one digit (2e+01).
+  fs::path dir = temp_dir();
+  Run r = run("render " + psf::test::source_path("scenes/cornell-box.xml") +
+              " --width 32 --height 32 --spp 16 --batch-log2 8 --min-removed 1 --no-png -o " +
+              (dir / "off.exr").string());
+  REQUIRE(r.status == 0);
+  INFO(r.output);
+  CHECK(r.output.find("switched itself off after") != std::string::npos);
+  CHECK(r.output.find("psf: 16384 paths (16 spp)") != std::string::npos);
+}
