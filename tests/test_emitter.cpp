@@ -683,6 +683,36 @@ static psf::Scene quad_under_sky(const std::vector<Material>& materials, float c
   return s;
 }
 
+TEST_CASE("Render: an OBJ light (Ke) emits from its front only, as Mitsuba's area lights", "[emitter]") {
+  // A lamp quad facing -z (clockwise seen from +z) and nothing else: from below
+  // the camera sees its Ke; from above its back, which neither emits nor has
+  // anything to reflect. Emitting from both sides, a panel just below a ceiling
+  // (McGuire's Cornell boxes) lit the ceiling through the gap: fireflies.
+  namespace fs = std::filesystem;
+  fs::path dir = psf::test::temp_dir("psf-obj-lamp");
+  std::ofstream(dir / "lamp.mtl") << "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 0.5 0.25\nnewmtl wall\nKd 0.5 0.5 0.5\n";
+  std::ofstream(dir / "lamp.obj") << "mtllib lamp.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+                                     "usemtl lamp\nf 1 4 3 2\n"
+                                     "v 5 5 0\nv 6 5 0\nv 6 6 0\nusemtl wall\nf 5 6 7\n";
+  psf::Scene s = psf::load_scene((dir / "lamp.obj").string());
+  REQUIRE(s.materials.size() == 2);
+  CHECK(s.materials[0].two_sided == 0u);  // the lamp
+  CHECK(s.materials[1].two_sided == 1u);  // the wall scatters on both sides
+  psf::test::look_at(s, {0, 0, -2}, {0, 0, 0}, {0, 1, 0}, 30, 8);
+  psf::Image below = render(s, 4).image;
+  psf::test::look_at(s, {0, 0, 2}, {0, 0, 0}, {0, 1, 0}, 30, 8);
+  psf::Image above = render(s, 4).image;
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      INFO("pixel " << x << ", " << y);
+      glm::dvec3 front = pixel(below, x, y), back = pixel(above, x, y);
+      CHECK(front.x == Approx(1.0).epsilon(1e-6));
+      CHECK(front.z == Approx(0.25).epsilon(1e-6));
+      CHECK(back.x == 0.0);
+      CHECK(back.y == 0.0);
+    }
+}
+
 TEST_CASE("Render: a blended material scatters as the weighted sum of its two BSDFs", "[emitter]") {
   // The quad under a constant sky of 1 (above): each material alone shows its
   // albedo; a blend with weight w shows (1 - w) rho_a + w rho_b. The choice is

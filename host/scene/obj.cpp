@@ -355,8 +355,12 @@ float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 // - otherwise diffuse Kd.
 // map_Kd replaces Kd (Kd stays the colour if the file is missing); d < 1 or
 // map_d make a mask of opacity d times map_d (its alpha channel, else
-// luminance); map_bump / bump a bump map (heights: luminance). Ke is emission.
-// OBJ has no one-sided surfaces: all but dielectrics scatter on both sides.
+// luminance); map_bump / bump a bump map (heights: luminance). Ke is emission,
+// from the front side only (the side the face's counter-clockwise winding faces),
+// as Mitsuba's and pbrt's area lights emit: a light panel just below a ceiling
+// (McGuire's Cornell boxes) would otherwise light the ceiling through the gap.
+// All other surfaces but dielectrics scatter on both sides (OBJ has no one-sided
+// surfaces); an emitter, like a Mitsuba area emitter's surface, on its front only.
 Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) {
   Material m{};
   m.emission = {{om.ke.x, om.ke.y, om.ke.z, 0}};
@@ -376,7 +380,7 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
     m.transmittance = {{om.tf.x, om.tf.y, om.tf.z, 0}};
     return m;
   }
-  m.two_sided = 1;
+  m.two_sided = max3(om.ke) > 0.0f ? 0u : 1u;
   uint32_t kd_tex = PSF_NO_TEXTURE;
   if (!om.map_kd.file.empty())
     kd_tex = obj_texture(om, om.map_kd, TextureUse::Color, "map_Kd", "using Kd", store, scene);
