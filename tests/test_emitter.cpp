@@ -713,6 +713,50 @@ TEST_CASE("Render: an OBJ light (Ke) emits from its front only, as Mitsuba's are
     }
 }
 
+TEST_CASE("Render: an OBJ mirror model (illum 3, 5, 8) reflects Ks + (1 - max Ks) Kd", "[emitter]") {
+  // MTL's reflection models weight a mirror reflection by Ks: psf blends a
+  // conductor reflecting Ks / max(Ks) (probability max(Ks)) with diffuse Kd.
+  // Under a constant sky of 1 both parts reflect their colour, so the quad shows
+  // Ks + (1 - max Ks) Kd; illum 2 (a highlight, no mirror) stays a plastic.
+  namespace fs = std::filesystem;
+  fs::path dir = psf::test::temp_dir("psf-obj-mirror");
+  std::ofstream(dir / "m.mtl") << "newmtl mirror\nKd 0.5 0.25 0.1\nKs 0.4 0.2 0.1\nNs 10000000\nillum 5\n"
+                                  "newmtl rough\nKd 0.5 0.25 0.1\nKs 0.4 0.2 0.1\nNs 100\nillum 3\n"
+                                  "newmtl plastic\nKd 0.5 0.25 0.1\nKs 0.4 0.2 0.1\nNs 100\nillum 2\n";
+  for (const char* name : {"mirror", "rough", "plastic"}) {
+    std::ofstream(dir / "m.obj") << "mtllib m.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nusemtl " << name
+                                 << "\nf 1 2 3 4\n";
+    psf::Scene s = psf::load_scene((dir / "m.obj").string());
+    INFO(name);
+    const Material& top = s.materials[s.tri_material[0]];
+    if (std::string(name) == "plastic") {
+      CHECK(top.type == PSF_MATERIAL_ROUGH_PLASTIC);
+      CHECK(top.blend == 0u);
+      continue;
+    }
+    REQUIRE(top.blend != 0u);
+    const Material& part = s.materials[top.blend - 1];
+    CHECK(top.type == PSF_MATERIAL_DIFFUSE);
+    CHECK(part.type == (std::string(name) == "mirror" ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR));
+    CHECK(top.blend_weight == Approx(0.4f));
+    CHECK(s.material_names[top.blend - 1] == std::string(name) + " (mirror)");
+    if (std::string(name) == "rough") continue;  // a rough conductor loses energy to its microfacets' shadowing
+    psf::test::look_at(s, {0, 0, 2}, {0, 0, 0}, {0, 1, 0}, 30, 16);
+    psf::LightDesc sky;
+    sky.type = psf::LightType::Constant;
+    sky.color = glm::vec3(1.0f);
+    s.lights = {sky};
+    psf::RenderResult r = render(s, 64);
+    glm::dvec3 mean(0.0);
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) mean += pixel(r.image, x, y) / 256.0;
+    // 16384 paths; the sky's and the blend's noise about 1 %: allow 2 %.
+    CHECK(mean.x == Approx(0.4 + 0.6 * 0.5).epsilon(0.02));
+    CHECK(mean.y == Approx(0.2 + 0.6 * 0.25).epsilon(0.02));
+    CHECK(mean.z == Approx(0.1 + 0.6 * 0.1).epsilon(0.02));
+  }
+}
+
 TEST_CASE("Render: a blended material scatters as the weighted sum of its two BSDFs", "[emitter]") {
   // The quad under a constant sky of 1 (above): each material alone shows its
   // albedo; a blend with weight w shows (1 - w) rho_a + w rho_b. The choice is

@@ -352,6 +352,12 @@ float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 //   without diffuse colour (Kd = 0, no map_Kd) a conductor reflecting Ks
 //   (Mitsuba's material "none"), else roughplastic with diffuse Kd, specular Ks
 //   and IOR Ni (1.5 if Ni <= 1); alpha below 0.001 gives the smooth variants.
+//   Except for illum 3, 5 and 8 (the models with a mirror reflection weighted
+//   by Ks): diffuse Kd (or map_Kd) blended with a (rough) conductor reflecting
+//   Ks / max(Ks) at every angle, chosen with probability max(Ks) per shading
+//   point (Material.blend), so that the surface reflects Ks + (1 - max(Ks)) Kd:
+//   McGuire's Cornell boxes' "mirror" (Kd 0.01, Ks 0.95, illum 5) is a mirror,
+//   not a dark plastic whose coat reflects 4 %.
 // - otherwise diffuse Kd.
 // map_Kd replaces Kd (Kd stays the colour if the file is missing); d < 1 or
 // map_d make a mask of opacity d times map_d (its alpha channel, else
@@ -387,7 +393,12 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
   glm::vec3 kd = om.kd;
   const bool diffuse_colour = max3(kd) > 0.0f || kd_tex != PSF_NO_TEXTURE;
   const float alpha = std::sqrt(2.0f / (std::max(om.ns, 0.0f) + 2.0f));
-  if (max3(om.ks) > 0.0f && !diffuse_colour) {
+  const bool mirror = max3(om.ks) > 0.0f && diffuse_colour && (om.illum == 3 || om.illum == 5 || om.illum == 8);
+  if (mirror) {
+    m.type = PSF_MATERIAL_DIFFUSE;  // the mirror is added as its blend partner below
+    m.albedo = {{kd.x, kd.y, kd.z, 0}};
+    m.tex_color = kd_tex;
+  } else if (max3(om.ks) > 0.0f && !diffuse_colour) {
     m.type = alpha < 1e-3f ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR;
     m.specular = {{om.ks.x, om.ks.y, om.ks.z, 0}};
     m.eta = {{0, 0, 0, 0}};  // eta 0 + i: reflectance 1 at every angle
@@ -419,6 +430,23 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
     m.tex_bump = obj_texture(om, om.map_bump, TextureUse::Height, "map_bump", "no bump mapping", store, scene);
     if (m.tex_bump != PSF_NO_TEXTURE) m.bump_scale = om.map_bump.bump_multiplier * kObjBumpScale;
   }
+  if (mirror) {  // the same sides and bump map, no emission (the blend's top emits)
+    const float weight = std::min(max3(om.ks), 1.0f);
+    Material r = m;
+    r.type = alpha < 1e-3f ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR;
+    r.emission = {{0, 0, 0, 0}};
+    r.albedo = {{0, 0, 0, 0}};
+    r.tex_color = PSF_NO_TEXTURE;
+    r.specular = {{om.ks.x / max3(om.ks), om.ks.y / max3(om.ks), om.ks.z / max3(om.ks), 0}};
+    r.eta = {{0, 0, 0, 0}};  // eta 0 + i: reflectance 1 at every angle
+    r.k = {{1, 1, 1, 0}};
+    r.alpha_u = r.alpha_v = alpha;
+    r.flags |= PSF_MATFLAG_BECKMANN;
+    m.blend = 1 + uint32_t(scene.materials.size());
+    m.blend_weight = weight;
+    scene.materials.push_back(r);
+    scene.material_names.push_back(om.name + " (mirror)");
+  }
   return m;
 }
 
@@ -433,8 +461,9 @@ Scene load_obj_scene(const std::string& path) {
   std::vector<uint32_t> material_index(obj.materials.size());
   for (size_t i = 0; i < obj.materials.size(); ++i) {
     const ObjMaterial& om = obj.materials[i];
+    Material m = obj_material(om, store, scene);  // may append its blend partner first
     material_index[i] = uint32_t(scene.materials.size());
-    scene.materials.push_back(obj_material(om, store, scene));
+    scene.materials.push_back(m);
     scene.material_names.push_back(om.name);
   }
 
