@@ -50,15 +50,50 @@ inline uint spread_bits3(uint v) {
 /* The key of a cell: the Morton code of its coordinates' low bits (as many per
  * axis as the key has bits for), so that the sort puts cells near each other in
  * space near each other in memory and the filter finds its neighbours' ranges and
- * tuples in cache; XORed with a hash of the level. Cells whose coordinates differ
- * by a multiple of the period share a key; filter.cl's distance and level tests
- * keep them apart. */
+ * tuples in cache; XORed with a hash of the level and of the block of 2^per_axis
+ * cells per axis that holds the cell. Inside a block the XOR is one constant,
+ * which maps aligned runs of Morton codes onto aligned runs and so keeps the
+ * order's locality. Without the block's hash, cells a period apart shared a key:
+ * in Sponza (about 240 cells across at its 2^20 tuples' levels, a period of 128)
+ * a key held 38 tuples where a cell holds 26, and the filter scanned the others'
+ * too. Keys may still collide by chance (a table of 2 keys per tuple);
+ * filter.cl's distance and level tests keep such cells apart, and it visits a key
+ * shared by two of a query's cells once. */
+inline uint cell_key_bits_per_axis(uint key_bits) { return min(key_bits / 3u, 10u); }
+
+/* A key is built from per-axis parts, so that the filter computes each
+ * coordinate's once for all the cells it visits: the coordinate's Morton bits
+ * (spread_bits3 of its low per_axis bits, shifted by the axis), and its block
+ * (the floor of c / 2^per_axis, an arithmetic shift) times a large odd constant
+ * of the axis (Teschner et al.'s spatial hash); the level's part is its own such
+ * product. key = (x | y | z Morton bits) ^ lowbias32(x ^ y ^ z ^ level blocks).
+ * The coordinates are offset first, so that block boundaries do not fall on
+ * the planes scenes are built on (a floor at y = 0 lay on one, and the filter's
+ * queries there visited cells of two blocks, whose keys it must compare). */
+inline int cell_offset(int c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); }
+
+inline uint cell_morton_part(int c, uint axis, uint per_axis) {
+  return spread_bits3((uint)cell_offset(c, axis) & ((1u << per_axis) - 1u)) << axis;
+}
+
+inline uint cell_block_part(int c, uint axis, uint per_axis) {
+  const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;
+  return (uint)(cell_offset(c, axis) >> (int)per_axis) * prime;
+}
+
+inline uint cell_level_part(int level) { return (uint)level * 2654435761u; }
+
+inline uint cell_key_of_parts(uint morton, uint blocks, uint key_bits) {
+  return (morton ^ psf_hash(blocks)) & ((1u << key_bits) - 1u);
+}
+
 inline uint cell_key(int level, int3 c, uint key_bits) {
-  uint per_axis = min(key_bits / 3u, 10u);
-  uint mask = (1u << per_axis) - 1u;
-  uint morton = spread_bits3((uint)c.x & mask) | (spread_bits3((uint)c.y & mask) << 1) |
-                (spread_bits3((uint)c.z & mask) << 2);
-  return (morton ^ psf_hash((uint)level)) & ((1u << key_bits) - 1u);
+  uint per_axis = cell_key_bits_per_axis(key_bits);
+  uint morton = cell_morton_part(c.x, 0u, per_axis) | cell_morton_part(c.y, 1u, per_axis) |
+                cell_morton_part(c.z, 2u, per_axis);
+  uint blocks = cell_block_part(c.x, 0u, per_axis) ^ cell_block_part(c.y, 1u, per_axis) ^
+                cell_block_part(c.z, 2u, per_axis) ^ cell_level_part(level);
+  return cell_key_of_parts(morton, blocks, key_bits);
 }
 
 /* The query radius of a path's filtering vertex, 0 for a path without one. */

@@ -104,15 +104,31 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
   float r2 = r * r, tol2 = p.albedo_tol * p.albedo_tol;
   floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
   intL taken = (intL)(0);
-  /* Neighbouring cells share a key only where it has fewer than 2 bits per
-   * axis (cell_key: tiny batches); only then are repeats looked for. */
-  const bool repeats = min(p.key_bits / 3u, 10u) < 2u;
+  /* The keys' parts of the (at most 3) coordinates along each axis, computed
+   * once (cell_keys.cl). Cells of one block have distinct keys where a key has
+   * at least 2 bits per axis; cells of different blocks (or of tiny batches'
+   * keys) may share one, and only then are repeats looked for. */
+  const uint per_axis = cell_key_bits_per_axis(p.key_bits);
+  uint mx[3], my[3], mz[3], bx[3], by[3], bz[3];
+  for (int k = 0; k < 3; ++k) {
+    mx[k] = cell_morton_part(lo.x + k, 0u, per_axis);
+    my[k] = cell_morton_part(lo.y + k, 1u, per_axis);
+    mz[k] = cell_morton_part(lo.z + k, 2u, per_axis);
+    bx[k] = cell_block_part(lo.x + k, 0u, per_axis);
+    by[k] = cell_block_part(lo.y + k, 1u, per_axis);
+    bz[k] = cell_block_part(lo.z + k, 2u, per_axis) ^ cell_level_part(level);
+  }
+  const bool one_block = bx[0] == bx[hi.x - lo.x] && by[0] == by[hi.y - lo.y] && bz[0] == bz[hi.z - lo.z];
+  const bool repeats = per_axis < 2u || !one_block;
+  const uint hash0 = psf_hash(bx[0] ^ by[0] ^ bz[0]); /* every cell's, where one_block */
   uint seen[27];
   uint nseen = 0u;
-  for (int cz = lo.z; cz <= hi.z; ++cz)
-    for (int cy = lo.y; cy <= hi.y; ++cy)
-      for (int cx = lo.x; cx <= hi.x; ++cx) {
-        uint key = cell_key(level, (int3)(cx, cy, cz), p.key_bits);
+  for (int kz = 0; kz <= hi.z - lo.z; ++kz)
+    for (int ky = 0; ky <= hi.y - lo.y; ++ky)
+      for (int kx = 0; kx <= hi.x - lo.x; ++kx) {
+        uint morton = mx[kx] | my[ky] | mz[kz];
+        uint key = one_block ? (morton ^ hash0) & ((1u << p.key_bits) - 1u)
+                             : cell_key_of_parts(morton, bx[kx] ^ by[ky] ^ bz[kz], p.key_bits);
         uint2 range = ranges[key];
         if (range.x >= range.y) continue;
         if (repeats) {

@@ -290,6 +290,81 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
   }
 }
 
+// The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
+// plus an offset, its low bits in Morton order and its block (the rest) times a
+// constant; the blocks' and level's products XORed and hashed (lowbias32) into
+// the Morton code.
+uint32_t host_cell_key(int level, const int c[3], uint32_t key_bits) {
+  auto spread = [](uint32_t v) {
+    uint32_t out = 0;
+    for (int b = 0; b < 10; ++b) out |= ((v >> b) & 1u) << (3 * b);
+    return out;
+  };
+  auto lowbias32 = [](uint32_t x) {
+    x ^= x >> 16;
+    x *= 0x7feb352du;
+    x ^= x >> 15;
+    x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+  };
+  const int offset[3] = {1237, 2741, 3593};
+  const uint32_t prime[3] = {73856093u, 19349663u, 83492791u};
+  const uint32_t per_axis = std::min(key_bits / 3, 10u);
+  uint32_t morton = 0, blocks = uint32_t(level) * 2654435761u;
+  for (int a = 0; a < 3; ++a) {
+    int o = c[a] + offset[a];
+    morton |= spread(uint32_t(o) & ((1u << per_axis) - 1u)) << a;
+    blocks ^= uint32_t(o >> per_axis) * prime[a];  // arithmetic shift: the floor
+  }
+  return (morton ^ lowbias32(blocks)) & ((1u << key_bits) - 1u);
+}
+
+TEST_CASE("Filter: a key shared by two of a query's cells (of different key blocks) is visited once", "[filter]") {
+  // Cells of one block of 2^(key bits / 3) cells per axis have distinct keys;
+  // cells of neighbouring blocks can share one by chance, and the filter must
+  // then scan it once. With 300 tuples (keys of 10 bits: blocks of 8 cells per
+  // axis, 1024 keys) and a global radius of 0.02 (cells of 1/16), the key
+  // written again here finds two cells side by side, in different blocks, with
+  // one key; the tuples lie on a plane through both, within two cells of their
+  // common face, so that the queries near it visit both cells. Scanning the key
+  // twice would count their own cell's tuples (the centre among them) twice.
+  FilterParams p = default_params();
+  p.r0 = 0.02f;
+  const uint32_t n = 300, key_bits = psf::filter_key_bits(n);
+  REQUIRE(key_bits == 10);
+  const int level = int(std::ceil(std::log2(double(p.r0))));
+  const float size = std::ldexp(1.0f, level + 1);
+  int pair[3] = {0, 0, 0};
+  bool found = false;
+  for (int z = 0; z < 64 && !found; ++z)
+    for (int y = -64; y < 64 && !found; ++y)
+      for (int x = -64; x < 64 && !found; ++x) {
+        const int a[3] = {x, y, z}, b[3] = {x + 1, y, z};
+        if ((x + 1 + 1237) % 8 == 0 && host_cell_key(level, a, key_bits) == host_cell_key(level, b, key_bits)) {
+          std::copy(a, a + 3, pair);
+          found = true;
+        }
+      }
+  REQUIRE(found);
+  INFO("cells (" << pair[0] << ", " << pair[1] << ", " << pair[2] << ") and the next along x share a key");
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<PathVertex> v(n);
+  const float face = float(pair[0] + 1) * size;
+  for (auto& t : v) {
+    t.position = {{face + (u(rng) - 0.5f) * 4.0f * size, (float(pair[1]) + u(rng)) * size,
+                   (float(pair[2]) + 0.5f) * size, 1.0f}};
+    t.normal = {{0, 0, 1, 1}};
+    t.albedo = {{0.5f, 0.5f, 0.5f, 1}};
+    t.alpha = {{1, 1, 1, 0}};
+  }
+  auto c = random_values(n, 5);
+  Reference ref = brute_force(v, c, p, 1);
+  CHECK(*std::max_element(ref.counts.begin(), ref.counts.end()) > 3);  // the balls hold neighbours
+  check_same(ref, run_filter(v, c, p, 1));
+}
+
 TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, iterations", "[filter]") {
   FilterParams p = default_params();
   SECTION("all points in one cell") {
