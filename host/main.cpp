@@ -2,9 +2,13 @@
 // renders a scene to OpenEXR (and a PNG preview).
 #include <CLI/CLI.hpp>
 
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "cl/runtime.h"
 #include "compare.h"
@@ -61,7 +65,54 @@ struct RenderArgs {
   std::string resume;                  // --resume EXR
   int batch_log2 = 20;                 // --batch-log2
   std::string path_kernels = "auto";   // --path-kernels
+  std::string look_at;                 // --look-at ox,oy,oz,tx,ty,tz[,ux,uy,uz]
+  float fov = 0;                       // --fov degrees; 0: the scene's
 };
+
+// The camera of --look-at and --fov in place of the scene's; a message for bad
+// values, else empty.
+std::string override_camera(const RenderArgs& a, psf::CameraDesc& cam) {
+  if (!a.look_at.empty()) {
+    std::vector<float> v;
+    const char* p = a.look_at.c_str();
+    while (*p) {
+      char* end = nullptr;
+      float x = std::strtof(p, &end);
+      if (end == p || !std::isfinite(x)) return "--look-at " + a.look_at + ": expected numbers separated by commas";
+      v.push_back(x);
+      p = end;
+      while (*p == ' ') ++p;
+      if (*p == ',' && p[1]) ++p;
+      else if (*p) return "--look-at " + a.look_at + ": expected numbers separated by commas";
+    }
+    if (v.size() != 6 && v.size() != 9)
+      return "--look-at " + a.look_at + ": expected ox,oy,oz,tx,ty,tz (origin, target) or with ux,uy,uz (up)";
+    glm::vec3 origin(v[0], v[1], v[2]), target(v[3], v[4], v[5]);
+    glm::vec3 dir = target - origin;
+    if (!(glm::length(dir) > 0.0f)) return "--look-at " + a.look_at + ": the origin and the target coincide";
+    auto along = [&](glm::vec3 up) { return glm::length(glm::cross(glm::normalize(dir), up)) <= 1e-6f * glm::length(up); };
+    glm::vec3 up = cam.up;
+    if (v.size() == 9) {
+      up = glm::vec3(v[6], v[7], v[8]);
+      if (along(up)) return "--look-at " + a.look_at + ": the up direction is zero or along the view direction";
+    } else {  // the scene's up where it is not along the view, else y, else z
+      for (glm::vec3 u : {cam.up, glm::vec3(0, 1, 0), glm::vec3(0, 0, 1)})
+        if (!along(u)) {
+          up = u;
+          break;
+        }
+    }
+    cam.origin = origin;
+    cam.target = target;
+    cam.up = up;
+    cam.mirrored = false;
+  }
+  if (a.fov > 0) {
+    if (cam.orthographic) return "--fov: the scene's camera is orthographic";
+    cam.fov_degrees = a.fov;
+  }
+  return "";
+}
 
 int run_render(const RenderArgs& a) {
   namespace fs = std::filesystem;
@@ -100,6 +151,10 @@ int run_render(const RenderArgs& a) {
     for (const auto& w : scene.warnings) std::cerr << "psf: warning: " << w << "\n";
   if (a.width > 0) scene.width = a.width;
   if (a.height > 0) scene.height = a.height;
+  if (std::string bad = override_camera(a, scene.camera); !bad.empty()) {
+    std::cerr << "psf: " << bad << "\n";
+    return kExitBadInput;
+  }
   // The film's per-pixel sums alone take 40 bytes a pixel on the host: refuse
   // sizes that cannot be held rather than fail in an allocation mid-render.
   constexpr int kMaxFilmSide = 65536;
@@ -158,6 +213,9 @@ int run_render(const RenderArgs& a) {
   so.render.spp = a.spp > 0 ? a.spp : (a.time > 0 ? 0 : opt.spp);
   so.scene_path = a.scene;
   so.params = params;
+  // A resumed render must have the same camera: the overrides join the scene's hash.
+  if (!a.look_at.empty()) so.params.emplace_back("--look-at", a.look_at);
+  if (a.fov > 0) so.params.emplace_back("--fov", std::to_string(a.fov));
   so.device = a.device;
   so.time_limit = a.time;
   so.checkpoint_seconds = a.checkpoint_seconds;
@@ -231,6 +289,11 @@ int main(int argc, char** argv) {
   render->add_option("--spp", ra.spp, "Samples per pixel (default: the scene's, else 16)")->check(CLI::PositiveNumber);
   render->add_option("--width", ra.width, "Image width (default: the scene's film)")->check(CLI::Range(1, 65536));
   render->add_option("--height", ra.height, "Image height (default: the scene's film)")->check(CLI::Range(1, 65536));
+  render->add_option("--look-at", ra.look_at,
+                     "Camera origin and target, with an up direction or not: ox,oy,oz,tx,ty,tz[,ux,uy,uz] "
+                     "(default: the scene's camera; OBJ, PLY: one framing the bounds)");
+  render->add_option("--fov", ra.fov, "Field of view in degrees along the scene camera's fov axis (default: the scene's)")
+      ->check(CLI::Range(0.01f, 179.0f));
   render->add_option("--max-depth", ra.max_depth, "Longest path in segments, -1 unbounded (default: the scene's)")
       ->check(CLI::Range(-1, 1 << 16));
   render->add_option("--seed", ra.seed, "Sampling seed: the image is a deterministic function of it");

@@ -176,3 +176,43 @@ TEST_CASE("CLI: the log of filtering switching itself off leaves the summary's n
   CHECK(r.output.find("switched itself off after") != std::string::npos);
   CHECK(r.output.find("psf: 16384 paths (16 spp)") != std::string::npos);
 }
+
+TEST_CASE("CLI: --look-at and --fov replace the scene's camera", "[cli]") {
+  fs::path dir = temp_dir();
+  const std::string scene = psf::test::source_path("scenes/cornell-box.xml");
+  auto render = [&](const std::string& name, const std::string& args) {
+    Run r = run("render " + scene + " --width 32 --height 32 --spp 2 -q --no-png -o " + (dir / name).string() + " " +
+                args);
+    INFO(r.output);
+    REQUIRE(r.status == 0);
+    return psf::read_exr((dir / name).string()).rgb;
+  };
+  // The file's own camera (lookat 278,273,-800 -> 278,273,-799, up y; fov 39.3077
+  // along x) given on the command line renders the same image, bit for bit.
+  std::vector<float> plain = render("plain.exr", "");
+  CHECK(render("same.exr", "--look-at 278,273,-800,278,273,-799,0,1,0 --fov 39.3077") == plain);
+  CHECK(render("same-up.exr", "--look-at 278,273,-800,278,273,-799") == plain);  // the scene's up
+  // Another view, and another field of view, are other images.
+  CHECK(render("side.exr", "--look-at 100,273,-800,278,273,0") != plain);
+  CHECK(render("wide.exr", "--fov 60") != plain);
+  // Bad values: a message naming the option, exit 2, the output left alone.
+  const std::string before = read_file(dir / "plain.exr");
+  for (const char* bad : {"1,2", "0,0,0,0,0,0", "0,0,0,1,0,0,2,0,0", "a,b,c,d,e,f", "1,2,3,4,5,6,"}) {
+    INFO(bad);
+    Run r = run("render " + scene + " --spp 1 -q -o " + (dir / "plain.exr").string() + " --look-at " + bad);
+    CHECK(r.status == 2);
+    CHECK(r.output.find("--look-at") != std::string::npos);
+  }
+  CHECK(read_file(dir / "plain.exr") == before);
+  // A render resumes only with the camera it started with.
+  Run start = run("render " + scene + " --width 32 --height 32 --spp 2 -q --no-png --look-at 100,273,-800,278,273,0 -o " +
+                  (dir / "cam.exr").string());
+  REQUIRE(start.status == 0);
+  Run other = run("render " + scene + " --width 32 --height 32 --spp 4 -q --no-png --resume " + (dir / "cam.exr").string() +
+                  " -o " + (dir / "cam2.exr").string());
+  CHECK(other.status == 2);
+  CHECK(other.output.find("another scene") != std::string::npos);
+  Run same = run("render " + scene + " --width 32 --height 32 --spp 4 -q --no-png --look-at 100,273,-800,278,273,0 --resume " +
+                 (dir / "cam.exr").string() + " -o " + (dir / "cam3.exr").string());
+  CHECK(same.status == 0);
+}
