@@ -1053,3 +1053,29 @@ TEST_CASE("OBJ: a file without Ke gets the default sky; one with Ke does not", "
   std::string lit = dir.write("lit.obj", "mtllib lamp.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n");
   CHECK(psf::load_scene(lit).lights.empty());
 }
+
+TEST_CASE("OBJ: a usemtl of a material the MTL library lacks warns at its line", "[formats]") {
+  // McGuire's CornellBox-Glossy.obj uses 'light', which its MTL file lacks: one
+  // warning at the first usemtl of it, saying what its faces become.
+  TempDir dir;
+  dir.write("box.mtl", "newmtl wall\nKd 0.8 0.8 0.8\n");
+  std::string obj = dir.write("box.obj",
+                              "mtllib box.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl wall\nf 1 2 3\n"
+                              "usemtl light\nf 1 3 2\nusemtl light\nf 1 2 3\n");
+  psf::Scene s = psf::load_scene(obj);
+  size_t found = 0;
+  for (const std::string& w : s.warnings) {
+    INFO(w);
+    if (w.find("light") == std::string::npos) continue;
+    ++found;
+    CHECK(w.find("box.obj:7: usemtl 'light': no such material") != std::string::npos);
+    CHECK(w.find("diffuse grey") != std::string::npos);
+  }
+  CHECK(found == 1);
+  REQUIRE(s.tri_material.size() == 3);
+  const Material& grey = s.materials[s.tri_material[1]];
+  CHECK(s.tri_material[1] != s.tri_material[0]);
+  CHECK(grey.type == PSF_MATERIAL_DIFFUSE);
+  CHECK(grey.albedo.s[0] == 0.5f);
+  CHECK(s.tri_material[2] == s.tri_material[1]);
+}

@@ -137,6 +137,22 @@ ObjData read_obj(const std::string& path, bool with_materials) {
         (!with_materials && about_materials) || d_and_tr)
       continue;
     std::string message = path + ": " + line;
+    // tinyobjloader's "material [ 'NAME' ] not found in .mtl": with the line of
+    // the first usemtl of NAME and what becomes of its faces.
+    const size_t open = line.find("material [ '"), close = line.find("' ] not found");
+    if (open != std::string::npos && close != std::string::npos && close > open + 12) {
+      const std::string name = line.substr(open + 12, close - open - 12);
+      std::istringstream lines(text);
+      int number = 0, first = 0;
+      for (std::string l; first == 0 && std::getline(lines, l);) {
+        ++number;
+        std::istringstream words(l);
+        std::string keyword, used;
+        if (words >> keyword >> used && keyword == "usemtl" && used == name) first = number;
+      }
+      message = path + (first > 0 ? ":" + std::to_string(first) : std::string()) + ": usemtl '" + name +
+                "': no such material in the MTL library; its faces are diffuse grey";
+    }
     if (std::find(data.warnings.begin(), data.warnings.end(), message) == data.warnings.end())
       data.warnings.push_back(message);
   }
