@@ -379,10 +379,10 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
           if (img.max_count <= 1)
             std::cerr << "no vertex had a neighbour any more\n";
           else {
-            char percent[32];  // formatted apart: a precision set on std::cerr would outlive this line
-            std::snprintf(percent, sizeof(percent), "%.1f", 100.0 * removed);
-            std::cerr << "its last batch removed " << percent << " % of the noise, less than --min-removed "
-                      << ro.filter.min_removed << "\n";
+            char text[96];  // formatted apart: a precision set on std::cerr would outlive this line
+            std::snprintf(text, sizeof(text), "%.1f %% of the noise, less than --min-removed %g (%.1f %%)",
+                          100.0 * removed, double(ro.filter.min_removed), 100.0 * ro.filter.min_removed);
+            std::cerr << "its last batch removed " << text << "\n";
           }
         }
       }

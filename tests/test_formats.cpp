@@ -1079,3 +1079,14 @@ TEST_CASE("OBJ: a usemtl of a material the MTL library lacks warns at its line",
   CHECK(grey.albedo.s[0] == 0.5f);
   CHECK(s.tri_material[2] == s.tri_material[1]);
 }
+
+TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its material", "[formats]") {
+  // Ks 1e39 overflows a float; the mirror model would divide by it (NaN).
+  TempDir dir;
+  dir.write("m.mtl", "newmtl ok\nKd 0.5 0.5 0.5\n\nnewmtl big\nKd 0.5 0.5 0.5\nKs 1e39 0 0\nillum 5\n");
+  std::string obj = dir.write("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl big\nf 1 2 3\n");
+  auto [line, message] = error_of([&] { psf::load_scene(obj); });
+  CHECK(line == 4);
+  CHECK(contains(message, "m.mtl"));
+  CHECK(contains(message, "material 'big': Ks is not a finite number"));
+}

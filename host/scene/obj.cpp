@@ -126,6 +126,25 @@ ObjData read_obj(const std::string& path, bool with_materials) {
   }
 
   ObjData data;
+  // The line of each material name's first usemtl, found in one pass when a
+  // warning needs one (tinyobjloader warns at every usemtl of a missing material).
+  std::map<std::string, int> first_usemtl;
+  bool usemtl_scanned = false;
+  auto usemtl_line = [&](const std::string& name) {
+    if (!usemtl_scanned) {
+      usemtl_scanned = true;
+      std::istringstream lines(text);
+      int number = 0;
+      for (std::string l; std::getline(lines, l);) {
+        ++number;
+        std::istringstream words(l);
+        std::string keyword, used;
+        if (words >> keyword >> used && keyword == "usemtl") first_usemtl.emplace(used, number);
+      }
+    }
+    auto it = first_usemtl.find(name);
+    return it == first_usemtl.end() ? 0 : it->second;
+  };
   std::istringstream warnings(warn);
   for (std::string line; std::getline(warnings, line);) {
     // The end-of-file index bounds messages are replaced by the exact check below;
@@ -142,14 +161,7 @@ ObjData read_obj(const std::string& path, bool with_materials) {
     const size_t open = line.find("material [ '"), close = line.find("' ] not found");
     if (open != std::string::npos && close != std::string::npos && close > open + 12) {
       const std::string name = line.substr(open + 12, close - open - 12);
-      std::istringstream lines(text);
-      int number = 0, first = 0;
-      for (std::string l; first == 0 && std::getline(lines, l);) {
-        ++number;
-        std::istringstream words(l);
-        std::string keyword, used;
-        if (words >> keyword >> used && keyword == "usemtl" && used == name) first = number;
-      }
+      const int first = usemtl_line(name);
       message = path + (first > 0 ? ":" + std::to_string(first) : std::string()) + ": usemtl '" + name +
                 "': no such material in the MTL library; its faces are diffuse grey";
     }
@@ -275,6 +287,18 @@ ObjData read_obj(const std::string& path, bool with_materials) {
     om.ni = m.ior;
     om.d = m.dissolve;
     om.illum = m.illum;
+    // A value that overflows a float (Ks 1e39) or is nan would poison every
+    // path that meets the material: refuse the file at the material.
+    const std::pair<const char*, glm::vec3> colours[] = {{"Kd", om.kd}, {"Ks", om.ks}, {"Ke", om.ke}, {"Tf", om.tf}};
+    for (const auto& [what, v] : colours)
+      if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+        throw SceneError(om.mtl_file.empty() ? path : om.mtl_file, om.line,
+                         "material '" + om.name + "': " + what + " is not a finite number");
+    const std::pair<const char*, float> numbers[] = {{"Ns", om.ns}, {"Ni", om.ni}, {"d", om.d}};
+    for (const auto& [what, x] : numbers)
+      if (!std::isfinite(x))
+        throw SceneError(om.mtl_file.empty() ? path : om.mtl_file, om.line,
+                         "material '" + om.name + "': " + what + " is not a finite number");
     auto texture = [](const std::string& name, const tinyobj::texture_option_t& o) {
       ObjTexture t;
       t.file = name;
