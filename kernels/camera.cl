@@ -3,12 +3,57 @@
  * Path j of a batch has the global index g = first_path + j; it belongs to pixel
  * g mod (width * height) and is that pixel's sample number g div (width * height),
  * so a path gets the same samples whatever batch, device or work-group size
- * computes it. Sobol dimensions 0 and 1 place it inside the pixel (box filter).
+ * computes it. Sobol dimensions 0 and 1 place it around the pixel's centre, drawn
+ * from the pixel filter (pixel_filter_offset).
  * Writes: the path's state, an empty filtering vertex, its camera ray (pinhole,
  * thin lens or orthographic, psf_shared.h Camera; Sobol dimensions 2 and 3 place it on the lens)
  * and its index into the first queue of live paths. */
 
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
+
+/* The inverse error function in single precision (Giles, "Approximating the
+ * erfinv function", GPU Computing Gems, 2011), for |x| < 1. */
+inline float psf_erfinv(float x) {
+  float w = -log((1.0f - x) * (1.0f + x)), p;
+  if (w < 5.0f) {
+    w -= 2.5f;
+    p = 2.81022636e-08f;
+    p = 3.43273939e-07f + p * w;
+    p = -3.5233877e-06f + p * w;
+    p = -4.39150654e-06f + p * w;
+    p = 0.00021858087f + p * w;
+    p = -0.00125372503f + p * w;
+    p = -0.00417768164f + p * w;
+    p = 0.246640727f + p * w;
+    p = 1.50140941f + p * w;
+  } else {
+    w = sqrt(w) - 3.0f;
+    p = -0.000200214257f;
+    p = 0.000100950558f + p * w;
+    p = 0.00134934322f + p * w;
+    p = -0.00367342844f + p * w;
+    p = 0.00573950773f + p * w;
+    p = -0.0076224613f + p * w;
+    p = 0.00943887047f + p * w;
+    p = 1.00167406f + p * w;
+    p = 2.83297682f + p * w;
+  }
+  return p * x;
+}
+
+/* A sample's offset from its pixel's centre along one axis, in pixels, from
+ * the uniform number u by inverting the pixel filter's cdf: every sample then
+ * has weight 1 and the pixel's mean is the image convolved with the filter
+ * (filter importance sampling, as pbrt-v4 and, for these positive filters, the
+ * same expectation as Mitsuba's weighted splatting). Box: uniform over the
+ * half-width; tent of radius r: the triangle's cdf inverted; Gaussian: cut off
+ * at its radius, erfinv of a uniform value of erf between the cut-offs. */
+inline float pixel_filter_offset(Camera c, float u) {
+  if (c.filter == PSF_PIXEL_FILTER_TENT)
+    return u < 0.5f ? c.filter_a * (sqrt(2.0f * u) - 1.0f) : c.filter_a * (1.0f - sqrt(2.0f - 2.0f * u));
+  if (c.filter == PSF_PIXEL_FILTER_GAUSSIAN) return c.filter_a * psf_erfinv((2.0f * u - 1.0f) * c.filter_b);
+  return (2.0f * u - 1.0f) * (c.filter_a > 0.0f ? c.filter_a : 0.5f);
+}
 
 __kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
                           __global PathState* states, __global PathVertex* vertices, __global Ray* rays,
@@ -22,8 +67,8 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   const uint key = pixel_seed(params.seed, pixel);
   float u = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
   float v = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL + 1);
-  float s = ((float)(pixel % params.width) + u) / (float)params.width;
-  float t = ((float)(pixel / params.width) + v) / (float)params.height;
+  float s = ((float)(pixel % params.width) + 0.5f + pixel_filter_offset(camera, u)) / (float)params.width;
+  float t = ((float)(pixel / params.width) + 0.5f + pixel_filter_offset(camera, v)) / (float)params.height;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
   float3 org = camera.origin.xyz;
   if (camera.orthographic) { /* parallel rays from the film's point */

@@ -24,6 +24,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Camera, width);
   out[i++] = PSF_OFFSET(Camera, focus);
   out[i++] = PSF_OFFSET(Camera, orthographic);
+  out[i++] = PSF_OFFSET(Camera, filter_b);
   out[i++] = sizeof(Material);
   out[i++] = PSF_OFFSET(Material, emission);
   out[i++] = PSF_OFFSET(Material, type);

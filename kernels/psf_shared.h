@@ -132,10 +132,16 @@ typedef struct {
   float focus;        /* distance of the plane in focus along forward (thin lens) */
   psf_uint orthographic; /* 1: parallel rays along forward from origin + (2s-1) right + (2t-1) down
                             (right and down then the film's world-space half extents) */
-  psf_uint pad0;      /* padding */
-  psf_uint pad1;      /* padding */
-  psf_uint pad2;      /* padding */
+  psf_uint filter;    /* pixel filter, PSF_PIXEL_FILTER_*: each axis of a sample's offset from its pixel's
+                         centre is drawn from it (filter importance sampling; camera.cl) */
+  float filter_a;     /* box: half-width (0: 0.5); tent: radius; gaussian: sqrt(2) stddev */
+  float filter_b;     /* gaussian: erf(radius / (sqrt(2) stddev)), where it is cut off */
 } Camera;
+
+/* Camera.filter: Mitsuba's reconstruction filters with no negative lobes. */
+#define PSF_PIXEL_FILTER_BOX 0u
+#define PSF_PIXEL_FILTER_TENT 1u
+#define PSF_PIXEL_FILTER_GAUSSIAN 2u
 
 /* Material types (Material.type): Mitsuba's BSDF plugins of the same names
  * (kernels/bsdf.cl has the equations). */

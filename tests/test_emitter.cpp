@@ -14,6 +14,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 
 #include <stb_image_write.h>
@@ -190,6 +191,18 @@ void add_quad(psf::Scene& s, glm::vec3 corner, glm::vec3 a, glm::vec3 b, uint32_
   s.triangles.push_back({base, base + 1, base + 2});
   s.triangles.push_back({base, base + 2, base + 3});
   s.tri_material.insert(s.tri_material.end(), 2, material);
+}
+
+// A scene of one quad (as add_quad) emitting radiance 1 and reflecting nothing.
+psf::Scene emitting_quad(glm::vec3 corner, glm::vec3 a, glm::vec3 b) {
+  psf::Scene s;
+  Material light{};
+  light.type = PSF_MATERIAL_DIFFUSE;
+  light.emission = {{1, 1, 1, 0}};
+  s.materials = {light};
+  s.material_names = {"light"};
+  add_quad(s, corner, a, b, 0);
+  return s;
 }
 
 uint32_t add_material(psf::Scene& s, float albedo, bool two_sided = false) {
@@ -757,6 +770,49 @@ TEST_CASE("Render: an OBJ mirror model (illum 3, 5, 8) reflects Ks + (1 - max Ks
   }
 }
 
+TEST_CASE("Render: the pixel filter spreads a step edge as its cdf", "[emitter]") {
+  // An emitting half-plane x > 0 (radiance 1, nothing else, max depth 1) seen
+  // square-on: its edge falls on the boundary between pixels 7 and 8 of 16. A
+  // pixel k's value is the chance that a sample at k + 0.5 + X lies right of the
+  // edge, P(X > 7.5 - k) for the filter's offset X, computed here from each
+  // filter's own formula: box of half-width 0.5, tent of radius r (a triangle),
+  // Gaussian of stddev 0.5 cut off at 4 stddev (Mitsuba's), Phi its normal cdf.
+  psf::Scene s = emitting_quad({0, -50, 0}, {50, 0, 0}, {0, 100, 0});
+  psf::test::look_at(s, {0, 0, 4}, {0, 0, 0}, {0, 1, 0}, 40, 16);
+  s.height = 4;
+  s.camera.fov_axis = "x";
+  auto phi = [](double x) { return 0.5 * std::erfc(-x / std::sqrt(2.0)); };
+  struct Case {
+    const char* filter;
+    float radius;
+    std::function<double(double)> above;  // P(X > a)
+  };
+  const std::vector<Case> cases = {
+      {"box", 1.0f, [](double a) { return std::clamp(0.5 - a, 0.0, 1.0); }},
+      {"tent", 1.0f, [](double a) { return a >= 1 ? 0.0 : a <= -1 ? 1.0 : a >= 0 ? 0.5 * (1 - a) * (1 - a)
+                                                                                 : 1 - 0.5 * (1 + a) * (1 + a); }},
+      {"tent", 2.0f, [](double a) { return a >= 2 ? 0.0 : a <= -2 ? 1.0 : a >= 0 ? (2 - a) * (2 - a) / 8
+                                                                                 : 1 - (2 + a) * (2 + a) / 8; }},
+      {"gaussian", 1.0f, [&](double a) {
+         const double cut = phi(4.0) - phi(-4.0);
+         return a >= 2 ? 0.0 : a <= -2 ? 1.0 : (phi(4.0) - phi(a / 0.5)) / cut;
+       }}};
+  for (const Case& c : cases) {
+    INFO(c.filter << " of radius " << c.radius);
+    s.camera.pixel_filter = c.filter;
+    s.camera.filter_radius = c.radius;
+    s.camera.filter_stddev = 0.5f;
+    psf::RenderResult r = render(s, 256, 1);
+    for (int k = 4; k < 12; ++k) {
+      INFO("pixel " << k);
+      double mean = 0;
+      for (int y = 0; y < 4; ++y) mean += pixel(r.image, k, y).x / 4.0;
+      // 1024 stratified samples a column: the fraction is within about 1/1024.
+      CHECK(mean == Approx(c.above(7.5 - k)).margin(0.006));
+    }
+  }
+}
+
 TEST_CASE("Render: a blended material scatters as the weighted sum of its two BSDFs", "[emitter]") {
   // The quad under a constant sky of 1 (above): each material alone shows its
   // albedo; a blend with weight w shows (1 - w) rho_a + w rho_b. The choice is
@@ -847,13 +903,7 @@ TEST_CASE("Render: a two-sided material with a back BSDF shows each side's own",
 // An emitting square of radiance 1 and side 1 at z = 0 facing +z, seen from
 // (0, 0, camera_z) at 32x32.
 static psf::Scene emitting_square(float camera_z) {
-  psf::Scene s;
-  Material light{};
-  light.type = PSF_MATERIAL_DIFFUSE;
-  light.emission = {{1, 1, 1, 0}};
-  s.materials = {light};
-  s.material_names = {"light"};
-  add_quad(s, {-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}, 0);
+  psf::Scene s = emitting_quad({-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0});
   s.camera.origin = {0, 0, camera_z};
   s.camera.target = {0, 0, 0};
   s.width = s.height = 32;

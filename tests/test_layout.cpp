@@ -25,6 +25,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Camera, width)", offsetof(Camera, width)},
       {"offsetof(Camera, focus)", offsetof(Camera, focus)},
       {"offsetof(Camera, orthographic)", offsetof(Camera, orthographic)},
+      {"offsetof(Camera, filter_b)", offsetof(Camera, filter_b)},
       {"sizeof(Material)", sizeof(Material)},
       {"offsetof(Material, emission)", offsetof(Material, emission)},
       {"offsetof(Material, type)", offsetof(Material, type)},
@@ -78,6 +79,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
   auto& rt = psf::test::runtime();
   cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 128 * sizeof(cl_uint));
   rt.launch("layout_report", 1, 1, out);
+  REQUIRE(host.size() <= 128);  // the buffer's size, here and in test_runtime
   auto device = rt.download<cl_uint>(out, host.size());
   for (size_t i = 0; i < host.size(); ++i) {
     INFO(host[i].first);

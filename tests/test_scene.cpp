@@ -269,6 +269,37 @@ TEST_CASE("Sensor thinlens and orthographic: aperture radius, focus distance, fi
                     3, "focus distance must be positive");
 }
 
+TEST_CASE("Film rfilter: box, tent and gaussian as Mitsuba's, its default a Gaussian", "[scene]") {
+  auto film = [](const std::string& rfilter) {
+    return load_text("<sensor type=\"perspective\"><film type=\"hdrfilm\">" + rfilter + "</film></sensor>\n");
+  };
+  psf::Scene none = film("");
+  CHECK(none.camera.pixel_filter == "gaussian");
+  CHECK(none.camera.filter_stddev == 0.5f);
+  CHECK(load_text("<sensor type=\"perspective\"/>\n").camera.pixel_filter == "gaussian");  // no film
+  CHECK(load_text("<shape type=\"cube\"/>\n").camera.pixel_filter == "gaussian");           // no sensor
+  CHECK(film("<rfilter type=\"box\"/>").camera.pixel_filter == "box");
+  psf::Scene tent = film("<rfilter type=\"tent\"/>");
+  CHECK(tent.camera.pixel_filter == "tent");
+  CHECK(tent.camera.filter_radius == 1.0f);
+  CHECK(film("<rfilter type=\"tent\"><float name=\"radius\" value=\"1.5\"/></rfilter>").camera.filter_radius ==
+        1.5f);
+  psf::Scene narrow = film("<rfilter name=\"rfilter\" type=\"gaussian\"><float name=\"stddev\" value=\"0.3\"/></rfilter>");
+  CHECK(narrow.camera.pixel_filter == "gaussian");
+  CHECK(narrow.camera.filter_stddev == 0.3f);
+  // Negative lobes cannot be sampled with weight 1: a Gaussian instead, with one warning at the line.
+  psf::Scene mitchell = load_text("<sensor type=\"perspective\">\n<film type=\"hdrfilm\">\n<rfilter type=\"mitchell\"/>\n"
+                                  "</film></sensor>\n");
+  CHECK(mitchell.camera.pixel_filter == "gaussian");
+  REQUIRE(count_warnings(mitchell, "rfilter 'mitchell' is not supported") == 1);
+  CHECK(count_warnings(mitchell, "scene.xml:4:") == 1);
+  // OBJ, PLY and glTF scenes keep a box.
+  CHECK(psf::CameraDesc{}.pixel_filter == "box");
+  require_xml_error("<sensor type=\"perspective\"><film type=\"hdrfilm\">\n<rfilter type=\"tent\">\n"
+                    "<float name=\"radius\" value=\"-1\"/></rfilter></film></sensor>\n",
+                    4, "radius must be positive");
+}
+
 TEST_CASE("$parameters and <default>", "[scene]") {
   const std::string body =
       "<default name=\"w\" value=\"64\"/>\n"

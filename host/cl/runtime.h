@@ -111,7 +111,12 @@ class Runtime {
   // Waits for the queue and adds the time of every finished launch to stats().
   void finish();
   const std::map<std::string, KernelTime>& stats() const { return stats_; }
-  void reset_stats() { stats_.clear(); }
+  // Forgets the times so far, including launches not yet collected by finish()
+  // (a launch before the reset counted after it otherwise).
+  void reset_stats() {
+    stats_.clear();
+    pending_.clear();
+  }
 
   static constexpr size_t kDefaultLocal = 64;
 

@@ -295,6 +295,7 @@ class MitsubaLoader {
   }
 
   Scene load(const std::string& path) {
+    scene_.camera.pixel_filter = "gaussian";  // Mitsuba's film's default rfilter, stddev 0.5
     XmlFile& main = open(path, pugi::xml_node());
     pugi::xml_node root = main.doc.document_element();
     std::string version = attr(root, "version").value_or("3.0.0");
@@ -326,6 +327,7 @@ class MitsubaLoader {
 
     if (!has_sensor_) {
       scene_.camera = camera_framing(scene_.positions);
+      scene_.camera.pixel_filter = "gaussian";
       scene_.warnings.push_back(main.path + ": no <sensor>; using a camera framing the scene");
     }
     return std::move(scene_);
@@ -911,6 +913,36 @@ class MitsubaLoader {
     scene_.width = get_int(e, "width", 768);
     scene_.height = get_int(e, "height", 576);
     if (scene_.width <= 0 || scene_.height <= 0) fail(node, "the film's width and height must be positive");
+    // The reconstruction filter: Mitsuba's default is a Gaussian of stddev 0.5.
+    scene_.camera.pixel_filter = "gaussian";
+    scene_.camera.filter_stddev = 0.5f;
+    for (pugi::xml_node rfilter : objects(e, "rfilter")) load_rfilter(rfilter);
+  }
+
+  // box, tent (radius, default 1) and gaussian (stddev, default 0.5) are sampled
+  // as Mitsuba weights them; the filters with negative lobes are not (a sample's
+  // weight would be negative), and a Gaussian takes their place.
+  void load_rfilter(pugi::xml_node node) {
+    Element e = parse_element(node);
+    CameraDesc& cam = scene_.camera;
+    if (e.type == "box") {
+      cam.pixel_filter = "box";
+    } else if (e.type == "tent") {
+      cam.pixel_filter = "tent";
+      cam.filter_radius = float(get_float(e, "radius", 1.0));
+      if (!(cam.filter_radius > 0.0f) || !std::isfinite(cam.filter_radius))
+        fail(find(e, "radius") ? find(e, "radius")->node : node, "the tent filter's radius must be positive");
+    } else if (e.type == "gaussian") {
+      cam.pixel_filter = "gaussian";
+      cam.filter_stddev = float(get_float(e, "stddev", 0.5));
+      if (!(cam.filter_stddev > 0.0f) || !std::isfinite(cam.filter_stddev))
+        fail(find(e, "stddev") ? find(e, "stddev")->node : node, "the Gaussian filter's stddev must be positive");
+    } else {
+      warn(node, "rfilter:" + e.type,
+           "rfilter '" + e.type + "' is not supported (box, tent, gaussian); using a Gaussian of stddev 0.5");
+      cam.pixel_filter = "gaussian";
+      cam.filter_stddev = 0.5f;
+    }
   }
 
   void load_sampler(pugi::xml_node node) {

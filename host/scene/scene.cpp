@@ -49,6 +49,17 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
   c.aperture = desc.orthographic ? 0.0f : std::max(desc.aperture_radius, 0.0f);
   c.focus = desc.focus_distance;
   c.orthographic = desc.orthographic ? 1u : 0u;
+  if (desc.pixel_filter == "tent") {
+    c.filter = PSF_PIXEL_FILTER_TENT;
+    c.filter_a = desc.filter_radius;
+  } else if (desc.pixel_filter == "gaussian") {
+    c.filter = PSF_PIXEL_FILTER_GAUSSIAN;
+    c.filter_a = std::sqrt(2.0f) * desc.filter_stddev;
+    c.filter_b = float(std::erf(4.0 / std::sqrt(2.0)));  // cut off at 4 stddev, as Mitsuba
+  } else {
+    c.filter = PSF_PIXEL_FILTER_BOX;
+    c.filter_a = 0.5f;
+  }
   return c;
 }
 

@@ -36,6 +36,11 @@ struct CameraDesc {
   float focus_distance = 1e4f; // distance of the plane in focus along the view direction (thin lens)
   bool orthographic = false;   // parallel rays (Mitsuba's orthographic); fov and the lens are unused
   glm::vec2 ortho_scale{1.0f}; // orthographic: the film spans [-x, x] by [-y, y] / aspect in world units
+  // Pixel filter (Mitsuba's rfilter): "box" (half-width 0.5), "tent" (radius
+  // filter_radius) or "gaussian" (stddev filter_stddev, cut off at 4 stddev).
+  std::string pixel_filter = "box";
+  float filter_radius = 1.0f;
+  float filter_stddev = 0.5f;
 };
 
 struct Scene {
