@@ -288,8 +288,8 @@ TEST_CASE("Film rfilter: box, tent and gaussian as Mitsuba's, its default a Gaus
   CHECK(narrow.camera.pixel_filter == "gaussian");
   CHECK(narrow.camera.filter_stddev == 0.3f);
   // Negative lobes cannot be sampled with weight 1: a Gaussian instead, with one warning at the line.
-  psf::Scene mitchell = load_text("<sensor type=\"perspective\">\n<film type=\"hdrfilm\">\n<rfilter type=\"mitchell\"/>\n"
-                                  "</film></sensor>\n");
+  psf::Scene mitchell = load_text(
+      "<sensor type=\"perspective\">\n<film type=\"hdrfilm\">\n<rfilter type=\"mitchell\"/>\n</film></sensor>\n");
   CHECK(mitchell.camera.pixel_filter == "gaussian");
   REQUIRE(count_warnings(mitchell, "rfilter 'mitchell' is not supported") == 1);
   CHECK(count_warnings(mitchell, "scene.xml:4:") == 1);
