@@ -90,7 +90,9 @@ std::string override_camera(const RenderArgs& a, psf::CameraDesc& cam) {
     glm::vec3 origin(v[0], v[1], v[2]), target(v[3], v[4], v[5]);
     glm::vec3 dir = target - origin;
     if (!(glm::length(dir) > 0.0f)) return "--look-at " + a.look_at + ": the origin and the target coincide";
-    auto along = [&](glm::vec3 up) { return glm::length(glm::cross(glm::normalize(dir), up)) <= 1e-6f * glm::length(up); };
+    auto along = [&](glm::vec3 up) {
+      return glm::length(glm::cross(glm::normalize(dir), up)) <= 1e-6f * glm::length(up);
+    };
     glm::vec3 up = cam.up;
     if (v.size() == 9) {
       up = glm::vec3(v[6], v[7], v[8]);
@@ -213,8 +215,15 @@ int run_render(const RenderArgs& a) {
   so.render.spp = a.spp > 0 ? a.spp : (a.time > 0 ? 0 : opt.spp);
   so.scene_path = a.scene;
   so.params = params;
-  // A resumed render must have the same camera: the overrides join the scene's hash.
-  if (!a.look_at.empty()) so.params.emplace_back("--look-at", a.look_at);
+  // A resumed render must have the same camera: the overrides join the scene's
+  // hash, as the camera they give (so "1,2" and "1, 2.0" are the same).
+  if (!a.look_at.empty()) {
+    const psf::CameraDesc& c = scene.camera;
+    char text[256];
+    std::snprintf(text, sizeof text, "%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g", c.origin.x, c.origin.y,
+                  c.origin.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y, c.up.z);
+    so.params.emplace_back("--look-at", text);
+  }
   if (a.fov > 0) so.params.emplace_back("--fov", std::to_string(a.fov));
   so.device = a.device;
   so.time_limit = a.time;
@@ -292,7 +301,8 @@ int main(int argc, char** argv) {
   render->add_option("--look-at", ra.look_at,
                      "Camera origin and target, with an up direction or not: ox,oy,oz,tx,ty,tz[,ux,uy,uz] "
                      "(default: the scene's camera; OBJ, PLY: one framing the bounds)");
-  render->add_option("--fov", ra.fov, "Field of view in degrees along the scene camera's fov axis (default: the scene's)")
+  render->add_option("--fov", ra.fov,
+                     "Field of view in degrees along the scene camera's fov axis (default: the scene's)")
       ->check(CLI::Range(0.01f, 179.0f));
   render->add_option("--max-depth", ra.max_depth, "Longest path in segments, -1 unbounded (default: the scene's)")
       ->check(CLI::Range(-1, 1 << 16));

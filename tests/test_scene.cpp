@@ -284,7 +284,8 @@ TEST_CASE("Film rfilter: box, tent and gaussian as Mitsuba's, its default a Gaus
   CHECK(tent.camera.filter_radius == 1.0f);
   CHECK(film("<rfilter type=\"tent\"><float name=\"radius\" value=\"1.5\"/></rfilter>").camera.filter_radius ==
         1.5f);
-  psf::Scene narrow = film("<rfilter name=\"rfilter\" type=\"gaussian\"><float name=\"stddev\" value=\"0.3\"/></rfilter>");
+  psf::Scene narrow =
+      film("<rfilter name=\"rfilter\" type=\"gaussian\"><float name=\"stddev\" value=\"0.3\"/></rfilter>");
   CHECK(narrow.camera.pixel_filter == "gaussian");
   CHECK(narrow.camera.filter_stddev == 0.3f);
   // Negative lobes cannot be sampled with weight 1: a Gaussian instead, with one warning at the line.
