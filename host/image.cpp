@@ -126,13 +126,14 @@ Image read_exr(const std::string& path) {
     Image img;
     Imath::Box2i dw = data_window(file, img.width, img.height);
     img.rgb.assign(size_t(img.width) * img.height * 3, 0.0f);
-    char* base = reinterpret_cast<char*>(img.rgb.data()) -
-                 (size_t(dw.min.x) + size_t(dw.min.y) * img.width) * 3 * sizeof(float);
+    // Slice::Make offsets the pointer by the data window's origin itself (a
+    // pointer computed here before the array's start is undefined behaviour,
+    // which the resume fuzzer's sanitizer reported for a window far from 0).
     size_t xs = 3 * sizeof(float), ys = xs * img.width;
     Imf::FrameBuffer fb;
-    fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
-    fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
-    fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
+    fb.insert("R", Imf::Slice::Make(Imf::FLOAT, img.rgb.data(), dw, xs, ys));
+    fb.insert("G", Imf::Slice::Make(Imf::FLOAT, img.rgb.data() + 1, dw, xs, ys));
+    fb.insert("B", Imf::Slice::Make(Imf::FLOAT, img.rgb.data() + 2, dw, xs, ys));
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);
     return img;
@@ -155,8 +156,7 @@ ExrFile read_exr_file(const std::string& path) {
         throw std::runtime_error(std::string("channel ") + c.name() + " is subsampled (not written by psf)");
       std::vector<float>& data = out.channels[c.name()];
       data.assign(n, 0.0f);
-      char* base = reinterpret_cast<char*>(data.data()) - (size_t(dw.min.x) + size_t(dw.min.y) * out.width) * sizeof(float);
-      fb.insert(c.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * out.width));
+      fb.insert(c.name(), Imf::Slice::Make(Imf::FLOAT, data.data(), dw, sizeof(float), sizeof(float) * out.width));
     }
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);

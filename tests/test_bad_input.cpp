@@ -185,6 +185,13 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     INFO(o.run.output);
     require_clear_error(o, "not-an-exr.exr");
   }
+  SECTION("--resume of an OpenEXR file whose data window starts at x = -2304") {
+    // From the resume fuzzer: reading it computed a pointer 2304 pixels before
+    // the array (undefined behaviour, reported by UBSan in scripts/test --sanitize).
+    Outcome o = render(bad("degenerate.obj"), "--resume " + bad("resume-far-window.exr"));
+    INFO(o.run.output);
+    require_clear_error(o, "resume-far-window.exr");
+  }
 }
 
 TEST_CASE("Bad input: NaN/Inf path contributions never reach the image and are counted", "[bad_input]") {
