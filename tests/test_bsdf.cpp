@@ -1834,6 +1834,29 @@ TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "
   expect_scene_error(one, 3, "two nested BSDFs");
 }
 
+TEST_CASE("Materials: glossy MTL materials with the same Ns and Ni share one roughplastic table", "[bsdf]") {
+  // The table (and its internal and external reflectances) is computed once and
+  // reused, as for the first material; another Ns gets its own.
+  TempDir dir;
+  dir.write("m.mtl", "newmtl a\nKd 0.5 0.1 0.1\nKs 0.3 0.3 0.3\nNs 50\n"
+                     "newmtl b\nKd 0.1 0.5 0.1\nKs 0.3 0.3 0.3\nNs 50\n"
+                     "newmtl c\nKd 0.1 0.1 0.5\nKs 0.3 0.3 0.3\nNs 60\n");
+  std::string obj = dir.write("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                       "usemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\nusemtl c\nf 1 2 3\n");
+  psf::Scene s = psf::load_scene(obj);
+  REQUIRE(s.tri_material.size() == 3);
+  const Material &a = s.materials[s.tri_material[0]], &b = s.materials[s.tri_material[1]],
+                 &c = s.materials[s.tri_material[2]];
+  REQUIRE(a.type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(a.tex_table == b.tex_table);
+  CHECK(a.eta.s[2] == b.eta.s[2]);
+  CHECK(a.eta.s[3] == b.eta.s[3]);
+  CHECK(a.eta.s[2] > 0.0f);
+  CHECK(a.eta.s[3] > 0.0f);
+  CHECK(c.tex_table != a.tex_table);
+  CHECK(c.eta.s[3] != a.eta.s[3]);
+}
+
 TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals and uvs", "[bsdf]") {
   TempDir dir;
   std::vector<uint8_t> px(2 * 2 * 4, 255);

@@ -296,7 +296,16 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
   if (m.tex_alpha == PSF_NO_TEXTURE) {
     key << " " << m.alpha_u;
     m.flags &= ~PSF_MATFLAG_ROUGH_TABLE2D;
-    m.tex_table = store.table(key.str(), row(m.alpha_u, internal, external, cores));
+    // OBJ exports often give every material the same Ns and Ni: one row for all.
+    const std::vector<double>* known = store.has_table(key.str()) ? store.table_numbers(key.str()) : nullptr;
+    if (known && known->size() == 2) {
+      internal = (*known)[0];
+      external = (*known)[1];
+      m.tex_table = store.table(key.str(), {});  // the cached table
+    } else {
+      m.tex_table = store.table(key.str(), row(m.alpha_u, internal, external, cores));
+      store.set_table_numbers(key.str(), {internal, external});
+    }
     m.eta.s[2] = float(internal);
     m.eta.s[3] = float(external);
     return;

@@ -58,6 +58,15 @@ class TextureStore {
   // Whether table() holds one for `key`, and the values of table `index`.
   bool has_table(const std::string& key) const { return cache_.count("table|" + key) != 0; }
   const std::vector<float>& table_values(uint32_t index) const { return table_values_.at(index); }
+  // Numbers that belong with table `key` (roughplastic: the internal and
+  // external reflectances of its row), so that a cached table needs no recompute.
+  void set_table_numbers(const std::string& key, std::vector<double> numbers) {
+    table_numbers_[key] = std::move(numbers);
+  }
+  const std::vector<double>* table_numbers(const std::string& key) const {
+    auto it = table_numbers_.find(key);
+    return it == table_numbers_.end() ? nullptr : &it->second;
+  }
 
   // A texture whose x channel is texture x's (the constant cx where x is
   // PSF_NO_TEXTURE) and whose y channel is texture y's (or cy): anisotropic
@@ -79,6 +88,7 @@ class TextureStore {
   std::map<std::string, uint32_t> cache_;  // file + use + sampling -> index; table keys
   std::map<uint32_t, glm::vec3> means_;    // texture -> mean RGB
   std::map<uint32_t, std::vector<float>> table_values_;  // table() textures -> their values
+  std::map<std::string, std::vector<double>> table_numbers_;  // set_table_numbers
 };
 
 // Mitsuba's named dielectric IORs ("bk7", "water", "air", ...); nullopt if unknown.
