@@ -10,6 +10,10 @@
 
 namespace psf {
 
+// FilterOptions::visibility_ray chosen by the scene: a hemisphere ray where the only
+// light is an environment, the light sample otherwise (--visibility-ray auto).
+constexpr float kVisibilityRayAuto = -1.0f;
+
 struct FilterOptions {
   bool enabled = true;            // --filter psf (true) or off
   float alpha = 0.25f;            // r(n) = r0 / n^alpha (--alpha)
@@ -19,6 +23,10 @@ struct FilterOptions {
   float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
   float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)
   bool cells27 = false;           // cells of size r searched 3x3x3 instead of 2r searched 2x2x2
+  // > 0: similar vertices agree on whether one hemisphere ray of this length (scene
+  // units) hits something (kernels/visibility.cl); 0: on their light sample's
+  // visibility; kVisibilityRayAuto: by the scene (Renderer::visibility_ray).
+  float visibility_ray = kVisibilityRayAuto;
   // Filtering switches itself off for the rest of the render after a batch in
   // which it removed less than this fraction of the noise (render.h
   // NoiseMonitor; --min-removed; 0: only when no vertex has a neighbour). It pays

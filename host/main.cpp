@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <limits>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -19,6 +21,31 @@
 #include "session.h"
 
 namespace {
+
+constexpr double kFloatMax = std::numeric_limits<float>::max();
+
+// A validator for a floating-point option: a finite number in [lo, hi] (lo
+// excluded when `open_lo`). CLI11's Range, PositiveNumber and NonNegativeNumber
+// let "nan" through (every comparison with NaN is false) and name an unbounded
+// range by 300 digits of DBL_MAX. hi = kFloatMax: unbounded, but finite as a float.
+CLI::Validator finite_number(double lo, double hi, bool open_lo = false) {
+  std::ostringstream what;
+  what << "a number ";
+  if (hi >= kFloatMax) what << (open_lo ? "> " : ">= ") << lo << " (and below 3.4e38)";
+  else what << "in " << (open_lo ? "(" : "[") << lo << ", " << hi << "]";
+  const std::string description = what.str();
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        const char* begin = text.c_str();
+        char* end = nullptr;
+        const double v = std::strtod(begin, &end);
+        const bool parsed = end != begin && *end == '\0';
+        if (!parsed || !std::isfinite(v) || v < lo || v > hi || (open_lo && v == lo))
+          return "'" + text + "' is not " + description;
+        return std::string();
+      },
+      description);
+}
 
 constexpr int kExitBadInput = 2;
 constexpr int kExitFailure = 1;
@@ -53,6 +80,7 @@ struct RenderArgs {
   std::string filter = "psf";          // --filter
   std::string aov;                     // --aov list
   psf::FilterOptions fopt;             // path space filtering parameters
+  std::string visibility_ray = "auto";  // --visibility-ray: auto, light or a length
   std::vector<std::string> defines;    // -D name=value
   int spp = 0;                         // 0: the scene's sample count, else 16
   int width = 0, height = 0;           // 0: the scene's film
@@ -192,6 +220,9 @@ int run_render(const RenderArgs& a) {
   opt.per_path = a.path_kernels == "per-path" ? 1 : a.path_kernels == "wavefront" ? 0 : -1;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.filter = a.fopt;
+  opt.filter.visibility_ray = a.visibility_ray == "auto"    ? psf::kVisibilityRayAuto
+                              : a.visibility_ray == "light" ? 0.0f
+                                                            : std::stof(a.visibility_ray);
   opt.filter.enabled = a.filter == "psf";
   bool aov_unfiltered = false, aov_neighbours = false, aov_albedo = false, aov_normal = false, aov_depth = false;
   for (size_t b = 0; b <= a.aov.size();) {
@@ -303,7 +334,7 @@ int main(int argc, char** argv) {
                      "(default: the scene's camera; OBJ, PLY: one framing the bounds)");
   render->add_option("--fov", ra.fov,
                      "Field of view in degrees along the scene camera's fov axis (default: the scene's)")
-      ->check(CLI::Range(0.01f, 179.0f));
+      ->check(finite_number(0.01, 179.0));
   render->add_option("--max-depth", ra.max_depth, "Longest path in segments, -1 unbounded (default: the scene's)")
       ->check(CLI::Range(-1, 1 << 16));
   render->add_option("--seed", ra.seed, "Sampling seed: the image is a deterministic function of it");
@@ -311,31 +342,36 @@ int main(int argc, char** argv) {
   render->add_option("--filter", ra.filter, "psf: path space filtering (default); off: plain path tracing")
       ->check(CLI::IsMember({"psf", "off"}));
   render->add_option("--alpha", ra.fopt.alpha, "Radius exponent: r(n) = r0 / n^alpha, n paths per pixel so far (0.25)")
-      ->check(CLI::Range(0.0f, 1.0f));
+      ->check(finite_number(0.0, 1.0));
   render->add_option("--r0", ra.fopt.r0, "Global initial radius in scene units (default: per vertex from --footprint-pixels)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite_number(0.0, kFloatMax));
   render->add_option("--footprint-pixels", ra.fopt.footprint_pixels,
                      "r0 covers the solid angle of N x N pixels at the vertex's distance (3)")
-      ->check(CLI::Range(0.01f, 1000.0f));
+      ->check(finite_number(0.01, 1000.0));
   render->add_option("--iterations", ra.fopt.iterations, "Averaging passes, each over the previous result (1)")
       ->check(CLI::Range(1, 64));
   render->add_option("--normal-threshold", ra.fopt.normal_cos, "Similar vertices: <n_i, n_j> >= this (0.95)")
-      ->check(CLI::Range(-1.0f, 1.0f));
+      ->check(finite_number(-1.0, 1.0));
   render->add_option("--albedo-threshold", ra.fopt.albedo_tol, "Similar vertices: |albedo_i - albedo_j| <= this (0.05)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite_number(0.0, kFloatMax));
+  render->add_option("--visibility-ray", ra.visibility_ray,
+                     "Similar vertices agree on: LENGTH, whether one hemisphere ray of this length (scene units) "
+                     "hits something; light, their light sample's visibility; auto (default): a ray of 1 % of the "
+                     "scene's size where the only light is an environment, else light")
+      ->check(CLI::IsMember({"auto", "light"}) | finite_number(0.0, kFloatMax, true));
   render->add_flag("--cells27", ra.fopt.cells27, "Neighbour search in cells of size r (27 cells) instead of 2r (8 cells)");
   render->add_option("--min-removed", ra.fopt.min_removed,
                      "Filtering switches itself off after a batch where it removed less than this fraction of the "
                      "noise; 0: only when no vertex has a neighbour (0.2)")
-      ->check(CLI::Range(0.0f, 1.0f));
+      ->check(finite_number(0.0, 1.0));
   render->add_option("--aov", ra.aov,
                      "Extra EXR layers, comma-separated: unfiltered, neighbours, albedo, normal, depth");
   render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");
   render->add_option("--time", ra.time, "Render until this many seconds have passed (with --spp: whichever comes first)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_number(0.0, kFloatMax, true));
   render->add_option("--checkpoint-seconds", ra.checkpoint_seconds,
                      "Rewrite the output (atomically) this often while rendering; 0: only at the end (30)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite_number(0.0, kFloatMax));
   render->add_option("--memory-budget", ra.memory_budget, "Device memory for the batch buffers, e.g. 256M, 2G");
   render->add_option("--batch-log2", ra.batch_log2, "Largest batch: 2^N paths (20)")->check(CLI::Range(6, 26));
   render->add_option("--path-kernels", ra.path_kernels,

@@ -42,6 +42,7 @@ struct Renderer::Impl {
   std::unique_ptr<RayCaster> caster;
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
+  float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
   cl::Buffer tri_attribs, textures, texels;  // shading normals and uvs, texture table and texels (psf_shared.h)
@@ -88,6 +89,16 @@ struct Renderer::Impl {
     // Lights: emissive triangles, delta lights and the environment, chosen by power (host/lights.cpp).
     LightTable lights = build_light_table(scene);
     num_emitters = uint32_t(lights.emitters.size());
+    bool environment_only = num_emitters > 0;
+    for (const Emitter& e : lights.emitters) environment_only = environment_only && e.type == PSF_EMITTER_ENVIRONMENT;
+    if (environment_only && !scene.positions.empty()) {
+      glm::vec3 lo = scene.positions[0], hi = lo;
+      for (const glm::vec3& q : scene.positions) {
+        lo = glm::min(lo, q);
+        hi = glm::max(hi, q);
+      }
+      auto_visibility_ray = 0.01f * glm::length(hi - lo);
+    }
     emitters = rt.upload(lights.emitters);
     emitter_cdf = rt.upload(lights.cdf);
     tri_light_pdf = rt.upload(lights.tri_light_pdf);
@@ -378,6 +389,10 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   batch_ = std::move(b);
 }
 
+float Renderer::visibility_ray(float option) const {
+  return option == kVisibilityRayAuto ? impl_->auto_visibility_ray : option;
+}
+
 BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering) {
   Impl& s = *impl_;
   Runtime& rt = s.rt;
@@ -468,6 +483,14 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   out.first = first;
   rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
   rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.values, b.ones, b.contrib_unfiltered);
+  const float visibility_ray = this->visibility_ray(o.filter.visibility_ray);
+  if (filtering && visibility_ray > 0.0f) {
+    // Each vertex's visibility from one hemisphere ray instead of its light
+    // sample (kernels/visibility.cl); the camera rays' buffer is free by now.
+    rt.launch("visibility_rays", p.batch_size, L, p, visibility_ray, vertices, b.rays[0]);
+    s.caster->any(b.rays[0], shadow_hits, p.batch_size);
+    rt.launch("visibility_store", p.batch_size, L, p.batch_size, shadow_hits, vertices);
+  }
   if (filtering) {
     FilterParams fp{};
     // An orthographic camera's pixels have one world-space size: the footprint

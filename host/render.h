@@ -136,6 +136,13 @@ class Renderer {
   void recycle(BatchImages&& batch);
   uint32_t batch_size() const;
   Runtime& runtime();
+  // The length of the filtering vertices' hemisphere ray for FilterOptions::
+  // visibility_ray = `option` (0: none, the light sample decides): the option
+  // when it is not kVisibilityRayAuto; for auto, 1 % of the diagonal of the
+  // scene's bounds when its only light is an environment (envmap or constant:
+  // there a light sample's visibility is a coin toss wherever part of the sky is
+  // hidden), else 0.
+  float visibility_ray(float option) const;
 
  private:
   struct Impl;

@@ -52,6 +52,11 @@ std::string options_text(const RenderOptions& o) {
     s << " alpha=" << o.filter.alpha << " r0=" << o.filter.r0 << " footprint=" << o.filter.footprint_pixels
       << " iterations=" << o.filter.iterations << " normal=" << o.filter.normal_cos << " albedo=" << o.filter.albedo_tol
       << " cells27=" << o.filter.cells27 << " min_removed=" << o.filter.min_removed;
+  if (o.filter.enabled) {
+    s << " visibility_ray=";
+    if (o.filter.visibility_ray == kVisibilityRayAuto) s << "auto";
+    else s << o.filter.visibility_ray;
+  }
   s << " aovs=" << o.aovs;
   return s.str();
 }

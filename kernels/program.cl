@@ -12,6 +12,7 @@
 #include "bsdf_test.cl"
 #include "emitter.cl"
 #include "shade.cl"
+#include "visibility.cl"
 #include "cell_keys.cl"
 #include "tuples.cl"
 #include "sort.cl"

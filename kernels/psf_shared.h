@@ -340,7 +340,8 @@ typedef struct {
  * prefix + alpha * c, where c is replaced by its filtered mean c-bar. */
 typedef struct {
   psf_float4 position; /* xyz x_i; w: camera path length d_i to it */
-  psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: light-sample visibility (1 visible, 0 not) */
+  psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: visibility, 1 or 0: of the light */
+                       /* sample, or of visibility.cl's hemisphere ray */
   psf_float4 albedo;   /* xyz the BSDF's colour term at x_i; w: 1 if the path has the vertex, else 0 */
   psf_float4 alpha;    /* xyz throughput alpha_i from the camera to x_i */
 } PathVertex;

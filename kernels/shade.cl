@@ -25,7 +25,8 @@
  * processor overlaps those misses across paths, which the long shade kernel
  * cannot.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
- * records the filtering vertex's light-sample visibility.
+ * records the filtering vertex's light-sample visibility (visibility.cl may
+ * replace it by a hemisphere ray's).
  * trace_paths (CPU devices, and the wavefront's tail on GPUs): all of the above
  * for one path per work-item, bounce after bounce, from the same inline functions
  * (env_sample_slot, env_texel_slot, shade_path, shadow_slot). */

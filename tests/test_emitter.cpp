@@ -977,6 +977,75 @@ static psf::Scene envmap_floor() {
   return s;
 }
 
+TEST_CASE("Render: --visibility-ray marks a vertex occluded where its hemisphere ray hits within the length",
+          "[emitter]") {
+  // A floor under a ceiling h = 1 above it that reaches 100 units every way. A
+  // cosine-distributed ray at angle theta from the normal meets the ceiling at
+  // h / cos(theta): within length R iff cos(theta) >= h / R, which a cosine
+  // distribution gives with probability 1 - (h / R)^2 (R > h), and never for R < h.
+  psf::Scene s;
+  uint32_t m = add_material(s, 0.5f);
+  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, m);            // floor, facing +z
+  add_quad(s, {-100, -100, 1}, {0, 200, 0}, {200, 0, 0}, m);    // ceiling, facing -z
+  s.camera.origin = {0, 0, 0.5f};
+  s.camera.target = {0, 0, 0};
+  s.camera.fov_degrees = 60;
+  s.width = s.height = 32;
+  psf::LightDesc sky;
+  sky.type = psf::LightType::Constant;
+  sky.color = glm::vec3(1.0f);
+  s.lights = {sky};
+  psf::Renderer renderer(psf::test::runtime(), s);
+  psf::RenderOptions o;
+  o.spp = 4;  // 4096 vertices, one batch
+  o.keep_last_batch = true;
+  o.filter.min_removed = 0.0f;
+  auto run = [&](float length) {
+    o.filter.visibility_ray = length;
+    psf::RenderResult r = renderer.render(o);
+    size_t open = 0, total = 0;
+    for (const PathVertex& v : r.last_batch.vertices) {
+      if (v.albedo.s[3] == 0.0f) continue;
+      ++total;
+      if (v.normal.s[3] == 1.0f) ++open;
+      else REQUIRE(v.normal.s[3] == 0.0f);
+    }
+    REQUIRE(total == 4096u);  // every camera ray meets the floor
+    return std::make_pair(double(total - open) / double(total), r);
+  };
+  auto [none, short_run] = run(0.5f);
+  CHECK(none == 0.0);
+  // auto: the sky is the only light, so a ray of 1 % of the bounds' diagonal.
+  CHECK(renderer.visibility_ray(psf::kVisibilityRayAuto) == Approx(0.01 * std::sqrt(2.0 * 200.0 * 200.0 + 1.0)));
+  CHECK(renderer.visibility_ray(0.0f) == 0.0f);
+  psf::Scene lamp = s;
+  lamp.lights.push_back(psf::LightDesc{});  // a point light as well: the light sample decides
+  lamp.lights.back().position = {0, 0, 0.9f};
+  CHECK(psf::Renderer(psf::test::runtime(), lamp).visibility_ray(psf::kVisibilityRayAuto) == 0.0f);
+  for (float length : {2.0f, 4.0f}) {
+    auto [occluded, r] = run(length);
+    const double p = 1.0 - 1.0 / (double(length) * length);
+    const double sigma = std::sqrt(p * (1.0 - p) / 4096.0);
+    INFO("R = " << length << ": occluded " << occluded << ", expected " << p << " +- " << sigma);
+    CHECK(std::fabs(occluded - p) < 4.0 * sigma);
+    // The flag reaches the filter: a vertex averages only with those of its own
+    // flag, independent of position, so of the others it averages when all share
+    // one flag, q = (1 - p)^2 + p^2 remain, and itself (3 %: the counts' noise is
+    // about 1 %).
+    double mean_r = 0, mean_short = 0;
+    for (size_t i = 0; i < r.neighbours.size(); ++i) {
+      mean_r += r.neighbours[i] / double(r.neighbours.size());
+      mean_short += short_run.neighbours[i] / double(r.neighbours.size());
+    }
+    const double q = p * p + (1.0 - p) * (1.0 - p);
+    CHECK(mean_r == Approx(1.0 + q * (mean_short - 1.0)).epsilon(0.03));
+    // The unfiltered image is that of plain path tracing.
+    psf::RenderOptions off = o;
+    off.filter.enabled = false;
+    CHECK(r.unfiltered.rgb == renderer.render(off).image.rgb);
+  }
+}
+
 TEST_CASE("Render: a diffuse floor under an envmap matches the map's cosine-weighted integral", "[emitter]") {
   // Floor y = 0 facing +y, seen from above; the map is not rotated, so the
   // floor's normal is the map's +y and cos(theta) the map's cos(theta). Reference:
