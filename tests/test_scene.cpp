@@ -448,6 +448,41 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
     CHECK(glm::length(p - glm::vec3(10, 0, 0)) == Approx(2.0f).epsilon(1e-5));
 }
 
+TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") {
+  // Axis along (1, 2, 2) / 3 from p0 = (1, 0, 0), length 3, radius 0.5, under a
+  // translation by y = 4.
+  psf::Scene s = load_text(
+      "<shape type=\"cylinder\"><point name=\"p0\" x=\"1\" y=\"0\" z=\"0\"/>"
+      "<point name=\"p1\" x=\"2\" y=\"2\" z=\"2\"/><float name=\"radius\" value=\"0.5\"/>"
+      "<transform name=\"to_world\"><translate y=\"4\"/></transform></shape>\n");
+  const glm::vec3 p0(1, 4, 0), d = glm::vec3(1, 2, 2) / 3.0f;
+  REQUIRE(s.triangles.size() == 2 * 64);  // 64 quads around, no caps
+  REQUIRE(s.normals.size() == s.positions.size());
+  REQUIRE(s.uvs.size() == s.positions.size());
+  for (size_t i = 0; i < s.positions.size(); ++i) {
+    const glm::vec3 q = s.positions[i] - p0;
+    const float along = glm::dot(q, d);
+    const glm::vec3 radial = q - along * d;
+    CHECK(glm::length(radial) == Approx(0.5f).epsilon(1e-5));
+    CHECK((std::fabs(along) < 1e-5f || std::fabs(along - 3.0f) < 1e-5f));
+    CHECK(s.uvs[i].y == Approx(along / 3.0f).margin(1e-5));  // v runs from p0 to p1
+    CHECK(near(s.normals[i], radial / 0.5f));                 // the shading normal points outwards
+  }
+  // Every triangle faces away from the axis, and the quads close around it.
+  float around = 0.0f;
+  for (const glm::uvec3& t : s.triangles) {
+    glm::vec3 a = s.positions[t.x], b = s.positions[t.y], c = s.positions[t.z];
+    glm::vec3 centre = (a + b + c) / 3.0f - p0;
+    CHECK(glm::dot(glm::cross(b - a, c - a), centre - glm::dot(centre, d) * d) > 0.0f);
+    around += glm::length(glm::cross(b - a, c - a)) / 2.0f;
+  }
+  CHECK(around == Approx(2.0 * 3.14159265 * 0.5 * 3.0).epsilon(0.002));  // the lateral area, tessellated
+  require_xml_error("<shape type=\"cylinder\"><float name=\"radius\" value=\"0\"/></shape>\n", 2,
+                    "radius must be positive");
+  require_xml_error("<shape type=\"cylinder\"><point name=\"p1\" x=\"0\" y=\"0\" z=\"0\"/></shape>\n", 2,
+                    "p0 and p1 must differ");
+}
+
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {
   // A group of a rectangle (its own to_world: scaled by 2) and a cube with a
   // diffuse BSDF, drawn by two instances (translated by x = 10 and by y = 5);

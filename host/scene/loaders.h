@@ -34,6 +34,9 @@ TriMesh make_disk(int segments = 64);
 // Mitsuba's sphere: a latitude-longitude tessellation with outward faces whose
 // vertices lie on the sphere; `rings` >= 2 bands from pole to pole, `segments` >= 3 around.
 TriMesh make_sphere(const glm::vec3& center, float radius, int rings = 32, int segments = 64);
+// Mitsuba's cylinder: the open tube (no caps) of `radius` from p0 to p1 with
+// outward faces and normals, `segments` >= 3 quads around; uv (phi / 2pi, 0 at p0 to 1 at p1).
+TriMesh make_cylinder(const glm::vec3& p0, const glm::vec3& p1, float radius, int segments = 64);
 
 // Appends `mesh` transformed by `to_world` with material `material` to the scene,
 // reversing the winding and the normals when `flip` is set; normals are

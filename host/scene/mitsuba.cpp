@@ -974,6 +974,7 @@ class MitsubaLoader {
                                                                 {"cube", &MitsubaLoader::shape_cube},
                                                                 {"disk", &MitsubaLoader::shape_disk},
                                                                 {"sphere", &MitsubaLoader::shape_sphere},
+                                                                {"cylinder", &MitsubaLoader::shape_cylinder},
                                                                 {"ply", &MitsubaLoader::shape_ply},
                                                                 {"serialized", &MitsubaLoader::shape_serialized}};
     return plugins;
@@ -1081,6 +1082,14 @@ class MitsubaLoader {
     float radius = float(get_float(e, "radius", 1.0));
     if (!(radius > 0.0f)) fail(find(e, "radius")->node, "the sphere radius must be positive");
     return make_sphere(get_point(e, "center", glm::vec3(0.0f)), radius);
+  }
+
+  TriMesh shape_cylinder(const Element& e) {
+    float radius = float(get_float(e, "radius", 1.0));
+    if (!(radius > 0.0f)) fail(find(e, "radius")->node, "the cylinder radius must be positive");
+    glm::vec3 p0 = get_point(e, "p0", glm::vec3(0.0f)), p1 = get_point(e, "p1", glm::vec3(0.0f, 0.0f, 1.0f));
+    if (!(glm::length(p1 - p0) > 0.0f)) fail(e.node, "the cylinder's p0 and p1 must differ");
+    return make_cylinder(p0, p1, radius);
   }
 
   // --- materials, BSDFs, textures -------------------------------------------

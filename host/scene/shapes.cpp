@@ -1,4 +1,4 @@
-// Tessellation of Mitsuba's analytic shapes (rectangle, cube, disk, sphere) in
+// Tessellation of Mitsuba's analytic shapes (rectangle, cube, disk, sphere, cylinder) in
 // their object-space conventions, and the transform-and-append step shared by
 // every shape loader.
 #include <algorithm>
@@ -82,6 +82,32 @@ TriMesh make_sphere(const glm::vec3& center, float radius, int rings, int segmen
       m.triangles.push_back({at(r, s), at(r + 1, s + 1), at(r, s + 1)});
     }
     m.triangles.push_back({at(rings - 1, s), south, at(rings - 1, s + 1)});
+  }
+  return m;
+}
+
+TriMesh make_cylinder(const glm::vec3& p0, const glm::vec3& p1, float radius, int segments) {
+  TriMesh m;
+  // Mitsuba 3's frame about the axis d (Duff et al. 2017, its coordinate_system):
+  // the local point (cos phi, sin phi, z) lies at p0 + radius (cos phi s + sin phi t) + z (p1 - p0).
+  const glm::vec3 axis = p1 - p0, d = glm::normalize(axis);
+  const float sign = d.z >= 0.0f ? 1.0f : -1.0f, a = -1.0f / (sign + d.z), b = d.x * d.y * a;
+  const glm::vec3 s(1.0f + sign * d.x * d.x * a, sign * b, -sign * d.x), t(b, sign + d.y * d.y * a, -d.y);
+  for (int i = 0; i <= segments; ++i) {  // the seam i = segments repeats i = 0 with u = 1
+    float phi = 2 * glm::pi<float>() * float(i % segments) / float(segments);
+    glm::vec3 radial = std::cos(phi) * s + std::sin(phi) * t;
+    for (int z = 0; z < 2; ++z) {
+      m.positions.push_back(p0 + radius * radial + float(z) * axis);
+      m.normals.push_back(radial);
+      m.uvs.push_back({float(i) / float(segments), float(z)});  // Mitsuba's: (phi / 2pi, z)
+    }
+  }
+  for (int i = 0; i < segments; ++i) {
+    // Bottom (2i), top (2i + 1); phi grows counter-clockwise about d, so
+    // (bottom i, bottom i+1, top i+1) faces outwards.
+    uint32_t b0 = uint32_t(2 * i), t0 = b0 + 1, b1 = b0 + 2, t1 = b0 + 3;
+    m.triangles.push_back({b0, b1, t1});
+    m.triangles.push_back({b0, t1, t0});
   }
   return m;
 }
