@@ -483,6 +483,21 @@ TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") 
                     "p0 and p1 must differ");
 }
 
+TEST_CASE("Shapes: merge draws its shapes; Mitsuba's curves and SDF grids are ignored with a warning", "[scene]") {
+  psf::Scene s = load_text(
+      "<shape type=\"merge\">\n"
+      "  <shape type=\"rectangle\"/>\n"
+      "  <shape type=\"cube\"><transform name=\"to_world\"><translate x=\"5\"/></transform></shape>\n"
+      "</shape>\n"
+      "<shape type=\"bsplinecurve\"><string name=\"filename\" value=\"hair.txt\"/></shape>\n"
+      "<shape type=\"sdfgrid\"/>\n");
+  REQUIRE(s.triangles.size() == 2 + 12);
+  CHECK(s.positions[4] == glm::vec3(6, -1, -1));  // the cube's first corner, moved by its own to_world
+  CHECK(count_warnings(s, ":6: shape 'bsplinecurve' is not supported yet; ignored") == 1);
+  CHECK(count_warnings(s, ":7: shape 'sdfgrid' is not supported yet; ignored") == 1);
+  require_xml_error("<shape type=\"cylindre\"/>\n", 2, "unknown shape type 'cylindre'");
+}
+
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {
   // A group of a rectangle (its own to_world: scaled by 2) and a cube with a
   // diffuse BSDF, drawn by two instances (translated by x = 10 and by y = 5);

@@ -995,6 +995,10 @@ class MitsubaLoader {
           warn(o, "shapegroup:" + std::string(o.name()), "<" + std::string(o.name()) + "> in a shapegroup is ignored");
       return;
     }
+    if (e.type == "merge") {  // Mitsuba 3's merge: its shapes, drawn as they are (merging only saves memory there)
+      for (pugi::xml_node child : objects(e, "shape")) load_shape_at(child, parent, depth);
+      return;
+    }
     if (e.type == "instance") {
       std::vector<pugi::xml_node> groups = objects(e, "shape");
       if (groups.size() != 1 || attr(groups[0], "type").value_or("") != "shapegroup")
@@ -1006,10 +1010,18 @@ class MitsubaLoader {
       return;
     }
     auto plugin = shape_plugins().find(e.type);
+    // Mitsuba 3's other shapes: curves, SDF grids and ellipsoid clouds are not
+    // triangle surfaces psf can tessellate yet; a name Mitsuba does not know is an error.
+    static const std::set<std::string> unsupported = {"bsplinecurve", "linearcurve", "sdfgrid", "ellipsoids",
+                                                      "ellipsoidsmesh"};
+    if (plugin == shape_plugins().end() && unsupported.count(e.type)) {
+      warn(node, "shape:" + e.type, "shape '" + e.type + "' is not supported yet; ignored");
+      return;
+    }
     if (plugin == shape_plugins().end()) {
       std::string known;
       for (const auto& entry : shape_plugins()) known += (known.empty() ? "" : ", ") + entry.first;
-      fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance)");
+      fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance, merge)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
 
