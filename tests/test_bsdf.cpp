@@ -1722,6 +1722,63 @@ TEST_CASE("Materials: textures for alpha_u and alpha_v share one texture, x and 
   expect_scene_error(negative, 3, "the roughness must not be negative");
 }
 
+TEST_CASE("Materials: Mitsuba's principled maps to plastic, conductor and dielectric as glTF's", "[bsdf]") {
+  TempDir dir;
+  std::string xml = dir.write(
+      "principled.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principled\"><rgb name=\"base_color\" value=\"0.8, 0.1, 0.1\"/>"
+      "<float name=\"roughness\" value=\"0.3\"/><float name=\"sheen\" value=\"0.5\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principled\"><float name=\"metallic\" value=\"1\"/>"
+      "<float name=\"roughness\" value=\"0\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principled\"><float name=\"metallic\" value=\"0.25\"/>"
+      "<float name=\"spec_trans\" value=\"0.5\"/><float name=\"specular\" value=\"1\"/></bsdf></shape>\n"
+      "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  auto count = [&](const std::string& text) {
+    return std::count_if(s.warnings.begin(), s.warnings.end(),
+                         [&](const std::string& w) { return w.find(text) != std::string::npos; });
+  };
+  CHECK(count("bsdf 'principled' is approximated") == 3);
+  CHECK(count(":2: property 'sheen' of bsdf 'principled' is not supported") == 1);
+  auto chain_of = [&](size_t triangle) {
+    std::vector<const Material*> links;
+    for (const Material* m = &s.materials.at(s.tri_material.at(triangle)); m;
+         m = m->blend ? &s.materials.at(m->blend - 1) : nullptr)
+      links.push_back(m);
+    return links;
+  };
+  // A dielectric base: a rough plastic over base_color, GGX alpha = roughness^2,
+  // and the IOR Mitsuba derives from specular 0.5: 2 / (1 - sqrt(0.04)) - 1 = 1.5.
+  auto plastic = chain_of(0);
+  REQUIRE(plastic.size() == 1);
+  CHECK(plastic[0]->type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(plastic[0]->albedo.s[0] == Approx(0.8f));
+  CHECK(plastic[0]->alpha_u == Approx(0.09f));
+  CHECK((plastic[0]->flags & PSF_MATFLAG_BECKMANN) == 0u);
+  CHECK(plastic[0]->eta.s[0] == Approx(1.5f));
+  // metallic 1, roughness 0: a smooth conductor reflecting base_color (0.5) at normal incidence.
+  auto metal = chain_of(2);
+  REQUIRE(metal.size() == 1);
+  CHECK(metal[0]->type == PSF_MATERIAL_CONDUCTOR);
+  auto f0 = [](const Material* m, int c) {
+    double eta = m->eta.s[c], k = m->k.s[c];
+    return ((eta - 1) * (eta - 1) + k * k) / ((eta + 1) * (eta + 1) + k * k);
+  };
+  CHECK(f0(metal[0], 0) == Approx(0.5).epsilon(1e-3));
+  // Metal with probability 0.25, glass with 0.75 * 0.5, plastic with the rest:
+  // plastic -> glass with w1 = 0.625, glass -> metal with 0.25 / 0.625; specular 1
+  // stands for IOR 2 / (1 - sqrt(0.08)) - 1.
+  auto mix = chain_of(4);
+  REQUIRE(mix.size() == 3);
+  CHECK(mix[0]->type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(mix[0]->blend_weight == Approx(0.625f));
+  CHECK(mix[1]->type == PSF_MATERIAL_ROUGH_DIELECTRIC);
+  CHECK(mix[1]->blend_weight == Approx(0.4f));
+  CHECK(mix[1]->eta.s[0] == Approx(2.0 / (1.0 - std::sqrt(0.08)) - 1.0).epsilon(1e-5));
+  CHECK(mix[2]->type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+}
+
 TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "[bsdf]") {
   TempDir dir;
   std::vector<uint8_t> px(2 * 2 * 3, 200);
