@@ -93,6 +93,12 @@ inline const std::vector<std::string>& pathtrace_kernels() {
   static const std::vector<std::string> k = {"camera_rays", "raycast_", "shade", "trace_paths", "store_tuples", "accumulate"};
   return k;
 }
+// Where the only light is an environment: each filtering vertex's hemisphere ray
+// (kernels/visibility.cl); the rays themselves are cast by raycast_any.
+inline const std::vector<std::string>& visibility_kernels() {
+  static const std::vector<std::string> k = {"visibility_"};
+  return k;
+}
 inline const std::vector<std::string>& filter_kernels() {
   static const std::vector<std::string> k = {"cell_keys",   "radix_", "clear_ranges", "cell_ranges",
                                              "gather_tuples", "filter", "scatter_values"};

@@ -226,13 +226,19 @@ std::pair<double, double> render_batch(psf::Runtime& rt, psf::Renderer& renderer
     std::string names;
     for (const auto& [name, t] : rt.stats()) {
       bool known = bench::kernel_ms({{name, t}}, bench::pathtrace_kernels()) > 0 ||
-                   bench::kernel_ms({{name, t}}, bench::filter_kernels()) > 0;
+                   bench::kernel_ms({{name, t}}, bench::filter_kernels()) > 0 ||
+                   bench::kernel_ms({{name, t}}, bench::visibility_kernels()) > 0;
       if (!known && t.ms > 0) {
         other += t.ms;
         names += " " + name;
       }
     }
     if (!names.empty()) report("%s: kernels counted in neither stage (%.1f ms):%s\n", b.name.c_str(), other, names.c_str());
+    const double visibility = bench::kernel_ms(rt.stats(), bench::visibility_kernels());
+    if (visibility > 0)
+      report("%s: hemisphere-ray visibility (the scene's only light is an environment): its kernels %.1f ms, "
+             "its any-hit rays counted with path tracing\n",
+             b.name.c_str(), visibility);
   }
   return {pt, r.seconds};
 }
@@ -258,12 +264,16 @@ int main(int argc, char** argv) {
   opt.pt_trials = std::max(1, opt.pt_trials);
 
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
-  psf::Runtime rt(dev);
+  // PSF_BUILD_OPTIONS: extra OpenCL build options, to compare kernel variants
+  // (e.g. "-DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0 -DPSF_FILTER_QUERIES=1").
+  const std::string build_options = std::getenv("PSF_BUILD_OPTIONS") ? std::getenv("PSF_BUILD_OPTIONS") : "";
+  psf::Runtime rt(dev, build_options);
   const unsigned threads = bench::peer_threads(dev);
   const uint64_t paths = uint64_t(opt.width) * opt.height * opt.spp;
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
-  benchmark::AddCustomContext("psf_build_options", "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH));
+  benchmark::AddCustomContext("psf_build_options", "-cl-std=CL1.2 -DPSF_BVH_WIDTH=" + std::to_string(PSF_BVH_WIDTH) +
+                                                        (build_options.empty() ? "" : " " + build_options));
   benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
   benchmark::AddCustomContext("psf_batch", std::to_string(opt.width) + "x" + std::to_string(opt.height) + " at " +
                                                std::to_string(opt.spp) + " spp = " + std::to_string(paths) + " paths");
