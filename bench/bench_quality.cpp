@@ -123,6 +123,7 @@ psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t se
   o.spp = spp;
   o.seed = seed;
   o.max_depth = b.scene.max_depth;
+  o.rr_depth = b.scene.rr_depth;
   o.filter.enabled = m.filter;
   o.filter.iterations = m.iterations;
   return o;

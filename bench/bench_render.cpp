@@ -153,6 +153,7 @@ psf::RenderOptions render_options(const Bench& b, bool filter, int64_t tail_path
   o.spp = b.spp;
   o.seed = 0;
   o.max_depth = b.scene.max_depth;
+  o.rr_depth = b.scene.rr_depth;
   o.filter.enabled = filter;
   return o;
 }

@@ -219,6 +219,7 @@ int run_render(const RenderArgs& a) {
   opt.seed = a.seed;
   opt.per_path = a.path_kernels == "per-path" ? 1 : a.path_kernels == "wavefront" ? 0 : -1;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
+  opt.rr_depth = scene.rr_depth;
   opt.filter = a.fopt;
   opt.filter.visibility_ray = a.visibility_ray == "auto"    ? psf::kVisibilityRayAuto
                               : a.visibility_ray == "light" ? 0.0f

@@ -416,6 +416,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.num_emitters = s.num_emitters;
   p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
   p.dim_bounce0 = s.camera.aperture > 0.0f ? PSF_DIM_BOUNCE0_LENS : PSF_DIM_BOUNCE0;
+  p.hide = s.scene.hide;
   auto& states = b.states;
   auto& vertices = b.vertices;
   auto& hits = b.hits;

@@ -358,9 +358,12 @@ typedef struct {
   psf_uint num_emitters;   /* entries of the emitter table */
   psf_uint rr_depth;       /* Russian roulette starts at this depth */
   psf_uint dim_bounce0;    /* first sample dimension of the bounces: PSF_DIM_BOUNCE0, or _LENS with a thin lens */
-  psf_uint pad1;           /* padding */
+  psf_uint hide;           /* PSF_HIDE_*: what camera rays do not see (Mitsuba's hide_emitters) */
   psf_uint pad2;           /* padding */
 } FrameParams;
+
+#define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */
+#define PSF_HIDE_AREA 2u        /* an emitter a camera ray hits adds nothing (Mitsuba 0.5's hideEmitters) */
 
 /* Path space filtering of one batch (Keller et al. 2016, Eq. 1-2; filter.cl). */
 #define PSF_NO_KEY 0xFFFFFFFFu /* key of a path without a filtering vertex */

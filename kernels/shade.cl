@@ -130,7 +130,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   if (hit.prim == PSF_NO_HIT) {
     /* An escaped ray sees the environment, MIS-weighted against its light samples
      * unless it left the camera or a delta lobe (emitter.cl). */
-    if (env.present) {
+    if (env.present && !(st.depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT))) {
       float3 d = normalize(ray.dir.xyz);
       float w = 1.0f;
       if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR))
@@ -156,7 +156,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   float3 beta = st.throughput.xyz;
 
   /* Emission reached by the previous BSDF sample (or seen directly from the camera). */
-  if (max3(m.emission.xyz) > 0.0f && (front || m.two_sided)) {
+  if (max3(m.emission.xyz) > 0.0f && (front || m.two_sided) && !(st.depth == 0u && (params.hide & PSF_HIDE_AREA))) {
     float w = 1.0f;
     if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR) && params.num_emitters > 0u)
       w = power_heuristic(st.throughput.w, emitter_pdf_hit(tri_light_pdf, hit.prim, dist, fabs(dot(ng, wo))));

@@ -676,6 +676,52 @@ TEST_CASE("Render: a diffuse quad under a constant environment shows albedo x L"
   glm::dvec3 corner = pixel(wide.image, 0, 0);
   CHECK(corner.x == Approx(1.0).epsilon(1e-6));
   CHECK(corner.z == Approx(0.25).epsilon(1e-6));
+
+  // Mitsuba's hide_emitters: camera rays that miss see black; the quad is lit as before.
+  s.hide = PSF_HIDE_ENVIRONMENT;
+  psf::RenderResult hidden = render(s, 4);
+  CHECK(pixel(hidden.image, 0, 0) == glm::dvec3(0.0));
+  CHECK(pixel(hidden.image, 8, 8) == pixel(wide.image, 8, 8));  // the quad, bit for bit
+}
+
+TEST_CASE("Render: hide_emitters hides an area emitter from camera rays only as Mitsuba 0.5 does", "[emitter]") {
+  // An emitting quad (radiance 1) above a diffuse floor (albedo 0.5), seen from
+  // below the lamp: the lamp's pixels show 1 unless hidden; the floor is lit the same either way.
+  psf::Scene s;
+  Material light{};
+  light.type = PSF_MATERIAL_DIFFUSE;
+  light.emission = {{1, 1, 1, 0}};
+  s.materials = {light};
+  s.material_names = {"light"};
+  add_quad(s, {-0.5f, -0.5f, 2}, {0, 1, 0}, {1, 0, 0}, 0);  // facing -z
+  uint32_t floor = add_material(s, 0.5f);
+  add_quad(s, {-4, -4, 0}, {8, 0, 0}, {0, 8, 0}, floor);
+  s.camera.origin = {0, -1.5f, 1};
+  s.camera.target = {0, 0, 1.5f};
+  s.camera.up = {0, 0, 1};
+  s.camera.fov_degrees = 90;
+  s.width = s.height = 16;
+  psf::RenderResult shown = render(s, 16);
+  s.hide = PSF_HIDE_AREA;
+  psf::RenderResult hidden = render(s, 16);
+  // Pixels wholly on the lamp turn black; the others keep their value bit for
+  // bit (the floor's light arrives after a bounce), except at the lamp's edge,
+  // where they lose the samples that hit it.
+  size_t lamp = 0, unchanged = 0;
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) {
+      glm::dvec3 a = pixel(shown.image, x, y), b = pixel(hidden.image, x, y);
+      if (a == glm::dvec3(1.0)) {
+        ++lamp;
+        CHECK(b == glm::dvec3(0.0));
+      } else if (b == a) {
+        ++unchanged;
+      } else {
+        CHECK(b.x < a.x);
+      }
+    }
+  CHECK(lamp >= 4);
+  CHECK(unchanged >= 150);
 }
 
 // The quad [-1, 1]^2 at z = 0 (facing +z) with material 0 of `materials`, seen

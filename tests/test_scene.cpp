@@ -381,6 +381,28 @@ TEST_CASE("Colours: rgb, srgb, spectrum", "[scene]") {
   }
 }
 
+TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' names", "[scene]") {
+  const std::string shape = "<shape type=\"rectangle\"/>\n";
+  psf::Scene v3 = load_text("<integrator type=\"path\"><integer name=\"max_depth\" value=\"9\"/>"
+                            "<integer name=\"rr_depth\" value=\"3\"/><boolean name=\"hide_emitters\" value=\"true\"/>"
+                            "<boolean name=\"strict_normals\" value=\"true\"/></integrator>\n" + shape);
+  CHECK(v3.max_depth == 9);
+  CHECK(v3.rr_depth == 3);
+  CHECK(v3.hide == PSF_HIDE_ENVIRONMENT);  // Mitsuba 3: the environment only
+  CHECK(count_warnings(v3, ":2: property 'strict_normals' of integrator 'path' is not supported; ignored") == 1);
+  psf::Scene v05 = load_text("<integrator type=\"path\"><integer name=\"rrDepth\" value=\"2\"/>"
+                             "<boolean name=\"hideEmitters\" value=\"true\"/></integrator>\n" + shape, {}, "0.5.0");
+  CHECK(v05.max_depth == -1);
+  CHECK(v05.rr_depth == 2);
+  CHECK(v05.hide == (PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA));  // Mitsuba 0.5: every emitter
+  psf::Scene plain = load_text("<integrator type=\"direct\"/>\n" + shape);
+  CHECK(plain.max_depth == 2);
+  CHECK(plain.rr_depth == 5);
+  CHECK(plain.hide == 0u);
+  require_xml_error("<integrator type=\"path\"><integer name=\"rr_depth\" value=\"0\"/></integrator>\n", 2,
+                    "'rr_depth' must be at least 1");
+}
+
 TEST_CASE("camelCase (0.5) and snake_case (3) names are the same properties", "[scene]") {
   auto body = [](const char* to_world, const char* fov_axis, const char* max_depth, const char* sample_count) {
     return std::string("<integrator type=\"path\"><integer name=\"") + max_depth + "\" value=\"7\"/></integrator>\n" +

@@ -827,13 +827,20 @@ class MitsubaLoader {
 
   void load_integrator(pugi::xml_node node) {
     Element e = parse_element(node);
-    if (e.type == "direct") {
-      scene_.max_depth = 2;  // emitters seen directly plus one bounce of direct light
-      return;
-    }
-    if (e.type != "path")
+    const bool direct = e.type == "direct";
+    if (e.type != "path" && !direct)
       warn(node, "integrator:" + e.type, "integrator '" + e.type + "' is not supported yet; using path tracing");
-    scene_.max_depth = get_int(e, "max_depth", -1);
+    // direct: emitters seen directly plus one bounce of direct light.
+    scene_.max_depth = direct ? 2 : get_int(e, "max_depth", -1);
+    scene_.rr_depth = direct ? 5 : get_int(e, "rr_depth", 5);
+    if (scene_.rr_depth < 1) fail(find(e, "rr_depth")->node, "'rr_depth' must be at least 1");
+    // hide_emitters: Mitsuba 3 hides the environment from camera rays (an area
+    // emitter hit stays visible); Mitsuba 0.5 hid every emitter they see.
+    if (get_bool(e, "hide_emitters", false))
+      scene_.hide = version_major_ >= 2 ? PSF_HIDE_ENVIRONMENT : PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
+    for (const auto& [name, p] : e.props)
+      if (direct ? name != "hide_emitters" : name != "max_depth" && name != "rr_depth" && name != "hide_emitters")
+        warn(p.node, "integrator:" + name, "property '" + name + "' of integrator '" + e.type + "' is not supported; ignored");
   }
 
   void load_sensor(pugi::xml_node node) {

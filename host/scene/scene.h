@@ -60,6 +60,8 @@ struct Scene {
   int width = 512;                       // film width in pixels
   int height = 512;                      // film height in pixels
   int max_depth = -1;                    // Mitsuba's max_depth: -1 unbounded, 1 emitters only, 2 direct light
+  int rr_depth = 5;                      // Mitsuba's rr_depth: Russian roulette from this depth on
+  uint32_t hide = 0;                     // PSF_HIDE_* (Mitsuba's hide_emitters): what camera rays do not see
   int default_spp = 0;                   // the scene's sampler sampleCount, 0 if none
   std::vector<LightDesc> lights;         // point, spot, directional lights and the environment (emissive surfaces are materials)
   std::vector<std::string> warnings;     // unsupported features, each with file:line
