@@ -83,9 +83,12 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
     dir = camera.focus * dir - lens;
     org += lens;
   }
+  /* The near and far clip planes, perpendicular to forward (Mitsuba's near_clip, far_clip). */
+  float3 d = normalize(dir);
+  float inv_cos = 1.0f / dot(d, camera.forward.xyz);
   Ray r;
-  r.org = (float4)(org, 0.0f);
-  r.dir = (float4)(normalize(dir), INFINITY);
+  r.org = (float4)(org, camera.origin.w * inv_cos);
+  r.dir = (float4)(d, camera.forward.w * inv_cos);
   rays[j] = r;
   queue[j] = j;
   PathState st;

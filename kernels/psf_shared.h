@@ -122,8 +122,8 @@ typedef struct {
  * pinhole ray reaches at distance `focus` along forward. An orthographic camera
  * (Mitsuba's orthographic) sends parallel rays instead. */
 typedef struct {
-  psf_float4 origin;  /* xyz eye position (the lens's centre) */
-  psf_float4 forward; /* xyz view direction, unit length */
+  psf_float4 origin;  /* xyz eye position (the lens's centre); w: near clip distance along forward */
+  psf_float4 forward; /* xyz view direction, unit length; w: far clip distance along forward */
   psf_float4 right;   /* xyz half-width of the film at distance 1 */
   psf_float4 down;    /* xyz half-height of the film at distance 1 */
   psf_uint width;     /* film width in pixels */

@@ -991,6 +991,33 @@ TEST_CASE("Render: a thin lens images its focal plane as a pinhole does and blur
   CHECK(total(blurred) == Approx(total(pinhole)).epsilon(0.03));  // the lens moves light, it does not lose it
 }
 
+TEST_CASE("Render: near and far clip planes lie perpendicular to the view direction", "[emitter]") {
+  // An emitting plane z = 0 that fills the view (60 degrees) from 4 units away:
+  // corner rays meet it 5.2 units from the camera. Clip planes at 3.9 and 4.1
+  // along the view direction keep it whole or hide it whole.
+  auto lit = [](bool ortho, float near_clip, float far_clip) {
+    psf::Scene s = emitting_quad({-4, -4, 0}, {8, 0, 0}, {0, 8, 0});
+    s.camera.origin = {0, 0, 4};
+    s.camera.target = {0, 0, 0};
+    s.camera.fov_degrees = 60;
+    s.camera.orthographic = ortho;
+    s.camera.near_clip = near_clip;
+    s.camera.far_clip = far_clip;
+    s.width = s.height = 16;
+    psf::Image im = render(s, 1, 1).image;
+    size_t n = 0;
+    for (size_t i = 0; i < im.rgb.size(); i += 3) n += im.rgb[i] == 1.0f;
+    return n;
+  };
+  for (bool ortho : {false, true}) {
+    INFO((ortho ? "orthographic" : "perspective"));
+    CHECK(lit(ortho, 0.0f, INFINITY) == 256u);
+    CHECK(lit(ortho, 3.9f, 4.1f) == 256u);
+    CHECK(lit(ortho, 4.1f, 100.0f) == 0u);
+    CHECK(lit(ortho, 0.0f, 3.9f) == 0u);
+  }
+}
+
 TEST_CASE("Render: an orthographic camera images a square at the same size at any distance", "[emitter]") {
   // The film spans [-1, 1]^2 (a square film, scale 1); an emitting square of
   // side 1 covers a quarter of it whether 2 or 6 units away.

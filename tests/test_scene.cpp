@@ -403,6 +403,29 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
                     "'rr_depth' must be at least 1");
 }
 
+TEST_CASE("Sensor: clip planes; unsupported sensor, film and sampler properties warn", "[scene]") {
+  const std::string film = "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/>"
+                           "<string name=\"pixel_format\" value=\"rgba\"/><boolean name=\"high_quality_edges\" "
+                           "value=\"true\"/><integer name=\"crop_width\" value=\"4\"/></film>";
+  psf::Scene s = load_text("<sensor type=\"perspective\"><float name=\"near_clip\" value=\"0.5\"/>"
+                           "<float name=\"far_clip\" value=\"20\"/><float name=\"principal_point_offset_x\" "
+                           "value=\"0.1\"/><transform name=\"to_world\"><scale value=\"2\"/></transform>" +
+                           film + "<sampler type=\"stratified\"><integer name=\"seed\" value=\"3\"/></sampler>"
+                           "</sensor>\n<shape type=\"rectangle\"/>\n");
+  CHECK(s.camera.near_clip == Approx(1.0f));  // camera space, scaled by to_world
+  CHECK(s.camera.far_clip == Approx(40.0f));
+  CHECK(s.warnings.size() == 3);
+  CHECK(count_warnings(s, ":2: property 'principal_point_offset_x' of sensor 'perspective' is not supported") == 1);
+  CHECK(count_warnings(s, ":2: property 'crop_width' of film 'hdrfilm' is not supported") == 1);
+  CHECK(count_warnings(s, ":2: property 'seed' of sampler 'stratified' is not supported") == 1);
+  psf::Scene d = load_text("<sensor type=\"perspective\"/>\n<shape type=\"rectangle\"/>\n");
+  CHECK(d.camera.near_clip == Approx(0.01f));  // Mitsuba's defaults
+  CHECK(d.camera.far_clip == Approx(1e4f));
+  require_xml_error("<sensor type=\"perspective\"><float name=\"near_clip\" value=\"5\"/>"
+                    "<float name=\"far_clip\" value=\"2\"/></sensor>\n",
+                    2, "0 <= near_clip < far_clip");
+}
+
 TEST_CASE("camelCase (0.5) and snake_case (3) names are the same properties", "[scene]") {
   auto body = [](const char* to_world, const char* fov_axis, const char* max_depth, const char* sample_count) {
     return std::string("<integrator type=\"path\"><integer name=\"") + max_depth + "\" value=\"7\"/></integrator>\n" +

@@ -843,6 +843,18 @@ class MitsubaLoader {
         warn(p.node, "integrator:" + name, "property '" + name + "' of integrator '" + e.type + "' is not supported; ignored");
   }
 
+  // One warning per property of `e` (a `kind` element) not in `known`, nor a nested plugin.
+  void ignored_properties(const Element& e, const std::string& kind, std::initializer_list<const char*> known) {
+    for (const auto& [name, p] : e.props) {
+      if (p.kind == Property::Kind::Object) continue;
+      bool ok = false;
+      for (const char* k : known) ok = ok || name == k;
+      if (!ok)
+        warn(p.node, kind + ":" + e.type + ":" + name,
+             "property '" + name + "' of " + kind + " '" + e.type + "' is not supported; ignored");
+    }
+  }
+
   void load_sensor(pugi::xml_node node) {
     if (has_sensor_) {
       warn(node, "sensor", "only the first <sensor> is used");
@@ -907,6 +919,15 @@ class MitsubaLoader {
     // which origin, target and up cannot express.
     cam.mirrored = glm::determinant(glm::mat3(m)) < 0.0f;
 
+    // Clip planes: Mitsuba's defaults (0.01 and 10^4), in camera space: a scaling to_world scales them by z.
+    cam.near_clip = float(get_float(e, "near_clip", 0.01)) * glm::length(axes[2]);
+    cam.far_clip = float(get_float(e, "far_clip", 1e4)) * glm::length(axes[2]);
+    if (!(cam.near_clip >= 0.0f && cam.far_clip > cam.near_clip && std::isfinite(cam.far_clip)))
+      fail(find(e, "far_clip") ? find(e, "far_clip")->node : find(e, "near_clip") ? find(e, "near_clip")->node : node,
+           "the clip distances must satisfy 0 <= near_clip < far_clip");
+    ignored_properties(e, "sensor", {"fov", "fov_axis", "focal_length", "to_world", "near_clip", "far_clip",
+                                     "aperture_radius", "focus_distance"});
+
     scene_.width = 768;
     scene_.height = 576;
     for (pugi::xml_node film : objects(e, "film")) load_film(film);
@@ -924,6 +945,12 @@ class MitsubaLoader {
     scene_.camera.pixel_filter = "gaussian";
     scene_.camera.filter_stddev = 0.5f;
     for (pugi::xml_node rfilter : objects(e, "rfilter")) load_rfilter(rfilter);
+    // The output's format is psf's own (OpenEXR, float RGB, and a PNG): those
+    // properties do not change the image and are ignored quietly. Pixel filters
+    // are sampled, so pixels at the border draw samples from beyond it as
+    // high_quality_edges asks (without it Mitsuba leaves those out).
+    ignored_properties(e, "film", {"width", "height", "pixel_format", "component_format", "file_format", "banner",
+                                   "gamma", "exposure", "tonemap_method", "high_quality_edges"});
   }
 
   // box, tent (radius, default 1) and gaussian (stddev, default 0.5) are sampled
@@ -956,6 +983,8 @@ class MitsubaLoader {
     Element e = parse_element(node);
     scene_.default_spp = get_int(e, "sample_count", 4);
     if (scene_.default_spp <= 0) fail(find(e, "sample_count")->node, "sample_count must be positive");
+    // Every sampler type draws psf's scrambled Sobol points (--seed picks the scrambling).
+    ignored_properties(e, "sampler", {"sample_count"});
   }
 
   void load_top_bsdf(pugi::xml_node node) { bsdf(node); }

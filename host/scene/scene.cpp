@@ -40,8 +40,8 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
     half_w = half_h * aspect;
   }
   Camera c{};
-  c.origin = {{desc.origin.x, desc.origin.y, desc.origin.z, 0}};
-  c.forward = {{forward.x, forward.y, forward.z, 0}};
+  c.origin = {{desc.origin.x, desc.origin.y, desc.origin.z, desc.near_clip}};
+  c.forward = {{forward.x, forward.y, forward.z, desc.far_clip}};
   c.right = {{right.x * half_w, right.y * half_w, right.z * half_w, 0}};
   c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, 0}};
   c.width = uint32_t(width);

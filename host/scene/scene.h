@@ -1,6 +1,7 @@
 // The renderer's scene: triangles with materials, a camera and the film size.
 // Every input format (Mitsuba XML, OBJ, ...) is loaded into this one structure.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -36,6 +37,8 @@ struct CameraDesc {
   float focus_distance = 1e4f; // distance of the plane in focus along the view direction (thin lens)
   bool orthographic = false;   // parallel rays (Mitsuba's orthographic); fov and the lens are unused
   glm::vec2 ortho_scale{1.0f}; // orthographic: the film spans [-x, x] by [-y, y] / aspect in world units
+  float near_clip = 0.0f;      // camera rays see what lies between these distances along the view direction
+  float far_clip = INFINITY;   // (Mitsuba's near_clip and far_clip)
   // Pixel filter (Mitsuba's rfilter): "box" (half-width 0.5), "tent" (radius
   // filter_radius) or "gaussian" (stddev filter_stddev, cut off at 4 stddev).
   std::string pixel_filter = "box";
