@@ -179,8 +179,7 @@ int run_render(const RenderArgs& a) {
   }
   if (!a.quiet)
     for (const auto& w : scene.warnings) std::cerr << "psf: warning: " << w << "\n";
-  if (a.width > 0) scene.width = a.width;
-  if (a.height > 0) scene.height = a.height;
+  psf::set_film_size(scene, a.width, a.height);
   if (std::string bad = override_camera(a, scene.camera); !bad.empty()) {
     std::cerr << "psf: " << bad << "\n";
     return kExitBadInput;

@@ -353,7 +353,6 @@ uint64_t Renderer::fixed_bytes() const {
 
 void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   Runtime& rt = impl_->rt;
-  const Scene& scene = impl_->scene;
   auto b = std::make_unique<Batch>();
   if (batch_) b->spare = std::move(batch_->spare);  // download vectors already paged in, for the next render
   batch_.reset();
@@ -382,8 +381,8 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   // r0_i = d_i sqrt(dOmega / pi), dOmega the solid angle of footprint_pixels^2
   // pixels at the image centre (orthographic: the radius of their area).
   const Camera& cam = impl_->camera;
-  const float pixel_w = 2.0f * glm::length(glm::vec3(cam.right.s[0], cam.right.s[1], cam.right.s[2])) / scene.width;
-  const float pixel_h = 2.0f * glm::length(glm::vec3(cam.down.s[0], cam.down.s[1], cam.down.s[2])) / scene.height;
+  const float pixel_w = 2.0f * glm::length(glm::vec3(cam.right.s[0], cam.right.s[1], cam.right.s[2])) / cam.width;
+  const float pixel_h = 2.0f * glm::length(glm::vec3(cam.down.s[0], cam.down.s[1], cam.down.s[2])) / cam.height;
   b->footprint = o.filter.footprint_pixels * std::sqrt(pixel_w * pixel_h / float(M_PI));
   rt.finish();  // surfaces allocation failures here
   batch_ = std::move(b);

@@ -64,11 +64,16 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   ulong g = frame_first_path(params) + (ulong)j;
   uint pixel = (uint)(g % pixels);
   uint sample = (uint)(g / pixels);
-  const uint key = pixel_seed(params.seed, pixel);
+  /* Film coordinates: the image's pixel, offset by its crop window's corner. A
+   * pixel's samples are keyed by its place in the film, so that a crop window
+   * renders the film's pixels as a render of the whole film does. */
+  uint fx = pixel % params.width + (uint)camera.right.w, fy = pixel / params.width + (uint)camera.down.w;
+  uint film_pixel = fy * camera.width + fx;
+  const uint key = pixel_seed(params.seed, film_pixel);
   float u = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
   float v = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL + 1);
-  float s = ((float)(pixel % params.width) + 0.5f + pixel_filter_offset(camera, u)) / (float)params.width;
-  float t = ((float)(pixel / params.width) + 0.5f + pixel_filter_offset(camera, v)) / (float)params.height;
+  float s = ((float)fx + 0.5f + pixel_filter_offset(camera, u)) / (float)camera.width;
+  float t = ((float)fy + 0.5f + pixel_filter_offset(camera, v)) / (float)camera.height;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
   float3 org = camera.origin.xyz;
   if (camera.orthographic) { /* parallel rays from the film's point */
@@ -97,7 +102,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   st.vertex_radiance = (float4)(0.0f);
   st.pending = (float4)(0.0f);
   st.prev_pos = (float4)(org, 0.0f);
-  st.pixel = pixel;
+  st.pixel = film_pixel;
   st.sample = sample;
   st.depth = 0u;
   st.flags = PSF_PATH_ALIVE;

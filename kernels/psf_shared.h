@@ -124,9 +124,9 @@ typedef struct {
 typedef struct {
   psf_float4 origin;  /* xyz eye position (the lens's centre); w: near clip distance along forward */
   psf_float4 forward; /* xyz view direction, unit length; w: far clip distance along forward */
-  psf_float4 right;   /* xyz half-width of the film at distance 1 */
-  psf_float4 down;    /* xyz half-height of the film at distance 1 */
-  psf_uint width;     /* film width in pixels */
+  psf_float4 right;   /* xyz half-width of the film at distance 1; w: the image's first column in the film */
+  psf_float4 down;    /* xyz half-height of the film at distance 1; w: the image's first row in the film */
+  psf_uint width;     /* film width in pixels (the image is the film, or a crop window of it) */
   psf_uint height;    /* film height in pixels */
   float aperture;     /* lens radius; 0: a pinhole */
   float focus;        /* distance of the plane in focus along forward (thin lens) */
@@ -329,7 +329,7 @@ typedef struct {
   psf_float4 vertex_radiance; /* xyz c: radiance scattered at the filtering vertex towards the camera */
   psf_float4 pending;    /* xyz next-event contribution awaiting its shadow ray */
   psf_float4 prev_pos;   /* xyz position of the previous vertex (MIS of emitter hits); w: camera path length so far */
-  psf_uint pixel;        /* pixel index y * width + x */
+  psf_uint pixel;        /* film pixel index y * width + x (the film's, with a crop window): the samples' key */
   psf_uint sample;       /* sample index within the pixel (Sobol index) */
   psf_uint depth;        /* number of surface interactions so far */
   psf_uint flags;        /* PSF_PATH_* */

@@ -1119,6 +1119,33 @@ TEST_CASE("Render: --visibility-ray marks a vertex occluded where its hemisphere
   }
 }
 
+TEST_CASE("Render: a crop window renders the film's pixels as the whole film's render does", "[emitter]") {
+  // The envmap floor (a textured sky, a bounce and light samples): a 16x16 film,
+  // and the window of 7x5 pixels from (6, 9), bit for bit.
+  psf::Scene full = envmap_floor();
+  psf::Scene crop = full;
+  crop.camera.film_width = crop.camera.film_height = 16;
+  crop.camera.crop_x = 6;
+  crop.camera.crop_y = 9;
+  crop.width = 7;
+  crop.height = 5;
+  const psf::Image a = render(full, 8).image, b = render(crop, 8).image;
+  REQUIRE(b.width == 7);
+  REQUIRE(b.height == 5);
+  size_t differ = 0;
+  for (int y = 0; y < 5; ++y)
+    for (int x = 0; x < 7; ++x) differ += pixel(b, x, y) != pixel(a, x + 6, y + 9);
+  CHECK(differ == 0);
+  // --width and --height scale the film and the window with it.
+  psf::set_film_size(crop, 32, 8);
+  CHECK(crop.camera.film_width == 32);
+  CHECK(crop.camera.film_height == 8);
+  CHECK(crop.camera.crop_x == 12);
+  CHECK(crop.width == 14);
+  CHECK(crop.camera.crop_y == 5);  // rows 9..14 of 16 -> 4.5..7 of 8, rounded
+  CHECK(crop.height == 2);
+}
+
 TEST_CASE("Render: a diffuse floor under an envmap matches the map's cosine-weighted integral", "[emitter]") {
   // Floor y = 0 facing +y, seen from above; the map is not rotated, so the
   // floor's normal is the map's +y and cos(theta) the map's cos(theta). Reference:

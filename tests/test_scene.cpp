@@ -403,10 +403,11 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
                     "'rr_depth' must be at least 1");
 }
 
-TEST_CASE("Sensor: clip planes; unsupported sensor, film and sampler properties warn", "[scene]") {
+TEST_CASE("Sensor: clip planes, crop window; unsupported sensor, film and sampler properties warn", "[scene]") {
   const std::string film = "<film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/>"
                            "<string name=\"pixel_format\" value=\"rgba\"/><boolean name=\"high_quality_edges\" "
-                           "value=\"true\"/><integer name=\"crop_width\" value=\"4\"/></film>";
+                           "value=\"true\"/><integer name=\"crop_offset_x\" value=\"3\"/>"
+                           "<integer name=\"crop_width\" value=\"4\"/></film>";
   psf::Scene s = load_text("<sensor type=\"perspective\"><float name=\"near_clip\" value=\"0.5\"/>"
                            "<float name=\"far_clip\" value=\"20\"/><float name=\"principal_point_offset_x\" "
                            "value=\"0.1\"/><transform name=\"to_world\"><scale value=\"2\"/></transform>" +
@@ -414,10 +415,20 @@ TEST_CASE("Sensor: clip planes; unsupported sensor, film and sampler properties 
                            "</sensor>\n<shape type=\"rectangle\"/>\n");
   CHECK(s.camera.near_clip == Approx(1.0f));  // camera space, scaled by to_world
   CHECK(s.camera.far_clip == Approx(40.0f));
-  CHECK(s.warnings.size() == 3);
+  // The window: 4 columns from 3 of the 8, every row of the 576 (Mitsuba's default height).
+  CHECK(s.width == 4);
+  CHECK(s.height == 576);
+  CHECK(s.camera.film_width == 8);
+  CHECK(s.camera.film_height == 576);
+  CHECK(s.camera.crop_x == 3);
+  CHECK(s.camera.crop_y == 0);
+  CHECK(s.warnings.size() == 2);
   CHECK(count_warnings(s, ":2: property 'principal_point_offset_x' of sensor 'perspective' is not supported") == 1);
-  CHECK(count_warnings(s, ":2: property 'crop_width' of film 'hdrfilm' is not supported") == 1);
   CHECK(count_warnings(s, ":2: property 'seed' of sampler 'stratified' is not supported") == 1);
+  require_xml_error("<sensor type=\"perspective\"><film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/>"
+                    "<integer name=\"crop_offset_x\" value=\"6\"/><integer name=\"crop_width\" value=\"4\"/>"
+                    "</film></sensor>\n",
+                    2, "does not lie within the 8x576 film");
   psf::Scene d = load_text("<sensor type=\"perspective\"/>\n<shape type=\"rectangle\"/>\n");
   CHECK(d.camera.near_clip == Approx(0.01f));  // Mitsuba's defaults
   CHECK(d.camera.far_clip == Approx(1e4f));

@@ -941,6 +941,24 @@ class MitsubaLoader {
     scene_.width = get_int(e, "width", 768);
     scene_.height = get_int(e, "height", 576);
     if (scene_.width <= 0 || scene_.height <= 0) fail(node, "the film's width and height must be positive");
+    // A crop window: the image is crop_width x crop_height pixels of the film from
+    // (crop_offset_x, crop_offset_y) on.
+    CameraDesc& cam = scene_.camera;
+    cam.film_width = cam.film_height = cam.crop_x = cam.crop_y = 0;
+    if (find(e, "crop_offset_x") || find(e, "crop_offset_y") || find(e, "crop_width") || find(e, "crop_height")) {
+      const int x = get_int(e, "crop_offset_x", 0), y = get_int(e, "crop_offset_y", 0);
+      const int w = get_int(e, "crop_width", scene_.width - x), h = get_int(e, "crop_height", scene_.height - y);
+      if (x < 0 || y < 0 || w < 1 || h < 1 || int64_t(x) + w > scene_.width || int64_t(y) + h > scene_.height)
+        fail(node, "the crop window (" + std::to_string(x) + ", " + std::to_string(y) + ") + " + std::to_string(w) +
+                       "x" + std::to_string(h) + " does not lie within the " + std::to_string(scene_.width) + "x" +
+                       std::to_string(scene_.height) + " film");
+      cam.film_width = scene_.width;
+      cam.film_height = scene_.height;
+      cam.crop_x = x;
+      cam.crop_y = y;
+      scene_.width = w;
+      scene_.height = h;
+    }
     // The reconstruction filter: Mitsuba's default is a Gaussian of stddev 0.5.
     scene_.camera.pixel_filter = "gaussian";
     scene_.camera.filter_stddev = 0.5f;
@@ -950,7 +968,8 @@ class MitsubaLoader {
     // are sampled, so pixels at the border draw samples from beyond it as
     // high_quality_edges asks (without it Mitsuba leaves those out).
     ignored_properties(e, "film", {"width", "height", "pixel_format", "component_format", "file_format", "banner",
-                                   "gamma", "exposure", "tonemap_method", "high_quality_edges"});
+                                   "gamma", "exposure", "tonemap_method", "high_quality_edges", "crop_offset_x",
+                                   "crop_offset_y", "crop_width", "crop_height"});
   }
 
   // box, tent (radius, default 1) and gaussian (stddev, default 0.5) are sampled

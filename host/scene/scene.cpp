@@ -15,7 +15,30 @@ SceneError::SceneError(const std::string& file, int line, const std::string& mes
       file_(file),
       line_(line) {}
 
-Camera make_camera(const CameraDesc& desc, int width, int height) {
+void set_film_size(Scene& scene, int width, int height) {
+  CameraDesc& c = scene.camera;
+  if (c.film_width <= 0) {
+    if (width > 0) scene.width = width;
+    if (height > 0) scene.height = height;
+    return;
+  }
+  // One axis: the film scaled to `target` pixels, the window [offset, offset + extent) with it.
+  auto scale = [](int& film, int& offset, int& extent, int target) {
+    if (target <= 0 || target == film) return;
+    const double f = double(target) / double(film);
+    const int end = std::clamp(int(std::lround((offset + extent) * f)), 1, target);
+    offset = std::min(int(std::lround(offset * f)), end - 1);
+    extent = end - offset;
+    film = target;
+  };
+  scale(c.film_width, c.crop_x, scene.width, width);
+  scale(c.film_height, c.crop_y, scene.height, height);
+}
+
+Camera make_camera(const CameraDesc& desc, int image_width, int image_height) {
+  // A crop window: the camera spans the whole film, the image a part of it.
+  const int width = desc.film_width > 0 ? desc.film_width : image_width;
+  const int height = desc.film_height > 0 ? desc.film_height : image_height;
   glm::vec3 forward = glm::normalize(desc.target - desc.origin);
   glm::vec3 right = glm::normalize(glm::cross(forward, desc.up));
   if (desc.mirrored) right = -right;  // a reflecting to_world flips the image left-right
@@ -42,8 +65,8 @@ Camera make_camera(const CameraDesc& desc, int width, int height) {
   Camera c{};
   c.origin = {{desc.origin.x, desc.origin.y, desc.origin.z, desc.near_clip}};
   c.forward = {{forward.x, forward.y, forward.z, desc.far_clip}};
-  c.right = {{right.x * half_w, right.y * half_w, right.z * half_w, 0}};
-  c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, 0}};
+  c.right = {{right.x * half_w, right.y * half_w, right.z * half_w, desc.film_width > 0 ? float(desc.crop_x) : 0.0f}};
+  c.down = {{down.x * half_h, down.y * half_h, down.z * half_h, desc.film_height > 0 ? float(desc.crop_y) : 0.0f}};
   c.width = uint32_t(width);
   c.height = uint32_t(height);
   c.aperture = desc.orthographic ? 0.0f : std::max(desc.aperture_radius, 0.0f);

@@ -37,6 +37,10 @@ struct CameraDesc {
   float focus_distance = 1e4f; // distance of the plane in focus along the view direction (thin lens)
   bool orthographic = false;   // parallel rays (Mitsuba's orthographic); fov and the lens are unused
   glm::vec2 ortho_scale{1.0f}; // orthographic: the film spans [-x, x] by [-y, y] / aspect in world units
+  // Crop window (Mitsuba's film crop_*): the image is the part of a film of
+  // film_width x film_height pixels from pixel (crop_x, crop_y) on, of the
+  // scene's width x height; film_width 0: no crop, the film is the image.
+  int film_width = 0, film_height = 0, crop_x = 0, crop_y = 0;
   float near_clip = 0.0f;      // camera rays see what lies between these distances along the view direction
   float far_clip = INFINITY;   // (Mitsuba's near_clip and far_clip)
   // Pixel filter (Mitsuba's rfilter): "box" (half-width 0.5), "tent" (radius
@@ -90,5 +94,9 @@ std::vector<bool> masked_triangles(const Scene& scene);
 
 // Camera for the film: pinhole rays as in kernels/camera.cl.
 Camera make_camera(const CameraDesc& desc, int width, int height);
+
+// Sets the image to width x height pixels (the film's, or with a crop window
+// the whole film scaled to that size, the window with it); 0 keeps a side.
+void set_film_size(Scene& scene, int width, int height);
 
 }  // namespace psf
