@@ -92,10 +92,22 @@ std::vector<float> gather(const std::vector<float>& v, size_t stride, size_t off
 
 std::vector<float> as_float(const std::vector<uint32_t>& v) { return std::vector<float>(v.begin(), v.end()); }
 
+// The scene hash of `scene` as loaded from o.scene_path: its film size, and with a
+// crop window the film's size and the window's corner too (--width and --height
+// scale them, and two films may round to windows of one size).
+std::string hash_of(const SessionOptions& o, const Scene& scene) {
+  std::vector<std::pair<std::string, std::string>> params = o.params;
+  const CameraDesc& c = scene.camera;
+  if (c.film_width > 0)
+    params.emplace_back("psf:film", std::to_string(c.film_width) + "x" + std::to_string(c.film_height) + "+" +
+                                        std::to_string(c.crop_x) + "+" + std::to_string(c.crop_y));
+  return scene_hash(o.scene_path, params, scene.width, scene.height);
+}
+
 class Writer {
  public:
   Writer(const SessionOptions& o, const Scene& scene, int batch_log2)
-      : o_(o), batch_log2_(batch_log2), hash_(scene_hash(o.scene_path, o.params, scene.width, scene.height)) {}
+      : o_(o), batch_log2_(batch_log2), hash_(hash_of(o, scene)) {}
 
   // Writes the image of `shown` with the resume state of `state` (the batches
   // that a resumed render may continue from).
@@ -254,7 +266,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   Accumulator acc;
   acc.reset(scene.width, scene.height, ro.aovs);
   ResumeState resumed;
-  const std::string hash = scene_hash(o.scene_path, o.params, scene.width, scene.height);
+  const std::string hash = hash_of(o, scene);
   if (!o.resume.empty()) {
     resumed = load_state(o.resume, hash, options_text(ro), acc);
     if (acc.paths > total)
