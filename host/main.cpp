@@ -28,7 +28,7 @@ constexpr double kFloatMax = std::numeric_limits<float>::max();
 // excluded when `open_lo`). CLI11's Range, PositiveNumber and NonNegativeNumber
 // let "nan" through (every comparison with NaN is false) and name an unbounded
 // range by 300 digits of DBL_MAX. hi = kFloatMax: unbounded, but finite as a float.
-CLI::Validator finite_number(double lo, double hi, bool open_lo = false) {
+CLI::Validator finite_number(double lo, double hi, bool open_lo = false, bool is_float = true) {
   std::ostringstream what;
   what << "a number ";
   if (hi >= kFloatMax) what << (open_lo ? "> " : ">= ") << lo << " (and below 3.4e38)";
@@ -42,6 +42,8 @@ CLI::Validator finite_number(double lo, double hi, bool open_lo = false) {
         const bool parsed = end != begin && *end == '\0';
         if (!parsed || !std::isfinite(v) || v < lo || v > hi || (open_lo && v == lo))
           return "'" + text + "' is not " + description;
+        if (is_float && v != 0.0 && std::fabs(v) < std::numeric_limits<float>::min())
+          return "'" + text + "' is too small for a float (it would become 0)";
         return std::string();
       },
       description);
@@ -188,9 +190,13 @@ int run_render(const RenderArgs& a) {
   // sizes that cannot be held rather than fail in an allocation mid-render.
   constexpr int kMaxFilmSide = 65536;
   constexpr uint64_t kMaxFilmPixels = uint64_t(1) << 27;
-  if (scene.width <= 0 || scene.height <= 0 || scene.width > kMaxFilmSide || scene.height > kMaxFilmSide ||
-      uint64_t(scene.width) * uint64_t(scene.height) > kMaxFilmPixels) {
-    std::cerr << "psf: " << a.scene << ": film " << scene.width << "x" << scene.height
+  // With a crop window the film it cuts from is held to the same limits (its
+  // pixel indices key the samples, kernels/camera.cl).
+  const int film_w = std::max(scene.width, scene.camera.film_width);
+  const int film_h = std::max(scene.height, scene.camera.film_height);
+  if (scene.width <= 0 || scene.height <= 0 || film_w > kMaxFilmSide || film_h > kMaxFilmSide ||
+      uint64_t(film_w) * uint64_t(film_h) > kMaxFilmPixels) {
+    std::cerr << "psf: " << a.scene << ": film " << film_w << "x" << film_h
               << " is out of range (each side 1 to " << kMaxFilmSide << ", at most " << kMaxFilmPixels
               << " pixels); set --width and --height\n";
     return kExitBadInput;
@@ -222,7 +228,7 @@ int run_render(const RenderArgs& a) {
   opt.filter = a.fopt;
   opt.filter.visibility_ray = a.visibility_ray == "auto"    ? psf::kVisibilityRayAuto
                               : a.visibility_ray == "light" ? 0.0f
-                                                            : std::stof(a.visibility_ray);
+                                                            : float(std::strtod(a.visibility_ray.c_str(), nullptr));
   opt.filter.enabled = a.filter == "psf";
   bool aov_unfiltered = false, aov_neighbours = false, aov_albedo = false, aov_normal = false, aov_depth = false;
   for (size_t b = 0; b <= a.aov.size();) {
@@ -368,10 +374,10 @@ int main(int argc, char** argv) {
                      "Extra EXR layers, comma-separated: unfiltered, neighbours, albedo, normal, depth");
   render->add_option("-D,--define", ra.defines, "Scene parameter name=value ($name in Mitsuba XML)");
   render->add_option("--time", ra.time, "Render until this many seconds have passed (with --spp: whichever comes first)")
-      ->check(finite_number(0.0, kFloatMax, true));
+      ->check(finite_number(0.0, kFloatMax, true, false));
   render->add_option("--checkpoint-seconds", ra.checkpoint_seconds,
                      "Rewrite the output (atomically) this often while rendering; 0: only at the end (30)")
-      ->check(finite_number(0.0, kFloatMax));
+      ->check(finite_number(0.0, kFloatMax, false, false));
   render->add_option("--memory-budget", ra.memory_budget, "Device memory for the batch buffers, e.g. 256M, 2G");
   render->add_option("--batch-log2", ra.batch_log2, "Largest batch: 2^N paths (20)")->check(CLI::Range(6, 26));
   render->add_option("--path-kernels", ra.path_kernels,

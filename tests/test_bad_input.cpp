@@ -114,6 +114,14 @@ TEST_CASE("Bad input: a film of 100000x100000 pixels is refused before anything 
   // --width and --height override the film: the documented way out.
   Outcome small = render(bad("film-huge.xml"));
   CHECK(small.run.status == 0);
+  // A 16x16 window of that film: the film's pixel indices key the samples (and
+  // would wrap around 32 bits), so the film is held to the same limits.
+  std::ofstream(out) << "precious";
+  Run crop = run("render " + bad("film-huge-crop.xml") + " --no-png --spp 1 -o " + out.string());
+  INFO(crop.output);
+  CHECK(crop.status == 2);
+  CHECK(contains(crop.output, "film-huge-crop.xml: film 100000x100000 is out of range"));
+  CHECK(read_file(out) == "precious");
 }
 
 TEST_CASE("Bad input: documented fallbacks render with a warning", "[bad_input]") {
@@ -159,7 +167,8 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
   for (const char* opt : {"--spp 0", "--spp -3", "--width 0", "--width -8", "--height 100000", "--width abc",
                           "--fov nan", "--alpha nan", "--r0 nan", "--r0 1e40", "--footprint-pixels inf",
                           "--normal-threshold nan", "--albedo-threshold -0.1", "--visibility-ray nan",
-                          "--visibility-ray -1", "--min-removed nan", "--time nan", "--checkpoint-seconds nan"}) {
+                          "--visibility-ray -1", "--visibility-ray 1e-50", "--r0 1e-45", "--min-removed nan",
+                          "--time nan", "--checkpoint-seconds nan"}) {
     SECTION(opt) {
       Outcome o = render(bad("degenerate.obj"), opt);
       INFO(o.run.output);

@@ -388,7 +388,7 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
                             "<boolean name=\"strict_normals\" value=\"true\"/></integrator>\n" + shape);
   CHECK(v3.max_depth == 9);
   CHECK(v3.rr_depth == 3);
-  CHECK(v3.hide == PSF_HIDE_ENVIRONMENT);  // Mitsuba 3: the environment only
+  CHECK(v3.hide == PSF_HIDE_ENVIRONMENT);  // Mitsuba 3.6's path tracer: the environment only
   CHECK(count_warnings(v3, ":2: property 'strict_normals' of integrator 'path' is not supported; ignored") == 1);
   psf::Scene v05 = load_text("<integrator type=\"path\"><integer name=\"rrDepth\" value=\"2\"/>"
                              "<boolean name=\"hideEmitters\" value=\"true\"/></integrator>\n" + shape, {}, "0.5.0");
@@ -399,6 +399,11 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
   CHECK(plain.max_depth == 2);
   CHECK(plain.rr_depth == 5);
   CHECK(plain.hide == 0u);
+  psf::Scene direct = load_text(
+      "<integrator type=\"direct\"><boolean name=\"hide_emitters\" value=\"true\"/></integrator>\n" + shape);
+  CHECK(direct.hide == (PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA));  // Mitsuba 3's direct: every emitter
+  // A merge that contains itself is an error, not an endless recursion.
+  require_xml_error("<shape type=\"merge\" id=\"m\"><ref id=\"m\"/></shape>\n", 2, "merge shape contains itself");
   require_xml_error("<integrator type=\"path\"><integer name=\"rr_depth\" value=\"0\"/></integrator>\n", 2,
                     "'rr_depth' must be at least 1");
 }
@@ -413,8 +418,8 @@ TEST_CASE("Sensor: clip planes, crop window; unsupported sensor, film and sample
                            "value=\"0.1\"/><transform name=\"to_world\"><scale value=\"2\"/></transform>" +
                            film + "<sampler type=\"stratified\"><integer name=\"seed\" value=\"3\"/></sampler>"
                            "</sensor>\n<shape type=\"rectangle\"/>\n");
-  CHECK(s.camera.near_clip == Approx(1.0f));  // camera space, scaled by to_world
-  CHECK(s.camera.far_clip == Approx(40.0f));
+  CHECK(s.camera.near_clip == Approx(0.5f));  // world-space distances, as Mitsuba 3 casts its rays
+  CHECK(s.camera.far_clip == Approx(20.0f));
   // The window: 4 columns from 3 of the 8, every row of the 576 (Mitsuba's default height).
   CHECK(s.width == 4);
   CHECK(s.height == 576);

@@ -834,10 +834,11 @@ class MitsubaLoader {
     scene_.max_depth = direct ? 2 : get_int(e, "max_depth", -1);
     scene_.rr_depth = direct ? 5 : get_int(e, "rr_depth", 5);
     if (scene_.rr_depth < 1) fail(find(e, "rr_depth")->node, "'rr_depth' must be at least 1");
-    // hide_emitters: Mitsuba 3 hides the environment from camera rays (an area
-    // emitter hit stays visible); Mitsuba 0.5 hid every emitter they see.
+    // hide_emitters: Mitsuba 3's path tracer (3.6) hides the environment from
+    // camera rays (an area emitter hit stays visible); its direct integrator,
+    // and Mitsuba 0.5's, hide every emitter they see.
     if (get_bool(e, "hide_emitters", false))
-      scene_.hide = version_major_ >= 2 ? PSF_HIDE_ENVIRONMENT : PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
+      scene_.hide = version_major_ >= 2 && !direct ? PSF_HIDE_ENVIRONMENT : PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
     for (const auto& [name, p] : e.props)
       if (direct ? name != "hide_emitters" : name != "max_depth" && name != "rr_depth" && name != "hide_emitters")
         warn(p.node, "integrator:" + name, "property '" + name + "' of integrator '" + e.type + "' is not supported; ignored");
@@ -919,9 +920,12 @@ class MitsubaLoader {
     // which origin, target and up cannot express.
     cam.mirrored = glm::determinant(glm::mat3(m)) < 0.0f;
 
-    // Clip planes: Mitsuba's defaults (0.01 and 10^4), in camera space: a scaling to_world scales them by z.
-    cam.near_clip = float(get_float(e, "near_clip", 0.01)) * glm::length(axes[2]);
-    cam.far_clip = float(get_float(e, "far_clip", 1e4)) * glm::length(axes[2]);
+    // Clip planes: Mitsuba's defaults (0.01 and 10^4), world-space distances
+    // along the view direction as Mitsuba 3 casts them; only an orthographic
+    // camera's near plane is a camera-space point, scaled by to_world's z.
+    const float near_clip = float(get_float(e, "near_clip", 0.01)), far_clip = float(get_float(e, "far_clip", 1e4));
+    cam.near_clip = e.type == "orthographic" ? near_clip * glm::length(axes[2]) : near_clip;
+    cam.far_clip = cam.near_clip + (far_clip - near_clip);
     if (!(cam.near_clip >= 0.0f && cam.far_clip > cam.near_clip && std::isfinite(cam.far_clip)))
       fail(find(e, "far_clip") ? find(e, "far_clip")->node : find(e, "near_clip") ? find(e, "near_clip")->node : node,
            "the clip distances must satisfy 0 <= near_clip < far_clip");
@@ -1051,7 +1055,9 @@ class MitsubaLoader {
       return;
     }
     if (e.type == "merge") {  // Mitsuba 3's merge: its shapes, drawn as they are (merging only saves memory there)
+      if (!in_progress_.insert(node.internal_object()).second) fail(node, "merge shape contains itself");
       for (pugi::xml_node child : objects(e, "shape")) load_shape_at(child, parent, depth);
+      in_progress_.erase(node.internal_object());
       return;
     }
     if (e.type == "instance") {
@@ -1616,7 +1622,9 @@ class MitsubaLoader {
     metal.m.tex_color = base.texture;
     if (base.texture != PSF_NO_TEXTURE) metal.m.flags |= PSF_MATFLAG_REFLECTANCE;  // eta, k per hit
     Bsdf glass = part(PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_DIELECTRIC);
-    glass.m.eta = {{eta, 1.0f / (eta * eta), 0, 0}};
+    // An index of 1 (specular 0) bends nothing; the dielectric's half-vector needs it apart from 1.
+    const float glass_eta = std::fabs(eta - 1.0f) < 1e-3f ? 1.001f : eta;
+    glass.m.eta = {{glass_eta, 1.0f / (glass_eta * glass_eta), 0, 0}};
     glass.m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
     if (metallic_map != PSF_NO_TEXTURE && spec_trans > 0.0f) {
       warn(find(e, "spec_trans")->node, "bsdf:principled:spec_trans+texture",
@@ -2049,7 +2057,7 @@ class MitsubaLoader {
   std::map<const void*, Bsdf> bsdfs_;                                  // BSDF element -> built BSDF
   TextureStore store_{scene_};                                         // scene_'s textures and texels
   std::map<std::pair<const void*, int>, uint32_t> textures_;           // (texture element, use) -> texture
-  std::set<const void*> in_progress_;                                  // BSDFs being built (cycle check)
+  std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
   std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
