@@ -846,6 +846,15 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
                               "{\"KHR_materials_ior\": {\"ior\": 1.7}}")));
     CHECK(t.materials[t.tri_material[0]].type == PSF_MATERIAL_ROUGH_PLASTIC);
     CHECK(t.materials[t.tri_material[0]].eta.s[0] == Approx(1.7f));
+    // ior 1 (no refraction): a glass with an index just above 1, where a rough
+    // dielectric's half-vector exists (it was an opaque plastic of IOR 1.5).
+    psf::Scene one = psf::load_scene(dir.write(
+        "ior1.gltf", replaced(gltf_json(embedded), m0,
+                              "\"metallicFactor\": 0, \"roughnessFactor\": 0.3}, \"doubleSided\": true, "
+                              "\"extensions\": {\"KHR_materials_transmission\": {\"transmissionFactor\": 1}, "
+                              "\"KHR_materials_ior\": {\"ior\": 1}}")));
+    CHECK(one.materials[one.tri_material[0]].type == PSF_MATERIAL_ROUGH_DIELECTRIC);
+    CHECK(one.materials[one.tri_material[0]].eta.s[0] == Approx(1.001f));
     // The glass takes the texture's roughness per texel, as a metal does.
     const unsigned char px[] = {0, 128, 0};  // roughness (green) 128/255
     psf::Scene r = psf::load_scene(dir.write(

@@ -402,6 +402,12 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
   psf::Scene direct = load_text(
       "<integrator type=\"direct\"><boolean name=\"hide_emitters\" value=\"true\"/></integrator>\n" + shape);
   CHECK(direct.hide == (PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA));  // Mitsuba 3's direct: every emitter
+  // Equal indices of refraction are an error for dielectrics, as in Mitsuba
+  // (psf rendered a rough one black).
+  require_xml_error("<bsdf type=\"roughdielectric\"><float name=\"int_ior\" value=\"1.000277\"/></bsdf>\n", 2,
+                    "indices of refraction must differ");
+  require_xml_error("<bsdf type=\"dielectric\"><string name=\"int_ior\" value=\"air\"/></bsdf>\n", 2,
+                    "indices of refraction must differ");
   // A merge that contains itself is an error, not an endless recursion.
   require_xml_error("<shape type=\"merge\" id=\"m\"><ref id=\"m\"/></shape>\n", 2, "merge shape contains itself");
   require_xml_error("<integrator type=\"path\"><integer name=\"rr_depth\" value=\"0\"/></integrator>\n", 2,

@@ -383,9 +383,12 @@ class GltfLoader {
     };
     float ior = ext_number("KHR_materials_ior", "ior", 1.5f);
     if (!(ior >= 1.0f)) ior = 1.5f;  // 0 (or nonsense): the default
+    // ior 1 refracts nothing; the glass part's half-vector needs it apart from 1
+    // (exactly 1, a rough transmission rendered black).
+    const float glass_ior = std::max(ior, 1.001f);
     const float transmission =
         std::clamp(ext_number("KHR_materials_transmission", "transmissionFactor", 0.0f), 0.0f, 1.0f);
-    const bool transmits = !metal_only && transmission > 0.0f && ior > 1.0f;
+    const bool transmits = !metal_only && transmission > 0.0f;
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
     // The texture's roughness (green) per hit, for every part (roughconductor,
@@ -456,7 +459,7 @@ class GltfLoader {
     auto glass_part = [&]() {
       Material m = part();
       m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
-      m.eta = {{ior, 1.0f / (ior * ior), 0, 0}};
+      m.eta = {{glass_ior, 1.0f / (glass_ior * glass_ior), 0, 0}};
       m.specular = {{1, 1, 1, 0}};
       m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
       m.tex_color = PSF_NO_TEXTURE;

@@ -1471,6 +1471,8 @@ class MitsubaLoader {
     m.type = rough ? PSF_MATERIAL_ROUGH_DIELECTRIC
                    : e.type == "thindielectric" ? PSF_MATERIAL_THIN_DIELECTRIC : PSF_MATERIAL_DIELECTRIC;
     float eta = get_ior(e, "int_ior", 1.5046f) / get_ior(e, "ext_ior", 1.000277f);
+    // As Mitsuba: equal indices are an error (a rough one's half-vector would be 0, and the surface nothing).
+    if (eta == 1.0f) fail(e.node, "the interior and exterior indices of refraction must differ");
     glm::vec3 r = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
     glm::vec3 t = constant_color(e, "specular_transmittance", glm::vec3(1.0f));
     m.eta = {{eta, 1.0f / (eta * eta), 0, 0}};
