@@ -1089,6 +1089,41 @@ TEST_CASE("OBJ: a usemtl of a material the MTL library lacks warns at its line",
   CHECK(s.tri_material[2] == s.tri_material[1]);
 }
 
+TEST_CASE("OBJ: the MTL PBR extension (Pr, Pm) maps as glTF's metallic-roughness", "[formats]") {
+  TempDir dir;
+  dir.write("m.mtl",
+            "newmtl red\nKd 0.8 0.1 0.1\nKs 0.5 0.5 0.5\nNs 10\nPr 0.3\n"
+            "newmtl gold\nKd 0.5 0.5 0.5\nPm 1\n"
+            "newmtl half\nKd 0.2 0.5 0.9\nPm 0.25\nPr 0.5\nNi 1.7\nPs 0.2\n");
+  std::string obj = dir.write("m.obj",
+                              "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                              "usemtl red\nf 1 2 3\nusemtl gold\nf 1 2 3\nusemtl half\nf 1 2 3\n");
+  psf::Scene s = psf::load_scene(obj);
+  auto at = [&](size_t t) -> const Material& { return s.materials.at(s.tri_material.at(t)); };
+  // Pr: a rough plastic over Kd with GGX alpha = Pr^2; Ks and Ns are not used.
+  CHECK(at(0).type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(at(0).alpha_u == Approx(0.09f));
+  CHECK((at(0).flags & PSF_MATFLAG_BECKMANN) == 0u);
+  CHECK(at(0).specular.s[0] == 1.0f);
+  CHECK(at(0).eta.s[0] == Approx(1.5f));
+  CHECK(at(0).blend == 0u);
+  // Pm 1, Pr 0: a smooth conductor whose normal-incidence reflectance is Kd.
+  CHECK(at(1).type == PSF_MATERIAL_CONDUCTOR);
+  const double eta = at(1).eta.s[0], k = at(1).k.s[0];
+  CHECK(((eta - 1) * (eta - 1) + k * k) / ((eta + 1) * (eta + 1) + k * k) == Approx(0.5).epsilon(1e-3));
+  // Pm 0.25: the plastic (IOR Ni) hands over to the metal with probability 0.25.
+  CHECK(at(2).type == PSF_MATERIAL_ROUGH_PLASTIC);
+  CHECK(at(2).eta.s[0] == Approx(1.7f));
+  CHECK(at(2).blend_weight == Approx(0.25f));
+  REQUIRE(at(2).blend >= 1u);
+  CHECK(s.materials[at(2).blend - 1].type == PSF_MATERIAL_ROUGH_CONDUCTOR);
+  CHECK(s.materials[at(2).blend - 1].alpha_u == Approx(0.25f));
+  // Sheen (Ps) is not supported: one warning at its material.
+  size_t sheen = 0;
+  for (const std::string& w : s.warnings) sheen += contains(w, "m.mtl:9: material 'half': Ps not supported");
+  CHECK(sheen == 1);
+}
+
 TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its material", "[formats]") {
   // Ks 1e39 overflows a float; the mirror model would divide by it (NaN).
   TempDir dir;

@@ -67,6 +67,8 @@ struct ObjMaterial {
   float ni = 1.0f;         // Ni, index of refraction
   float d = 1.0f;          // d (or 1 - Tr), dissolve = opacity
   int illum = 2;           // illumination model
+  float pr = 0.0f;         // Pr, roughness (the PBR extension; with Pm, 0 when absent)
+  float pm = 0.0f;         // Pm, metallic
   ObjTexture map_kd;       // map_Kd
   ObjTexture map_d;        // map_d
   ObjTexture map_bump;     // map_bump / bump

@@ -287,6 +287,8 @@ ObjData read_obj(const std::string& path, bool with_materials) {
     om.ni = m.ior;
     om.d = m.dissolve;
     om.illum = m.illum;
+    om.pr = m.roughness;
+    om.pm = m.metallic;
     // A value that overflows a float (Ks 1e39) or is nan would poison every
     // path that meets the material: refuse the file at the material.
     const std::pair<const char*, glm::vec3> colours[] = {{"Kd", om.kd}, {"Ks", om.ks}, {"Ke", om.ke}, {"Tf", om.tf}};
@@ -294,7 +296,8 @@ ObjData read_obj(const std::string& path, bool with_materials) {
       if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
         throw SceneError(om.mtl_file.empty() ? path : om.mtl_file, om.line,
                          "material '" + om.name + "': " + what + " is not a finite number");
-    const std::pair<const char*, float> numbers[] = {{"Ns", om.ns}, {"Ni", om.ni}, {"d", om.d}};
+    const std::pair<const char*, float> numbers[] = {
+        {"Ns", om.ns}, {"Ni", om.ni}, {"d", om.d}, {"Pr", om.pr}, {"Pm", om.pm}};
     for (const auto& [what, x] : numbers)
       if (!std::isfinite(x))
         throw SceneError(om.mtl_file.empty() ? path : om.mtl_file, om.line,
@@ -321,6 +324,10 @@ ObjData read_obj(const std::string& path, bool with_materials) {
         {&m.emissive_texname, "map_Ke"}};
     for (const auto& [name, what] : others)
       if (!name->empty()) om.unsupported.push_back(what);
+    const std::pair<float, const char*> pbr_others[] = {
+        {m.sheen, "Ps"}, {m.clearcoat_thickness, "Pc"}, {m.clearcoat_roughness, "Pcr"}, {m.anisotropy, "aniso"}};
+    for (const auto& [value, what] : pbr_others)
+      if (value != 0.0f) om.unsupported.push_back(what);
     data.materials.push_back(om);
   }
   return data;
@@ -434,7 +441,37 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
   const bool diffuse_colour = max3(kd) > 0.0f || kd_tex != PSF_NO_TEXTURE;
   const float alpha = std::sqrt(2.0f / (std::max(om.ns, 0.0f) + 2.0f));
   const bool mirror = max3(om.ks) > 0.0f && diffuse_colour && (om.illum == 3 || om.illum == 5 || om.illum == 8);
-  if (mirror) {
+  // The PBR extension (Pr, Pm; Blender writes it): as glTF's metallic-roughness,
+  // a plastic over Kd with IOR Ni (1.5 if Ni <= 1) and a conductor reflecting
+  // Kd at normal incidence, chosen with probability Pm; GGX, alpha = Pr^2 (the
+  // smooth types below 0.001). Ks and Ns are then not used.
+  const bool pbr = om.pr > 0.0f || om.pm > 0.0f;
+  const float pbr_alpha = std::max(om.pr * om.pr, 1e-4f);
+  const glm::vec3 base = glm::clamp(kd_tex != PSF_NO_TEXTURE ? store.mean(kd_tex) : kd, 0.0f, 1.0f);
+  auto pbr_metal = [&](Material r) {
+    r.type = pbr_alpha < 1e-3f ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR;
+    glm::vec3 eta_v, k_v;
+    conductor_from_reflectance(base, eta_v, k_v);
+    r.eta = {{eta_v.x, eta_v.y, eta_v.z, 0}};
+    r.k = {{k_v.x, k_v.y, k_v.z, 0}};
+    r.specular = {{1, 1, 1, 0}};
+    r.albedo = {{0, 0, 0, 0}};
+    r.tex_color = kd_tex;
+    if (kd_tex != PSF_NO_TEXTURE) r.flags |= PSF_MATFLAG_REFLECTANCE;  // eta, k per hit from map_Kd
+    r.alpha_u = r.alpha_v = pbr_alpha;
+    return r;
+  };
+  if (pbr && om.pm >= 1.0f) {
+    m = pbr_metal(m);
+  } else if (pbr) {
+    m.type = pbr_alpha < 1e-3f ? PSF_MATERIAL_PLASTIC : PSF_MATERIAL_ROUGH_PLASTIC;
+    m.albedo = {{kd.x, kd.y, kd.z, 0}};
+    m.specular = {{1, 1, 1, 0}};
+    m.eta = {{eta, 0, 0, 0}};
+    m.alpha_u = m.alpha_v = pbr_alpha;
+    m.tex_color = kd_tex;
+    finish_plastic(m, (base.x + base.y + base.z) / 3.0f, 1.0f, store);
+  } else if (mirror) {
     m.type = PSF_MATERIAL_DIFFUSE;  // the mirror is added as its blend partner below
     m.albedo = {{kd.x, kd.y, kd.z, 0}};
     m.tex_color = kd_tex;
@@ -470,7 +507,15 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
     m.tex_bump = obj_texture(om, om.map_bump, TextureUse::Height, "map_bump", "no bump mapping", store, scene);
     if (m.tex_bump != PSF_NO_TEXTURE) m.bump_scale = om.map_bump.bump_multiplier * kObjBumpScale;
   }
-  if (mirror) {  // the same sides and bump map, no emission (the blend's top emits)
+  if (pbr && om.pm > 0.0f && om.pm < 1.0f) {  // the metal partner: the same sides, bump map and cut-out
+    Material r = pbr_metal(m);
+    r.emission = {{0, 0, 0, 0}};
+    r.tex_table = PSF_NO_TEXTURE;
+    m.blend = 1 + uint32_t(scene.materials.size());
+    m.blend_weight = om.pm;
+    scene.materials.push_back(r);
+    scene.material_names.push_back(om.name + " (metal)");
+  } else if (mirror && !pbr) {  // the same sides and bump map, no emission (the blend's top emits)
     const float weight = std::min(max3(om.ks), 1.0f);
     Material r = m;
     r.type = alpha < 1e-3f ? PSF_MATERIAL_CONDUCTOR : PSF_MATERIAL_ROUGH_CONDUCTOR;
