@@ -841,7 +841,8 @@ class MitsubaLoader {
       scene_.hide = version_major_ >= 2 && !direct ? PSF_HIDE_ENVIRONMENT : PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
     for (const auto& [name, p] : e.props)
       if (direct ? name != "hide_emitters" : name != "max_depth" && name != "rr_depth" && name != "hide_emitters")
-        warn(p.node, "integrator:" + name, "property '" + name + "' of integrator '" + e.type + "' is not supported; ignored");
+        warn(p.node, "integrator:" + name,
+             "property '" + name + "' of integrator '" + e.type + "' is not supported; ignored");
   }
 
   // One warning per property of `e` (a `kind` element) not in `known`, nor a nested plugin.
