@@ -54,6 +54,12 @@ TEST_CASE("Session: an incompatible --resume is refused with a clear message", "
   Run seed = psf_run(box("--spp 4 --seed 9 --resume " + a + " -o " + out));
   CHECK(seed.status == 2);
   CHECK(seed.output.find("other options") != std::string::npos);
+  // The vertices' visibility (here auto: the light sample) is an option of the render too.
+  Run visibility = psf_run(box("--spp 4 --visibility-ray 50 --resume " + a + " -o " + out));
+  CHECK(visibility.status == 2);
+  CHECK(visibility.output.find("other options") != std::string::npos);
+  REQUIRE(psf_run(box("--spp 3 --visibility-ray auto --resume " + a + " -o " + out)).status == 0);
+  fs::remove(out);
   Run scene = psf_run(box("--spp 4 -D res=32 --resume " + a + " -o " + out));
   CHECK(scene.status == 2);
   CHECK(scene.output.find("another scene") != std::string::npos);
