@@ -563,6 +563,11 @@ TEST_CASE("Shapes: merge draws its shapes; Mitsuba's curves and SDF grids are ig
   CHECK(count_warnings(s, ":6: shape 'bsplinecurve' is not supported yet; ignored") == 1);
   CHECK(count_warnings(s, ":7: shape 'sdfgrid' is not supported yet; ignored") == 1);
   require_xml_error("<shape type=\"cylindre\"/>\n", 2, "unknown shape type 'cylindre'");
+  // A shape's properties it does not read warn (Mitsuba 0.5's maxSmoothAngle smooths normals).
+  psf::Scene smooth = load_text("<shape type=\"sphere\"><float name=\"radius\" value=\"2\"/>"
+                                "<float name=\"maxSmoothAngle\" value=\"30\"/></shape>\n", {}, "0.5.0");
+  CHECK(smooth.warnings.size() == 2);  // and no <sensor>
+  CHECK(count_warnings(smooth, ":2: property 'max_smooth_angle' of shape 'sphere' is not supported; ignored") == 1);
 }
 
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {

@@ -1086,6 +1086,21 @@ class MitsubaLoader {
       fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance, merge)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
+    // Each type's properties (as read by its builder); the others get a warning.
+    static const std::map<std::string, std::set<std::string>> shape_properties = {
+        {"obj", {"filename", "face_normals", "flip_tex_coords"}},
+        {"ply", {"filename", "face_normals", "flip_tex_coords"}},
+        {"serialized", {"filename", "shape_index", "face_normals"}},
+        {"sphere", {"center", "radius"}},
+        {"cylinder", {"p0", "p1", "radius"}},
+        {"rectangle", {}},
+        {"cube", {}},
+        {"disk", {}}};
+    for (const auto& [name, prop] : e.props)
+      if (prop.kind != Property::Kind::Object && name != "to_world" && name != "flip_normals" &&
+          !shape_properties.at(e.type).count(name))
+        warn(prop.node, "shape:" + e.type + ":" + name,
+             "property '" + name + "' of shape '" + e.type + "' is not supported; ignored");
 
     std::vector<pugi::xml_node> bsdfs = objects(e, "bsdf"), emitters = objects(e, "emitter");
     if (bsdfs.size() > 1) fail(bsdfs[1], "a shape can have only one BSDF");
