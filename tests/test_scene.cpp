@@ -570,6 +570,37 @@ TEST_CASE("Shapes: merge draws its shapes; Mitsuba's curves and SDF grids are ig
   CHECK(count_warnings(smooth, ":2: property 'max_smooth_angle' of shape 'sphere' is not supported; ignored") == 1);
 }
 
+TEST_CASE("Shapes: maxSmoothAngle rebuilds a mesh's normals with creases (Mitsuba 0.5)", "[scene]") {
+  // A cube of 8 shared vertices: at 30 degrees its 90-degree edges are creases
+  // (each corner takes its face's normal); at 100 the three faces at a corner
+  // share (1, 1, 1) / sqrt(3), each weighted by its 90 degrees there.
+  TempDir dir;
+  dir.write("cube.obj",
+            "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n"
+            "vn 0 0 1\n"  // file normals, discarded
+            "f 1//1 4//1 3//1 2//1\nf 5//1 6//1 7//1 8//1\nf 1//1 2//1 6//1 5//1\n"
+            "f 2//1 3//1 7//1 6//1\nf 3//1 4//1 8//1 7//1\nf 4//1 1//1 5//1 8//1\n");
+  auto load = [&](float degrees) {
+    return psf::load_scene(dir.write("s.xml", "<scene version=\"0.5.0\"><shape type=\"obj\">"
+                                              "<string name=\"filename\" value=\"cube.obj\"/>"
+                                              "<float name=\"maxSmoothAngle\" value=\"" +
+                                                  std::to_string(degrees) + "\"/></shape></scene>\n"));
+  };
+  psf::Scene creased = load(30.0f), smooth = load(100.0f);
+  REQUIRE(creased.triangles.size() == 12);
+  REQUIRE(smooth.triangles.size() == 12);
+  CHECK(creased.positions.size() == 24);  // 4 corners per face
+  CHECK(smooth.positions.size() == 8);    // one normal per corner of the cube
+  for (const glm::uvec3& t : creased.triangles) {
+    glm::vec3 a = creased.positions[t.x], b = creased.positions[t.y], c = creased.positions[t.z];
+    glm::vec3 face = glm::normalize(glm::cross(b - a, c - a));
+    for (int k = 0; k < 3; ++k) CHECK(near(creased.normals[t[k]], face));
+  }
+  for (size_t v = 0; v < smooth.positions.size(); ++v)
+    CHECK(near(smooth.normals[v], glm::normalize(smooth.positions[v])));
+  CHECK_THROWS_WITH(load(-5.0f), Catch::Contains("maxSmoothAngle must be between 0 and 180 degrees"));
+}
+
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {
   // A group of a rectangle (its own to_world: scaled by 2) and a cube with a
   // diffuse BSDF, drawn by two instances (translated by x = 10 and by y = 5);

@@ -25,6 +25,12 @@ struct TriMesh {
 // them for meshes without normals.
 void compute_vertex_normals(TriMesh& mesh);
 
+// Mitsuba 0.5's maxSmoothAngle: the mesh's normals rebuilt so that faces meeting
+// at a vertex (by position) share a normal only where their normals differ by
+// less than `max_angle_degrees`; each face corner's normal is the angle-weighted
+// sum of those faces' normals, and vertices are split where corners differ.
+void compute_crease_normals(TriMesh& mesh, float max_angle_degrees);
+
 // Mitsuba's rectangle: [-1,1]^2 in the plane z = 0, facing +z (2 triangles).
 TriMesh make_rectangle();
 // Mitsuba's cube: [-1,1]^3 with outward faces, 4 vertices per face (12 triangles).

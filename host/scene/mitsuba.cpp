@@ -1086,11 +1086,18 @@ class MitsubaLoader {
       fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance, merge)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
+    // Mitsuba 0.5's maxSmoothAngle (obj, ply, serialized): normals rebuilt with creases.
+    if (const Property* a = find(e, "max_smooth_angle"); a && (e.type == "obj" || e.type == "ply" ||
+                                                               e.type == "serialized")) {
+      const float degrees = float(get_float(e, "max_smooth_angle", 0.0));
+      if (!(degrees >= 0.0f && degrees <= 180.0f)) fail(a->node, "maxSmoothAngle must be between 0 and 180 degrees");
+      compute_crease_normals(mesh, degrees);
+    }
     // Each type's properties (as read by its builder); the others get a warning.
     static const std::map<std::string, std::set<std::string>> shape_properties = {
-        {"obj", {"filename", "face_normals", "flip_tex_coords"}},
-        {"ply", {"filename", "face_normals", "flip_tex_coords"}},
-        {"serialized", {"filename", "shape_index", "face_normals"}},
+        {"obj", {"filename", "face_normals", "flip_tex_coords", "max_smooth_angle"}},
+        {"ply", {"filename", "face_normals", "flip_tex_coords", "max_smooth_angle"}},
+        {"serialized", {"filename", "shape_index", "face_normals", "max_smooth_angle"}},
         {"sphere", {"center", "radius"}},
         {"cylinder", {"p0", "p1", "radius"}},
         {"rectangle", {}},

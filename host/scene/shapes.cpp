@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <tuple>
 #include <glm/gtc/constants.hpp>
 
 #include "scene/loaders.h"
@@ -133,6 +135,57 @@ void compute_vertex_normals(TriMesh& mesh) {
     double len = glm::length(sum[i]);
     mesh.normals[i] = len > 0.0 ? glm::vec3(sum[i] / len) : glm::vec3(0.0f);
   }
+}
+
+void compute_crease_normals(TriMesh& mesh, float max_angle_degrees) {
+  const size_t nt = mesh.triangles.size();
+  // Unit face normals and each corner's angle.
+  std::vector<glm::dvec3> face(nt, glm::dvec3(0.0));
+  std::vector<glm::dvec3> angle(nt, glm::dvec3(0.0));
+  for (size_t t = 0; t < nt; ++t) {
+    const glm::uvec3 tri = mesh.triangles[t];
+    glm::dvec3 p[3] = {mesh.positions[tri.x], mesh.positions[tri.y], mesh.positions[tri.z]};
+    glm::dvec3 n = glm::cross(p[1] - p[0], p[2] - p[0]);
+    double len = glm::length(n);
+    if (!(len > 0.0)) continue;
+    face[t] = n / len;
+    for (int k = 0; k < 3; ++k) {
+      glm::dvec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
+      double la = glm::length(a), lb = glm::length(b);
+      if (la > 0.0 && lb > 0.0) angle[t][k] = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0, 1.0));
+    }
+  }
+  // The corners at each position (vertices with equal coordinates are one).
+  std::map<std::tuple<float, float, float>, std::vector<std::pair<uint32_t, int>>> at;
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const glm::vec3& p = mesh.positions[mesh.triangles[t][k]];
+      at[{p.x, p.y, p.z}].push_back({uint32_t(t), k});
+    }
+  const double min_cos = std::cos(glm::radians(double(max_angle_degrees)));
+  TriMesh out;
+  out.triangles.resize(nt);
+  std::map<std::tuple<uint32_t, float, float, float>, uint32_t> made;  // (vertex, normal) -> new vertex
+  for (const auto& entry : at) {
+    const auto& corners = entry.second;
+    for (const auto& [t, k] : corners) {
+      glm::dvec3 sum(0.0);
+      for (const auto& [u, j] : corners)
+        if (glm::dot(face[t], face[u]) >= min_cos) sum += face[u] * angle[u][j];
+      const double len = glm::length(sum);
+      const glm::vec3 n = len > 0.0 ? glm::vec3(sum / len) : glm::vec3(face[t]);
+      const uint32_t v = mesh.triangles[t][k];
+      auto [it, fresh] = made.insert({{v, n.x, n.y, n.z}, uint32_t(out.positions.size())});
+      if (fresh) {
+        out.positions.push_back(mesh.positions[v]);
+        out.normals.push_back(n);
+        if (!mesh.uvs.empty()) out.uvs.push_back(mesh.uvs[v]);
+        if (!mesh.tangents.empty()) out.tangents.push_back(mesh.tangents[v]);
+      }
+      out.triangles[t][k] = it->second;
+    }
+  }
+  mesh = std::move(out);
 }
 
 void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, uint32_t material, bool flip,
