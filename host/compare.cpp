@@ -78,6 +78,23 @@ double rel_mse(const Image& test, const Image& ref) {
   return test.rgb.empty() ? 0.0 : sum / double(test.rgb.size());
 }
 
+ErrorMetrics error_metrics(const Image& test, const Image& ref) {
+  ErrorMetrics e;
+  e.rel_mse = rel_mse(test, ref);  // checks the sizes
+  for (size_t i = 0; i < test.rgb.size(); ++i) {
+    double x = test.rgb[i], y = ref.rgb[i];
+    if (!std::isfinite(x)) x = 0.0;
+    e.mse += (x - y) * (x - y);
+    e.mae += std::fabs(x - y);
+    e.mape += std::fabs(x - y) / (std::fabs(y) + 0.01);
+  }
+  const double n = std::max<double>(double(test.rgb.size()), 1.0);
+  e.mse /= n;
+  e.mae /= n;
+  e.mape /= n;
+  return e;
+}
+
 Image box_downsample(const Image& image, int width, int height) {
   if (width <= 0 || height <= 0 || image.width % width != 0 || image.height % height != 0)
     throw std::invalid_argument("cannot box-filter " + std::to_string(image.width) + "x" +

@@ -37,6 +37,14 @@ void default_grid(const Image& image, int& blocks_x, int& blocks_y);
 // reference. The images must have the same size (see box_downsample).
 double rel_mse(const Image& test, const Image& ref);
 
+// The usual per-pixel errors against a reference y, means over pixels and
+// channels (a non-finite test value counts as 0, as in rel_mse): relMSE, MSE
+// (x - y)^2, MAE |x - y| and MAPE |x - y| / (|y| + 0.01). Same sizes, as rel_mse.
+struct ErrorMetrics {
+  double rel_mse = 0.0, mse = 0.0, mae = 0.0, mape = 0.0;
+};
+ErrorMetrics error_metrics(const Image& test, const Image& ref);
+
 // Box-filters `image` down to width x height; the sizes must divide evenly.
 // Throws std::invalid_argument otherwise.
 Image box_downsample(const Image& image, int width, int height);

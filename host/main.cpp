@@ -290,8 +290,9 @@ int run_render(const RenderArgs& a) {
   return 0;
 }
 
-// `psf compare TEST REFERENCE`: relMSE (the reference box-filtered to the test's
-// size when it is an integer multiple of it) and block luminance statistics.
+// `psf compare TEST REFERENCE`: relMSE, MSE, MAE and MAPE (the reference
+// box-filtered to the test's size when it is an integer multiple of it) and
+// block luminance statistics.
 int run_compare(const std::string& test_path, const std::string& ref_path, int blocks_x, int blocks_y) {
   psf::Image test = psf::read_exr(test_path), ref = psf::read_exr(ref_path);
   std::printf("test %s: %dx%d; reference %s: %dx%d\n", test_path.c_str(), test.width, test.height, ref_path.c_str(),
@@ -301,10 +302,14 @@ int run_compare(const std::string& test_path, const std::string& ref_path, int b
   if (!same && ref.width % test.width == 0 && ref.height % test.height == 0 &&
       ref.width / test.width == ref.height / test.height) {
     ref_at_test = psf::box_downsample(ref, test.width, test.height);
-    std::printf("relMSE: %.6g (reference box-filtered %dx down to the test's size)\n", psf::rel_mse(test, ref_at_test),
+    const psf::ErrorMetrics e = psf::error_metrics(test, ref_at_test);
+    std::printf("relMSE: %.6g (reference box-filtered %dx down to the test's size)\n", e.rel_mse,
                 ref.width / test.width);
+    std::printf("MSE: %.6g, MAE: %.6g, MAPE: %.6g %%\n", e.mse, e.mae, 100.0 * e.mape);
   } else if (same) {
-    std::printf("relMSE: %.6g\n", psf::rel_mse(test, ref));
+    const psf::ErrorMetrics e = psf::error_metrics(test, ref);
+    std::printf("relMSE: %.6g\n", e.rel_mse);
+    std::printf("MSE: %.6g, MAE: %.6g, MAPE: %.6g %%\n", e.mse, e.mae, 100.0 * e.mape);
   } else {
     std::printf("relMSE: not computed (the reference is not an integer multiple of the test's size)\n");
   }

@@ -1039,6 +1039,15 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   psf::write_exr(pb, b);
   CHECK(run("compare " + pa + " " + pb, out) == 0);
   CHECK(contains(out, "relMSE: 0.990099"));
+  CHECK(contains(out, "MSE: 1, MAE: 1, MAPE: 99.0099 %"));
+  // Half the pixels 3, half 1, against 1: (x - y)^2 is 4 or 0, |x - y| 2 or 0.
+  psf::Image c = b;
+  for (size_t i = 0; i < c.rgb.size() / 2; ++i) c.rgb[i] = 3.0f;
+  std::string pc = dir.write("c.exr", "");
+  psf::write_exr(pc, c);
+  CHECK(run("compare " + pc + " " + pb, out) == 0);
+  CHECK(contains(out, "MSE: 2, MAE: 1, MAPE: 99.0099 %"));
+  CHECK(contains(out, "relMSE: 1.9802"));
   CHECK(contains(out, "blocks 16x9: mean relative error 100.00 %"));
   CHECK(contains(out, "(+100.00 %)"));
   CHECK(run("compare " + pa + " " + pb + " --blocks 4x2", out) == 0);
