@@ -704,6 +704,14 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(contains(msg, "accessors[1][4]"));
     CHECK(contains(msg, "index 9 out of range"));
   }
+  SECTION("vertex colours (COLOR_0) are ignored with one warning") {
+    psf::Scene s = psf::load_scene(dir.write(
+        "c.gltf", replaced(gltf_json(embedded), "\"attributes\": {\"POSITION\": 2}",
+                           "\"attributes\": {\"POSITION\": 2, \"COLOR_0\": 2}")));
+    size_t n = 0;
+    for (const std::string& w : s.warnings) n += contains(w, "primitives[0]: vertex colours (COLOR_0) are not supported");
+    CHECK(n == 1);
+  }
   SECTION("a non-finite position") {
     std::string b = bin;
     float nan = NAN;
@@ -1053,6 +1061,17 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   CHECK(run("compare " + pa + " " + pb + " --blocks 4x2", out) == 0);
   CHECK(contains(out, "blocks 4x2"));
   CHECK(run("compare " + pa + " " + pb + " --blocks four", out) == 2);
+}
+
+TEST_CASE("OBJ: vertex colours are ignored with one warning", "[formats]") {
+  TempDir dir;
+  psf::Scene coloured = psf::load_scene(
+      dir.write("c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n"));
+  psf::Scene plain = psf::load_scene(dir.write("p.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
+  size_t n = 0;
+  for (const std::string& w : coloured.warnings) n += contains(w, "c.obj: vertex colours are not supported; ignored");
+  CHECK(n == 1);
+  CHECK(plain.warnings.empty());
 }
 
 TEST_CASE("OBJ: a file without Ke gets the default sky; one with Ke does not", "[formats]") {

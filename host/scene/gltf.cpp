@@ -223,6 +223,8 @@ class GltfLoader {
         continue;
       }
       if (!prim.targets.empty()) warn_once(where + ": morph targets are not supported; using the base shape");
+      if (prim.attributes.count("COLOR_0"))
+        warn_once(where + ": vertex colours (COLOR_0) are not supported; the base colour is used alone");
       auto pos_attr = prim.attributes.find("POSITION");
       if (pos_attr == prim.attributes.end()) fail(where, "the primitive has no POSITION attribute");
       std::vector<double> p = read_accessor(pos_attr->second, TINYGLTF_TYPE_VEC3, where + ".POSITION", false, true);

@@ -169,6 +169,9 @@ ObjData read_obj(const std::string& path, bool with_materials) {
       data.warnings.push_back(message);
   }
 
+  // Vertex colours ("v x y z r g b"; tinyobjloader gives 1 where a vertex has none).
+  if (std::any_of(attrib.colors.begin(), attrib.colors.end(), [](float c) { return c != 1.0f; }))
+    data.warnings.push_back(path + ": vertex colours are not supported; ignored");
   const size_t num_vertices = attrib.vertices.size() / 3;
   const size_t num_uvs = attrib.texcoords.size() / 2;
   const size_t num_normals = attrib.normals.size() / 3;
