@@ -48,6 +48,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(TriAttrib, uv01);
   out[i++] = PSF_OFFSET(TriAttrib, u2);
   out[i++] = PSF_OFFSET(TriAttrib, flags);
+  out[i++] = PSF_OFFSET(TriAttrib, color2);
   out[i++] = sizeof(Emitter);
   out[i++] = PSF_OFFSET(Emitter, radiance);
   out[i++] = PSF_OFFSET(Emitter, prim);

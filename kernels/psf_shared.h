@@ -181,6 +181,10 @@ typedef struct {
 /* tex_alpha holds alpha_u in its x channel and alpha_v in y (anisotropic
  * roughness textures, one of them perhaps a constant; TextureStore::combine_xy). */
 #define PSF_MATFLAG_ALPHA_UV 256u
+/* Some triangle of it has vertex colours (set by host/scene/materials.cpp): the
+ * colour term (diffuse, plastic: albedo; conductors: specular) is multiplied by
+ * the colour interpolated at the hit (glTF's COLOR_0, PLY and OBJ colours). */
+#define PSF_MATFLAG_VERTEX_COLOR 512u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 
@@ -226,6 +230,7 @@ typedef struct {
 /* TriAttrib.flags */
 #define PSF_TRI_NORMALS 1u  /* the triangle has per-vertex shading normals */
 #define PSF_TRI_TANGENTS 2u /* and tangents: n0.w, n1.w, n2.w hold each vertex's, packed (surface.cl tangent_unpack) */
+#define PSF_TRI_COLORS 4u   /* and vertex colours: color0-2, linear RGB in [0, 1] as 11, 11 and 10 bits (surface.cl) */
 
 /* Shading attributes of one triangle, in scene order. A mesh without texture
  * coordinates has uv (0,0), (1,0), (0,1) at its corners, so that uv are the
@@ -242,7 +247,11 @@ typedef struct {
   float u2;        /* uv at vertex 2 */
   float v2;
   psf_uint flags;  /* PSF_TRI_* */
+  psf_uint color0; /* with PSF_TRI_COLORS: vertex 0's colour, R in bits 0-10, G 11-21, B 22-31 (unorm) */
+  psf_uint color1; /* vertex 1's */
+  psf_uint color2; /* vertex 2's */
   psf_uint pad0;   /* padding */
+  psf_uint pad1;
 } TriAttrib;
 
 /* Entries of roughplastic's external transmittance table over cos theta in [0, 1] (as Mitsuba 3). */

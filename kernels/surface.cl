@@ -103,6 +103,11 @@ inline float3 tangent_unpack(float w) {
   return normalize(d);
 }
 
+/* A vertex colour packed as in TriAttrib (11, 11, 10 bits unorm). */
+inline float3 vertex_color_unpack(uint c) {
+  return (float3)((float)(c & 2047u) / 2047.0f, (float)((c >> 11) & 2047u) / 2047.0f, (float)(c >> 22) / 1023.0f);
+}
+
 inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
                                    float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                                    __global const half* texels) {
@@ -181,6 +186,13 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   } else {
     f = frame_from_normal(ns);
   }
+  /* Vertex colours multiply the colour term (after its texture, as glTF's COLOR_0). */
+  if ((m->flags & PSF_MATFLAG_VERTEX_COLOR) && (a->flags & PSF_TRI_COLORS)) {
+    float3 c = b0 * vertex_color_unpack(a->color0) + b1 * vertex_color_unpack(a->color1) +
+               b2 * vertex_color_unpack(a->color2);
+    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m)) m->albedo.xyz *= c;
+    else if (m->type == PSF_MATERIAL_CONDUCTOR || m->type == PSF_MATERIAL_ROUGH_CONDUCTOR) m->specular.xyz *= c;
+  }
   if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) f.n = -f.n;
   return f;
 }
@@ -189,8 +201,8 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
 inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0, float3 p1,
                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                            __global const half* texels) {
-  if ((m->flags & PSF_MATFLAG_NORMALS) || m->tex_color != PSF_NO_TEXTURE || m->tex_bump != PSF_NO_TEXTURE ||
-      m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE)
+  if ((m->flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR)) || m->tex_color != PSF_NO_TEXTURE ||
+      m->tex_bump != PSF_NO_TEXTURE || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE)
     return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels);
   float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
   return frame_from_normal(n);

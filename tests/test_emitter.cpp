@@ -724,6 +724,50 @@ TEST_CASE("Render: hide_emitters hides an area emitter from camera rays only as 
   CHECK(unchanged >= 150);
 }
 
+TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated across each triangle", "[emitter]") {
+  // Under a constant sky of 1 an unoccluded diffuse surface shows its albedo:
+  // here white times the colour interpolated (barycentrically, in each of the
+  // quad's two triangles) from red, green, blue and yellow corners.
+  psf::Scene s;
+  uint32_t m = add_material(s, 1.0f);
+  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, m);
+  const glm::dvec3 corner[4] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}};
+  s.colors = {glm::vec3(corner[0]), glm::vec3(corner[1]), glm::vec3(corner[2]), glm::vec3(corner[3])};
+  s.camera.origin = {0, 0, 2};
+  s.camera.target = {0, 0, 0};
+  s.camera.fov_degrees = 30;
+  s.width = s.height = 16;
+  psf::LightDesc sky;
+  sky.type = psf::LightType::Constant;
+  sky.color = glm::vec3(1.0f);
+  s.lights = {sky};
+  psf::RenderResult r = render(s, 64);
+  // The expected colour at each pixel centre; the rendered and expected means
+  // over each quarter of the image (64 pixels x 64 paths: about 0.6 % noise).
+  auto expected = [&](double x, double y) {
+    glm::dvec3 p = plane_point(s, x, y);
+    glm::dvec3 q[4] = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+    // Triangle (0, 1, 2) below the diagonal y = x, (0, 2, 3) above it.
+    const int a = 0, b = p.y <= p.x ? 1 : 2, c = p.y <= p.x ? 2 : 3;
+    glm::dvec3 e1 = q[b] - q[a], e2 = q[c] - q[a], d = p - q[a];
+    double det = e1.x * e2.y - e1.y * e2.x;
+    double u = (d.x * e2.y - d.y * e2.x) / det, v = (e1.x * d.y - e1.y * d.x) / det;
+    return (1 - u - v) * corner[a] + u * corner[b] + v * corner[c];
+  };
+  for (int qy = 0; qy < 2; ++qy)
+    for (int qx = 0; qx < 2; ++qx) {
+      glm::dvec3 got(0.0), want(0.0);
+      for (int y = 8 * qy; y < 8 * qy + 8; ++y)
+        for (int x = 8 * qx; x < 8 * qx + 8; ++x) {
+          got += pixel(r.image, x, y) / 64.0;
+          want += expected(x + 0.5, y + 0.5) / 64.0;
+        }
+      INFO("quarter " << qx << ", " << qy << ": got " << got.x << " " << got.y << " " << got.z << ", want " << want.x
+                      << " " << want.y << " " << want.z);
+      for (int k = 0; k < 3; ++k) CHECK(std::fabs(got[k] - want[k]) < 0.02 * std::max(want[k], 0.1));
+    }
+}
+
 // The quad [-1, 1]^2 at z = 0 (facing +z) with material 0 of `materials`, seen
 // from (0, 0, camera_z) at 16x16 under a constant sky of 1 that reaches both sides.
 static psf::Scene quad_under_sky(const std::vector<Material>& materials, float camera_z) {

@@ -704,13 +704,18 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK(contains(msg, "accessors[1][4]"));
     CHECK(contains(msg, "index 9 out of range"));
   }
-  SECTION("vertex colours (COLOR_0) are ignored with one warning") {
+  SECTION("vertex colours (COLOR_0) are read per vertex") {
+    // The quad's COLOR_0 is its POSITION accessor: (0,0,0), (1,0,0), (1,1,0), (0,1,0).
     psf::Scene s = psf::load_scene(dir.write(
-        "c.gltf", replaced(gltf_json(embedded), "\"attributes\": {\"POSITION\": 2}",
-                           "\"attributes\": {\"POSITION\": 2, \"COLOR_0\": 2}")));
-    size_t n = 0;
-    for (const std::string& w : s.warnings) n += contains(w, "primitives[0]: vertex colours (COLOR_0) are not supported");
-    CHECK(n == 1);
+        "c.gltf", replaced(gltf_json(embedded), "\"attributes\": {\"POSITION\": 0,",
+                           "\"attributes\": {\"POSITION\": 0, \"COLOR_0\": 0,")));
+    for (const std::string& w : s.warnings) CHECK_FALSE(contains(w, "COLOR_0"));
+    REQUIRE(s.colors.size() == s.positions.size());
+    CHECK(s.colors[0] == glm::vec3(0, 0, 0));
+    CHECK(s.colors[1] == glm::vec3(1, 0, 0));
+    CHECK(s.colors[2] == glm::vec3(1, 1, 0));
+    CHECK(s.colors[3] == glm::vec3(0, 1, 0));
+    CHECK(s.colors[4].x < 0.0f);  // the other mesh has none
   }
   SECTION("a non-finite position") {
     std::string b = bin;
@@ -1063,15 +1068,26 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   CHECK(run("compare " + pa + " " + pb + " --blocks four", out) == 2);
 }
 
-TEST_CASE("OBJ: vertex colours are ignored with one warning", "[formats]") {
+TEST_CASE("OBJ and PLY: vertex colours are read, and then are the default material's colour", "[formats]") {
   TempDir dir;
-  psf::Scene coloured = psf::load_scene(
-      dir.write("c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n"));
+  psf::Scene obj = psf::load_scene(dir.write("c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 0.5\nf 1 2 3\n"));
   psf::Scene plain = psf::load_scene(dir.write("p.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
-  size_t n = 0;
-  for (const std::string& w : coloured.warnings) n += contains(w, "c.obj: vertex colours are not supported; ignored");
-  CHECK(n == 1);
-  CHECK(plain.warnings.empty());
+  psf::Scene ply = psf::load_scene(dir.write(
+      "c.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+               "property uchar red\nproperty uchar green\nproperty uchar blue\nelement face 1\n"
+               "property list uchar int vertex_indices\nend_header\n0 0 0 255 0 0\n1 0 0 0 255 0\n0 1 0 0 0 51\n"
+               "3 0 1 2\n"));
+  for (const psf::Scene* s : {&obj, &ply}) {
+    REQUIRE(s->colors.size() == 3);
+    CHECK(s->colors[0] == glm::vec3(1, 0, 0));
+    CHECK(s->colors[1] == glm::vec3(0, 1, 0));
+    CHECK(s->materials[s->tri_material[0]].albedo.s[0] == 1.0f);  // white: the colours are the colour
+  }
+  CHECK(obj.colors[2] == glm::vec3(0, 0, 0.5f));
+  CHECK(ply.colors[2].z == Approx(0.2f));  // uchar 51 / 255
+  CHECK(ply.warnings.empty());             // red, green, blue are used
+  CHECK(plain.colors.empty());
+  CHECK(plain.materials[plain.tri_material[0]].albedo.s[0] == 0.5f);
 }
 
 TEST_CASE("OBJ: a file without Ke gets the default sky; one with Ke does not", "[formats]") {

@@ -49,6 +49,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(TriAttrib, uv01)", offsetof(TriAttrib, uv01)},
       {"offsetof(TriAttrib, u2)", offsetof(TriAttrib, u2)},
       {"offsetof(TriAttrib, flags)", offsetof(TriAttrib, flags)},
+      {"offsetof(TriAttrib, color2)", offsetof(TriAttrib, color2)},
       {"sizeof(Emitter)", sizeof(Emitter)},
       {"offsetof(Emitter, radiance)", offsetof(Emitter, radiance)},
       {"offsetof(Emitter, prim)", offsetof(Emitter, prim)},

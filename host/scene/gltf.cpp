@@ -223,8 +223,6 @@ class GltfLoader {
         continue;
       }
       if (!prim.targets.empty()) warn_once(where + ": morph targets are not supported; using the base shape");
-      if (prim.attributes.count("COLOR_0"))
-        warn_once(where + ": vertex colours (COLOR_0) are not supported; the base colour is used alone");
       auto pos_attr = prim.attributes.find("POSITION");
       if (pos_attr == prim.attributes.end()) fail(where, "the primitive has no POSITION attribute");
       std::vector<double> p = read_accessor(pos_attr->second, TINYGLTF_TYPE_VEC3, where + ".POSITION", false, true);
@@ -292,8 +290,23 @@ class GltfLoader {
           tm.tangents[i] = ok ? glm::vec4(v, t[4 * i + 3] < 0.0 ? -1.0f : 1.0f) : glm::vec4(0.0f);
         }
       }
+      // Vertex colours (VEC3 or VEC4, float or normalized integers; alpha not used)
+      // multiply the base colour.
+      auto color_attr = prim.attributes.find("COLOR_0");
+      if (color_attr != prim.attributes.end()) {
+        const int ai = color_attr->second;
+        const bool vec4 = ai >= 0 && size_t(ai) < model_.accessors.size() &&
+                          model_.accessors[size_t(ai)].type == TINYGLTF_TYPE_VEC4;
+        const size_t k = vec4 ? 4 : 3;
+        std::vector<double> c =
+            read_accessor(ai, vec4 ? TINYGLTF_TYPE_VEC4 : TINYGLTF_TYPE_VEC3, where + ".COLOR_0", false, true);
+        if (c.size() != k * nv) fail(where, "COLOR_0 and POSITION have different counts");
+        tm.colors.resize(nv);
+        for (size_t i = 0; i < nv; ++i) tm.colors[i] = glm::vec3(float(c[k * i]), float(c[k * i + 1]), float(c[k * i + 2]));
+      }
       for (const auto& a : prim.attributes)
-        if (a.first != "POSITION" && a.first != "NORMAL" && a.first != "TEXCOORD_0" && a.first != "TANGENT")
+        if (a.first != "POSITION" && a.first != "NORMAL" && a.first != "TEXCOORD_0" && a.first != "TANGENT" &&
+            a.first != "COLOR_0")
           ignored_attributes_.insert(a.first);
       if (!ignored_attributes_.empty()) {
         std::string list;

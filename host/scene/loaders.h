@@ -18,6 +18,7 @@ struct TriMesh {
   std::vector<glm::vec3> normals;     // per vertex shading normal, or empty (face normals)
   std::vector<glm::vec2> uvs;         // per vertex uv (v = 0 at the image top, Mitsuba's), or empty
   std::vector<glm::vec4> tangents;    // per vertex tangent xyz and handedness w = +-1 (glTF's TANGENT), or empty
+  std::vector<glm::vec3> colors;      // per vertex linear RGB colour in [0, 1], or empty
 };
 
 // Smooth vertex normals of `mesh`: the face normals around each vertex weighted

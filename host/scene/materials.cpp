@@ -33,6 +33,12 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
   const bool has_normals = scene.normals.size() == scene.positions.size();
   const bool has_tangents = has_normals && scene.tangents.size() == scene.positions.size();
   const bool has_uvs = scene.uvs.size() == scene.positions.size();
+  const bool has_colors = scene.colors.size() == scene.positions.size();
+  // A colour in [0, 1] as TriAttrib packs it: 11, 11 and 10 bits.
+  auto pack_color = [](const glm::vec3& c) {
+    auto q = [](float v, float levels) { return uint32_t(std::lround(std::clamp(v, 0.0f, 1.0f) * levels)); };
+    return q(c.x, 2047.0f) | q(c.y, 2047.0f) << 11 | q(c.z, 1023.0f) << 22;
+  };
   for (size_t i = 0; i < scene.triangles.size(); ++i) {
     const glm::uvec3& t = scene.triangles[i];
     TriAttrib& a = out[i];
@@ -68,6 +74,15 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
     a.uv01 = {{uv[0].x, uv[0].y, uv[1].x, uv[1].y}};
     a.u2 = uv[2].x;
     a.v2 = uv[2].y;
+    if (has_colors) {
+      const glm::vec3 c[3] = {scene.colors[t.x], scene.colors[t.y], scene.colors[t.z]};
+      if (c[0].x >= 0.0f && c[1].x >= 0.0f && c[2].x >= 0.0f) {
+        a.color0 = pack_color(c[0]);
+        a.color1 = pack_color(c[1]);
+        a.color2 = pack_color(c[2]);
+        a.flags |= PSF_TRI_COLORS;
+      }
+    }
   }
   return out;
 }
@@ -75,12 +90,18 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes) {
   std::vector<Material> out = scene.materials;
   for (Material& m : out) {
-    m.flags &= ~PSF_MATFLAG_NORMALS;
+    m.flags &= ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR);
     if (m.blend > out.size()) m.blend = 0;  // a partner outside the table: no blend
   }
-  for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i)
-    if ((attributes[i].flags & PSF_TRI_NORMALS) && scene.tri_material[i] < out.size())
-      out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;
+  for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i) {
+    if (scene.tri_material[i] >= out.size()) continue;
+    if (attributes[i].flags & PSF_TRI_NORMALS) out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;
+    if (attributes[i].flags & PSF_TRI_COLORS) out[scene.tri_material[i]].flags |= PSF_MATFLAG_VERTEX_COLOR;
+  }
+  // A blend's partners scatter the same triangles: they take the flags of the material that names them.
+  for (int pass = 0; pass < 2; ++pass)
+    for (Material& m : out)
+      if (m.blend > 0) out[m.blend - 1].flags |= m.flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR);
   return out;
 }
 

@@ -1086,6 +1086,13 @@ class MitsubaLoader {
       fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance, merge)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
+    // Mitsuba uses a mesh's vertex colours only through a mesh_attribute texture,
+    // which psf does not read: they are left out, with a warning.
+    if (!mesh.colors.empty()) {
+      warn(node, "shape:vertex-colors", "the mesh's vertex colours are not used (Mitsuba reads them only through a "
+                                        "mesh_attribute texture, which is not supported)");
+      mesh.colors.clear();
+    }
     // Mitsuba 0.5's maxSmoothAngle (obj, ply, serialized): normals rebuilt with creases.
     if (const Property* a = find(e, "max_smooth_angle"); a && (e.type == "obj" || e.type == "ply" ||
                                                                e.type == "serialized")) {

@@ -169,9 +169,10 @@ ObjData read_obj(const std::string& path, bool with_materials) {
       data.warnings.push_back(message);
   }
 
-  // Vertex colours ("v x y z r g b"; tinyobjloader gives 1 where a vertex has none).
-  if (std::any_of(attrib.colors.begin(), attrib.colors.end(), [](float c) { return c != 1.0f; }))
-    data.warnings.push_back(path + ": vertex colours are not supported; ignored");
+  // Vertex colours ("v x y z r g b"; tinyobjloader gives 1 where a vertex has
+  // none): used where some vertex has one other than white.
+  const bool with_colors = attrib.colors.size() == attrib.vertices.size() &&
+                           std::any_of(attrib.colors.begin(), attrib.colors.end(), [](float c) { return c != 1.0f; });
   const size_t num_vertices = attrib.vertices.size() / 3;
   const size_t num_uvs = attrib.texcoords.size() / 2;
   const size_t num_normals = attrib.normals.size() / 3;
@@ -234,6 +235,10 @@ ObjData read_obj(const std::string& path, bool with_materials) {
   for (const auto& c : corners) {
     const float* p = &attrib.vertices[3 * size_t(c[0])];
     data.mesh.positions.emplace_back(p[0], p[1], p[2]);
+    if (with_colors) {
+      const float* q = &attrib.colors[3 * size_t(c[0])];
+      data.mesh.colors.emplace_back(q[0], q[1], q[2]);
+    }
     if (any_uv) {
       // OBJ's v points up the image; Mitsuba's (and the texture table's) down.
       const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -565,7 +570,8 @@ Scene load_obj_scene(const std::string& path) {
     }
     if (default_material == uint32_t(-1)) {
       Material d{};
-      d.albedo = {{0.5f, 0.5f, 0.5f, 0}};
+      const float grey = obj.mesh.colors.empty() ? 0.5f : 1.0f;  // vertex colours are then the colour
+      d.albedo = {{grey, grey, grey, 0}};
       d.type = PSF_MATERIAL_DIFFUSE;
       d.two_sided = 1;
       default_material = uint32_t(scene.materials.size());
@@ -580,6 +586,7 @@ Scene load_obj_scene(const std::string& path) {
   scene.triangles = std::move(obj.mesh.triangles);
   scene.normals = std::move(obj.mesh.normals);
   scene.uvs = std::move(obj.mesh.uvs);
+  scene.colors = std::move(obj.mesh.colors);
   scene.tri_material = std::move(tri_material);
   scene.camera = camera_framing(scene.positions);
   scene.width = 512;

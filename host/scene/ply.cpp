@@ -168,7 +168,7 @@ class BodyReader {
 };
 
 // Roles of the vertex properties the reader uses.
-enum Role { kX, kY, kZ, kNx, kNy, kNz, kU, kV, kRoles };
+enum Role { kX, kY, kZ, kNx, kNy, kNz, kU, kV, kR, kG, kB, kRoles };
 
 }  // namespace
 
@@ -283,6 +283,17 @@ PlyMesh read_ply(const std::string& path) {
         break;
       }
     }
+    const char* color_names[][3] = {{"red", "green", "blue"}, {"r", "g", "b"},
+                                    {"diffuse_red", "diffuse_green", "diffuse_blue"}};
+    for (auto& names : color_names) {
+      int r = index_of(names[0]), g = index_of(names[1]), b = index_of(names[2]);
+      if (r >= 0 && g >= 0 && b >= 0) {
+        role_of[kR] = r;
+        role_of[kG] = g;
+        role_of[kB] = b;
+        break;
+      }
+    }
     for (int r = 0; r < kRoles; ++r)
       if (role_of[r] >= 0 && props[size_t(role_of[r])].list)
         throw SceneError(path, vertex_element->line, "vertex property '" + props[size_t(role_of[r])].name + "' is a list");
@@ -358,6 +369,18 @@ PlyMesh read_ply(const std::string& path) {
                                    float(values[size_t(role_of[kNz])]));
         if (role_of[kU] >= 0)
           out.mesh.uvs.emplace_back(float(values[size_t(role_of[kU])]), float(values[size_t(role_of[kV])]));
+        if (role_of[kR] >= 0) {  // integers are unorm (uchar / 255, ushort / 65535, ...), floats as they are
+          glm::vec3 c;
+          for (int k = 0; k < 3; ++k) {
+            const PlyProperty& prop = vertex_element->props[size_t(role_of[kR + k])];
+            double scale = prop.type == PlyType::U8 || prop.type == PlyType::I8     ? 255.0
+                           : prop.type == PlyType::U16 || prop.type == PlyType::I16 ? 65535.0
+                           : prop.type == PlyType::U32 || prop.type == PlyType::I32 ? 4294967295.0
+                                                                                    : 1.0;
+            c[k] = float(values[size_t(role_of[kR + k])] / scale);
+          }
+          out.mesh.colors.push_back(c);
+        }
       }
     }
   }
@@ -375,7 +398,9 @@ Scene load_ply_scene(const std::string& path) {
     scene.warnings.push_back(path + ": PLY data not used: " + list);
   }
   Material m{};
-  m.albedo = {{0.5f, 0.5f, 0.5f, 0}};
+  // Vertex colours are the diffuse colour; without them a grey of 0.5.
+  const float grey = ply.mesh.colors.empty() ? 0.5f : 1.0f;
+  m.albedo = {{grey, grey, grey, 0}};
   m.type = PSF_MATERIAL_DIFFUSE;
   m.two_sided = 1;
   scene.materials.push_back(m);

@@ -58,6 +58,9 @@ struct Scene {
   // Per vertex unit tangent (world space) and handedness w = +-1, the normal
   // map's frame (t, w n x t, n) (glTF's TANGENT), or empty; w = 0: none.
   std::vector<glm::vec4> tangents;
+  // Per vertex linear RGB colour in [0, 1] (glTF COLOR_0, PLY, OBJ), or empty;
+  // x < 0: none. It multiplies the colour term of the triangle's material.
+  std::vector<glm::vec3> colors;
   std::vector<uint32_t> tri_material;    // material index of each triangle
   std::vector<Material> materials;       // albedo and emission (psf_shared.h)
   std::vector<std::string> material_names;  // per material: bsdf id or MTL name, for messages and tests

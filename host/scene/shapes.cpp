@@ -230,6 +230,17 @@ void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, u
     scene.uvs.resize(base, no_uv);
     for (size_t i = 0; i < mesh.positions.size(); ++i) scene.uvs.push_back(has_uvs ? mesh.uvs[i] : no_uv);
   }
+  // Vertex colours, clamped to [0, 1] (a NaN one is none: x = -1).
+  const bool has_colors = mesh.colors.size() == mesh.positions.size() && !mesh.positions.empty();
+  if (has_colors || !scene.colors.empty()) {
+    const glm::vec3 none(-1.0f);
+    scene.colors.resize(base, none);
+    for (size_t i = 0; i < mesh.positions.size(); ++i) {
+      const glm::vec3 c = has_colors ? mesh.colors[i] : none;
+      const bool ok = has_colors && std::isfinite(c.x) && std::isfinite(c.y) && std::isfinite(c.z);
+      scene.colors.push_back(ok ? glm::clamp(c, 0.0f, 1.0f) : none);
+    }
+  }
   scene.positions.reserve(scene.positions.size() + mesh.positions.size());
   for (const glm::vec3& p : mesh.positions) {
     glm::vec4 w = to_world * glm::vec4(p, 1.0f);
