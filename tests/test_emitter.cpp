@@ -724,16 +724,14 @@ TEST_CASE("Render: hide_emitters hides an area emitter from camera rays only as 
   CHECK(unchanged >= 150);
 }
 
-TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated across each triangle", "[emitter]") {
-  // Under a constant sky of 1 an unoccluded diffuse surface shows its albedo:
-  // here white times the colour interpolated (barycentrically, in each of the
-  // quad's two triangles) from red, green, blue and yellow corners.
+// The quad [-1, 1]^2 at z = 0 (facing +z) with material 0 of `materials`, seen
+// from (0, 0, camera_z) at 16x16 under a constant sky of 1 that reaches both sides.
+static psf::Scene quad_under_sky(const std::vector<Material>& materials, float camera_z) {
   psf::Scene s;
-  uint32_t m = add_material(s, 1.0f);
-  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, m);
-  const glm::dvec3 corner[4] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}};
-  s.colors = {glm::vec3(corner[0]), glm::vec3(corner[1]), glm::vec3(corner[2]), glm::vec3(corner[3])};
-  s.camera.origin = {0, 0, 2};
+  s.materials = materials;
+  s.material_names.assign(materials.size(), "m");
+  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, 0);
+  s.camera.origin = {0, 0, camera_z};
   s.camera.target = {0, 0, 0};
   s.camera.fov_degrees = 30;
   s.width = s.height = 16;
@@ -741,6 +739,19 @@ TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated
   sky.type = psf::LightType::Constant;
   sky.color = glm::vec3(1.0f);
   s.lights = {sky};
+  return s;
+}
+
+TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated across each triangle", "[emitter]") {
+  // Under a constant sky of 1 an unoccluded diffuse surface shows its albedo:
+  // here white times the colour interpolated (barycentrically, in each of the
+  // quad's two triangles) from red, green, blue and yellow corners.
+  Material white{};
+  white.type = PSF_MATERIAL_DIFFUSE;
+  white.albedo = {{1, 1, 1, 0}};
+  psf::Scene s = quad_under_sky({white}, 2.0f);
+  const glm::dvec3 corner[4] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}};
+  s.colors = {glm::vec3(corner[0]), glm::vec3(corner[1]), glm::vec3(corner[2]), glm::vec3(corner[3])};
   psf::RenderResult r = render(s, 64);
   // The expected colour at each pixel centre; the rendered and expected means
   // over each quarter of the image (64 pixels x 64 paths: about 0.6 % noise).
@@ -766,24 +777,6 @@ TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated
                       << " " << want.y << " " << want.z);
       for (int k = 0; k < 3; ++k) CHECK(std::fabs(got[k] - want[k]) < 0.02 * std::max(want[k], 0.1));
     }
-}
-
-// The quad [-1, 1]^2 at z = 0 (facing +z) with material 0 of `materials`, seen
-// from (0, 0, camera_z) at 16x16 under a constant sky of 1 that reaches both sides.
-static psf::Scene quad_under_sky(const std::vector<Material>& materials, float camera_z) {
-  psf::Scene s;
-  s.materials = materials;
-  s.material_names.assign(materials.size(), "m");
-  add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, 0);
-  s.camera.origin = {0, 0, camera_z};
-  s.camera.target = {0, 0, 0};
-  s.camera.fov_degrees = 30;
-  s.width = s.height = 16;
-  psf::LightDesc sky;
-  sky.type = psf::LightType::Constant;
-  sky.color = glm::vec3(1.0f);
-  s.lights = {sky};
-  return s;
 }
 
 TEST_CASE("Render: an OBJ light (Ke) emits from its front only, as Mitsuba's area lights", "[emitter]") {
