@@ -601,6 +601,32 @@ TEST_CASE("Shapes: maxSmoothAngle rebuilds a mesh's normals with creases (Mitsub
   CHECK_THROWS_WITH(load(-5.0f), Catch::Contains("maxSmoothAngle must be between 0 and 180 degrees"));
 }
 
+TEST_CASE("Shapes: a PLY's vertex colours reach a BSDF through mesh_attribute 'vertex_color' only", "[scene]") {
+  TempDir dir;
+  dir.write("c.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                     "property uchar red\nproperty uchar green\nproperty uchar blue\nelement face 1\n"
+                     "property list uchar int vertex_indices\nend_header\n0 0 0 255 0 0\n1 0 0 0 255 0\n"
+                     "0 1 0 0 0 255\n3 0 1 2\n");
+  auto load = [&](const std::string& bsdf) {
+    return psf::load_scene(dir.write("s.xml", "<scene version=\"3.0.0\">\n<shape type=\"ply\"><string name=\"filename\" "
+                                              "value=\"c.ply\"/>" + bsdf + "</shape>\n</scene>\n"));
+  };
+  const std::string attribute = "<texture name=\"reflectance\" type=\"mesh_attribute\"><string name=\"name\" "
+                                "value=\"vertex_color\"/></texture>";
+  psf::Scene used = load("<bsdf type=\"twosided\"><bsdf type=\"diffuse\">" + attribute + "</bsdf></bsdf>");
+  REQUIRE(used.colors.size() == 3);
+  CHECK(used.colors[1] == glm::vec3(0, 1, 0));
+  CHECK(used.materials[used.tri_material[0]].albedo.s[0] == 1.0f);  // white times the colours
+  CHECK(count_warnings(used, "vertex colours") == 0);
+  psf::Scene left = load("<bsdf type=\"diffuse\"/>");
+  CHECK(left.colors.empty());
+  CHECK(count_warnings(left, ":2: the mesh's vertex colours are not used") == 1);
+  psf::Scene other = load("<bsdf type=\"diffuse\"><texture name=\"reflectance\" type=\"mesh_attribute\">"
+                          "<string name=\"name\" value=\"face_color\"/></texture></bsdf>");
+  CHECK(count_warnings(other, "mesh_attribute 'face_color' is not supported") == 1);
+  CHECK(other.colors.empty());
+}
+
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {
   // A group of a rectangle (its own to_world: scaled by 2) and a cube with a
   // diffuse BSDF, drawn by two instances (translated by x = 10 and by y = 5);

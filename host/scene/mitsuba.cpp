@@ -271,6 +271,9 @@ struct Bsdf {
   // blendbsdf: the BSDF that scatters instead with probability m.blend_weight
   // (times m.tex_blend); the material gets it as Material.blend.
   std::shared_ptr<const Bsdf> blend;
+  // A colour of it (or of a BSDF inside) is the mesh's vertex colour (Mitsuba 3's
+  // mesh_attribute "vertex_color"): the colour term is 1, times the vertex colours.
+  bool vertex_color = false;
 };
 
 // Element tags that hold a plugin (a nested object) rather than a property value.
@@ -1086,12 +1089,18 @@ class MitsubaLoader {
       fail(node, "unknown shape type '" + e.type + "' (supported: " + known + ", shapegroup, instance, merge)");
     }
     TriMesh mesh = (this->*plugin->second)(e);
-    // Mitsuba uses a mesh's vertex colours only through a mesh_attribute texture,
-    // which psf does not read: they are left out, with a warning.
-    if (!mesh.colors.empty()) {
-      warn(node, "shape:vertex-colors", "the mesh's vertex colours are not used (Mitsuba reads them only through a "
-                                        "mesh_attribute texture, which is not supported)");
-      mesh.colors.clear();
+    // Mitsuba uses a mesh's vertex colours only through a mesh_attribute texture
+    // of its BSDF: without one they are left out (with a warning).
+    {
+      std::vector<pugi::xml_node> shape_bsdfs = objects(e, "bsdf");
+      const bool wanted = !shape_bsdfs.empty() && bsdf(shape_bsdfs[0]).vertex_color;
+      if (!mesh.colors.empty() && !wanted) {
+        warn(node, "shape:vertex-colors",
+             "the mesh's vertex colours are not used (its BSDF has no mesh_attribute 'vertex_color')");
+        mesh.colors.clear();
+      } else if (mesh.colors.empty() && wanted) {
+        warn(node, "shape:no-vertex-colors", "the BSDF reads vertex colours, which this mesh does not have; white");
+      }
     }
     // Mitsuba 0.5's maxSmoothAngle (obj, ply, serialized): normals rebuilt with creases.
     if (const Property* a = find(e, "max_smooth_angle"); a && (e.type == "obj" || e.type == "ply" ||
@@ -1251,11 +1260,18 @@ class MitsubaLoader {
 
   const Bsdf& bsdf(pugi::xml_node node) {
     auto cached = bsdfs_.find(node.internal_object());
-    if (cached != bsdfs_.end()) return cached->second;
+    if (cached != bsdfs_.end()) {
+      vertex_color_ = vertex_color_ || cached->second.vertex_color;
+      return cached->second;
+    }
     if (!in_progress_.insert(node.internal_object()).second) fail(node, "BSDF refers to itself");
     Element e = parse_element(node);
     auto plugin = bsdf_plugins().find(e.type);
+    const bool outer_vertex_color = vertex_color_;
+    vertex_color_ = false;
     Bsdf b = plugin != bsdf_plugins().end() ? (this->*plugin->second)(e) : approximate_bsdf(e);
+    b.vertex_color = b.vertex_color || vertex_color_;
+    vertex_color_ = outer_vertex_color || b.vertex_color;
     b.name = attr(node, "id").value_or(b.name.empty() ? e.type : b.name);
     in_progress_.erase(node.internal_object());
     return bsdfs_.emplace(node.internal_object(), b).first->second;
@@ -1301,6 +1317,22 @@ class MitsubaLoader {
 
   ColorParam color_param(const Element& e, const std::string& name, const glm::vec3& fallback) {
     const Property* p = find(e, name);
+    if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture" &&
+        attr(p->object, "type").value_or("") == "mesh_attribute") {
+      // Mitsuba 3's mesh_attribute: "vertex_color" (a PLY's colours) is the
+      // colour 1 times the vertex colours; other attributes are not supported.
+      Element t = parse_element(p->object);
+      const std::string attribute = get_string(t, "name").value_or("");
+      check_texture_properties(t, {"name", "scale"});
+      if (attribute == "vertex_color") {
+        vertex_color_ = true;
+        return {glm::vec3(float(get_float(t, "scale", 1.0)))};
+      }
+      warn(p->object, "texture:mesh_attribute:" + attribute,
+           "mesh_attribute '" + attribute + "' is not supported (only vertex_color); using " + fmt(fallback) +
+               " for '" + name + "'");
+      return {fallback};
+    }
     if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
       ColorParam c{fallback};
       c.texture = texture(p->object, TextureUse::Color, "using " + fmt(fallback) + " for '" + name + "'");
@@ -2090,6 +2122,7 @@ class MitsubaLoader {
   TextureStore store_{scene_};                                         // scene_'s textures and texels
   std::map<std::pair<const void*, int>, uint32_t> textures_;           // (texture element, use) -> texture
   std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
+  bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
   std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
