@@ -13,6 +13,7 @@
 #include <fstream>
 #include <string>
 
+#include "scene/loaders.h"
 #include "scene/scene.h"
 #include "support.h"
 
@@ -598,6 +599,21 @@ TEST_CASE("Shapes: maxSmoothAngle rebuilds a mesh's normals with creases (Mitsub
   }
   for (size_t v = 0; v < smooth.positions.size(); ++v)
     CHECK(near(smooth.normals[v], glm::normalize(smooth.positions[v])));
+  // Vertex colours follow their vertices into the split ones.
+  psf::detail::TriMesh coloured;
+  coloured.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  coloured.triangles = {{0, 1, 2}, {0, 3, 1}};  // two faces at 90 degrees
+  coloured.colors = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}};
+  psf::detail::compute_crease_normals(coloured, 30.0f);
+  REQUIRE(coloured.colors.size() == coloured.positions.size());
+  for (size_t v = 0; v < coloured.positions.size(); ++v) {
+    const glm::vec3 p = coloured.positions[v];
+    const glm::vec3 want = p == glm::vec3(0, 0, 0)   ? glm::vec3(1, 0, 0)
+                           : p == glm::vec3(1, 0, 0) ? glm::vec3(0, 1, 0)
+                           : p == glm::vec3(0, 1, 0) ? glm::vec3(0, 0, 1)
+                                                     : glm::vec3(1, 1, 0);
+    CHECK(coloured.colors[v] == want);
+  }
   CHECK_THROWS_WITH(load(-5.0f), Catch::Contains("maxSmoothAngle must be between 0 and 180 degrees"));
 }
 

@@ -181,6 +181,7 @@ void compute_crease_normals(TriMesh& mesh, float max_angle_degrees) {
         out.normals.push_back(n);
         if (!mesh.uvs.empty()) out.uvs.push_back(mesh.uvs[v]);
         if (!mesh.tangents.empty()) out.tangents.push_back(mesh.tangents[v]);
+        if (!mesh.colors.empty()) out.colors.push_back(mesh.colors[v]);
       }
       out.triangles[t][k] = it->second;
     }
