@@ -181,9 +181,10 @@ typedef struct {
 /* tex_alpha holds alpha_u in its x channel and alpha_v in y (anisotropic
  * roughness textures, one of them perhaps a constant; TextureStore::combine_xy). */
 #define PSF_MATFLAG_ALPHA_UV 256u
-/* Some triangle of it has vertex colours (set by host/scene/materials.cpp): the
- * colour term (diffuse, plastic: albedo; conductors: specular) is multiplied by
- * the colour interpolated at the hit (glTF's COLOR_0, PLY and OBJ colours). */
+/* The colour term (diffuse, plastic: albedo; conductors: specular) is multiplied
+ * by the vertex colour interpolated at the hit, on triangles with PSF_TRI_COLORS
+ * (set by the loaders: glTF's COLOR_0, PLY and OBJ colours, Mitsuba's
+ * mesh_attribute 'vertex_color'). */
 #define PSF_MATFLAG_VERTEX_COLOR 512u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f

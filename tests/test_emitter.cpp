@@ -749,6 +749,7 @@ TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated
   Material white{};
   white.type = PSF_MATERIAL_DIFFUSE;
   white.albedo = {{1, 1, 1, 0}};
+  white.flags = PSF_MATFLAG_VERTEX_COLOR;  // the loaders' mark: this material's colour term reads them
   psf::Scene s = quad_under_sky({white}, 2.0f);
   const glm::dvec3 corner[4] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 0}};
   s.colors = {glm::vec3(corner[0]), glm::vec3(corner[1]), glm::vec3(corner[2]), glm::vec3(corner[3])};
@@ -777,6 +778,14 @@ TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated
                       << " " << want.y << " " << want.z);
       for (int k = 0; k < 3; ++k) CHECK(std::fabs(got[k] - want[k]) < 0.02 * std::max(want[k], 0.1));
     }
+  // Without the mark the same triangles show the white albedo (a blend part
+  // that does not read the colours is not tinted by them).
+  s.materials[0].flags = 0;
+  psf::RenderResult plain = render(s, 64);
+  glm::dvec3 mean(0.0);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) mean += pixel(plain.image, x, y) / 256.0;
+  for (int k = 0; k < 3; ++k) CHECK(mean[k] == Approx(1.0).epsilon(0.02));
 }
 
 TEST_CASE("Render: an OBJ light (Ke) emits from its front only, as Mitsuba's area lights", "[emitter]") {

@@ -1070,7 +1070,7 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
 
 TEST_CASE("OBJ and PLY: vertex colours are read, and then are the default material's colour", "[formats]") {
   TempDir dir;
-  psf::Scene obj = psf::load_scene(dir.write("c.obj", "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 0.5\nf 1 2 3\n"));
+  psf::Scene obj = psf::load_scene(dir.write("c.obj", "v 0 0 0 1 0 -0.2\nv 1 0 0 0 1 0\nv 0 1 0 0 0 0.5\nf 1 2 3\n"));
   psf::Scene plain = psf::load_scene(dir.write("p.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"));
   psf::Scene ply = psf::load_scene(dir.write(
       "c.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"

@@ -615,6 +615,12 @@ TEST_CASE("Shapes: maxSmoothAngle rebuilds a mesh's normals with creases (Mitsub
     CHECK(coloured.colors[v] == want);
   }
   CHECK_THROWS_WITH(load(-5.0f), Catch::Contains("maxSmoothAngle must be between 0 and 180 degrees"));
+  // face_normals wins over maxSmoothAngle: flat shading.
+  psf::Scene flat = psf::load_scene(dir.write("f.xml", "<scene version=\"0.5.0\"><shape type=\"obj\">"
+                                                       "<string name=\"filename\" value=\"cube.obj\"/>"
+                                                       "<boolean name=\"faceNormals\" value=\"true\"/>"
+                                                       "<float name=\"maxSmoothAngle\" value=\"30\"/></shape></scene>\n"));
+  CHECK(flat.normals.empty());
 }
 
 TEST_CASE("Shapes: a PLY's vertex colours reach a BSDF through mesh_attribute 'vertex_color' only", "[scene]") {
@@ -641,6 +647,21 @@ TEST_CASE("Shapes: a PLY's vertex colours reach a BSDF through mesh_attribute 'v
                           "<string name=\"name\" value=\"face_color\"/></texture></bsdf>");
   CHECK(count_warnings(other, "mesh_attribute 'face_color' is not supported") == 1);
   CHECK(other.colors.empty());
+  // In a blend only the part whose colour term reads them multiplies them in;
+  // a plastic's specular reflectance cannot (a warning), its diffuse can.
+  psf::Scene blend = load("<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" "
+                          "value=\"0.3\"/></bsdf><bsdf type=\"diffuse\">" + attribute + "</bsdf></bsdf>");
+  const Material& top = blend.materials[blend.tri_material[0]];
+  REQUIRE(top.blend >= 1u);
+  CHECK((top.flags & PSF_MATFLAG_VERTEX_COLOR) == 0u);
+  CHECK((blend.materials[top.blend - 1].flags & PSF_MATFLAG_VERTEX_COLOR) != 0u);
+  CHECK(blend.colors.size() == 3);
+  std::string specular = attribute;
+  specular.replace(specular.find("reflectance"), 11, "specular_reflectance");
+  psf::Scene coat = load("<bsdf type=\"plastic\">" + specular + "</bsdf>");
+  CHECK(count_warnings(coat, "a mesh_attribute for 'specular_reflectance' is not supported") == 1);
+  CHECK((coat.materials[coat.tri_material[0]].flags & PSF_MATFLAG_VERTEX_COLOR) == 0u);
+  CHECK(coat.colors.empty());
 }
 
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {

@@ -318,7 +318,26 @@ class GltfLoader {
       // the inverse transpose and need no flip).
       if (glm::determinant(glm::mat3(to_world)) < 0.0f)
         for (glm::uvec3& t : tm.triangles) std::swap(t.y, t.z);
-      append_mesh(scene_, tm, to_world, material(prim.material, where), false, path_, 0);
+      uint32_t mat = material(prim.material, where);
+      if (!tm.colors.empty()) {
+        // COLOR_0 multiplies the base colour of every part of the material (its
+        // blend partners too); without a material, glTF's default white.
+        if (prim.material < 0) {
+          if (default_coloured_material_ == uint32_t(-1)) {
+            Material m = scene_.materials[mat];
+            m.albedo = {{1, 1, 1, 0}};
+            m.flags |= PSF_MATFLAG_VERTEX_COLOR;
+            default_coloured_material_ = push_material(m, "default (vertex colours)");
+          }
+          mat = default_coloured_material_;
+        }
+        for (uint32_t k = mat, n = 0; k < scene_.materials.size() && n < 4; ++n) {
+          scene_.materials[k].flags |= PSF_MATFLAG_VERTEX_COLOR;
+          if (scene_.materials[k].blend == 0) break;
+          k = scene_.materials[k].blend - 1;
+        }
+      }
+      append_mesh(scene_, tm, to_world, mat, false, path_, 0);
     }
     if (!attribute_warning_.empty()) warn_once(attribute_warning_);
   }
@@ -718,6 +737,7 @@ class GltfLoader {
   TextureStore textures_{scene_};              // base colour textures, into scene_
   std::vector<uint32_t> materials_;            // glTF material -> scene material, -1 until used
   uint32_t default_material_ = uint32_t(-1);  // for primitives without a material
+  uint32_t default_coloured_material_ = uint32_t(-1);  // the same, white, for primitives with COLOR_0
   bool has_camera_ = false;
   std::set<std::string> ignored_attributes_;   // vertex attributes other than POSITION
   std::string attribute_warning_;

@@ -90,18 +90,18 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes) {
   std::vector<Material> out = scene.materials;
   for (Material& m : out) {
-    m.flags &= ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR);
+    m.flags &= ~PSF_MATFLAG_NORMALS;
     if (m.blend > out.size()) m.blend = 0;  // a partner outside the table: no blend
   }
-  for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i) {
-    if (scene.tri_material[i] >= out.size()) continue;
-    if (attributes[i].flags & PSF_TRI_NORMALS) out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;
-    if (attributes[i].flags & PSF_TRI_COLORS) out[scene.tri_material[i]].flags |= PSF_MATFLAG_VERTEX_COLOR;
-  }
-  // A blend's partners scatter the same triangles: they take the flags of the material that names them.
+  for (size_t i = 0; i < attributes.size() && i < scene.tri_material.size(); ++i)
+    if ((attributes[i].flags & PSF_TRI_NORMALS) && scene.tri_material[i] < out.size())
+      out[scene.tri_material[i]].flags |= PSF_MATFLAG_NORMALS;
+  // A blend's partners shade the same triangles: they take the normal flag of
+  // the material that names them. (PSF_MATFLAG_VERTEX_COLOR is the loaders':
+  // a part multiplies vertex colours only where its colour term reads them.)
   for (int pass = 0; pass < 2; ++pass)
     for (Material& m : out)
-      if (m.blend > 0) out[m.blend - 1].flags |= m.flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR);
+      if (m.blend > 0) out[m.blend - 1].flags |= m.flags & PSF_MATFLAG_NORMALS;
   return out;
 }
 

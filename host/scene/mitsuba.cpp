@@ -1093,18 +1093,21 @@ class MitsubaLoader {
     // of its BSDF: without one they are left out (with a warning).
     {
       std::vector<pugi::xml_node> shape_bsdfs = objects(e, "bsdf");
-      const bool wanted = !shape_bsdfs.empty() && bsdf(shape_bsdfs[0]).vertex_color;
+      const bool wanted = !shape_bsdfs.empty() && reads_vertex_colors(bsdf(shape_bsdfs[0]));
       if (!mesh.colors.empty() && !wanted) {
         warn(node, "shape:vertex-colors",
              "the mesh's vertex colours are not used (its BSDF has no mesh_attribute 'vertex_color')");
         mesh.colors.clear();
       } else if (mesh.colors.empty() && wanted) {
-        warn(node, "shape:no-vertex-colors", "the BSDF reads vertex colours, which this mesh does not have; white");
+        warn(node, "shape:no-vertex-colors",
+             "the BSDF reads vertex colours, which psf found none of in this mesh (it reads them from PLY and OBJ "
+             "files); white");
       }
     }
-    // Mitsuba 0.5's maxSmoothAngle (obj, ply, serialized): normals rebuilt with creases.
-    if (const Property* a = find(e, "max_smooth_angle"); a && (e.type == "obj" || e.type == "ply" ||
-                                                               e.type == "serialized")) {
+    // Mitsuba 0.5's maxSmoothAngle (obj, ply, serialized): normals rebuilt with
+    // creases, unless face_normals cleared them (face normals win).
+    if (const Property* a = find(e, "max_smooth_angle");
+        a && (e.type == "obj" || e.type == "ply" || e.type == "serialized") && !mesh.normals.empty()) {
       const float degrees = float(get_float(e, "max_smooth_angle", 0.0));
       if (!(degrees >= 0.0f && degrees <= 180.0f)) fail(a->node, "maxSmoothAngle must be between 0 and 180 degrees");
       compute_crease_normals(mesh, degrees);
@@ -1260,21 +1263,28 @@ class MitsubaLoader {
 
   const Bsdf& bsdf(pugi::xml_node node) {
     auto cached = bsdfs_.find(node.internal_object());
-    if (cached != bsdfs_.end()) {
-      vertex_color_ = vertex_color_ || cached->second.vertex_color;
-      return cached->second;
-    }
+    if (cached != bsdfs_.end()) return cached->second;
     if (!in_progress_.insert(node.internal_object()).second) fail(node, "BSDF refers to itself");
     Element e = parse_element(node);
     auto plugin = bsdf_plugins().find(e.type);
+    // vertex_color_: whether this BSDF's own colour term (not a nested BSDF's)
+    // is a mesh_attribute 'vertex_color'; then its material multiplies it in.
     const bool outer_vertex_color = vertex_color_;
     vertex_color_ = false;
     Bsdf b = plugin != bsdf_plugins().end() ? (this->*plugin->second)(e) : approximate_bsdf(e);
-    b.vertex_color = b.vertex_color || vertex_color_;
-    vertex_color_ = outer_vertex_color || b.vertex_color;
+    if (vertex_color_) {
+      b.vertex_color = true;
+      b.m.flags |= PSF_MATFLAG_VERTEX_COLOR;
+    }
+    vertex_color_ = outer_vertex_color;
     b.name = attr(node, "id").value_or(b.name.empty() ? e.type : b.name);
     in_progress_.erase(node.internal_object());
     return bsdfs_.emplace(node.internal_object(), b).first->second;
+  }
+
+  // Whether `b` or a BSDF of its blend chain multiplies in the vertex colours.
+  static bool reads_vertex_colors(const Bsdf& b) {
+    return b.vertex_color || (b.m.flags & PSF_MATFLAG_VERTEX_COLOR) || (b.blend && reads_vertex_colors(*b.blend));
   }
 
   // One warning per property of `e` not in `known` (snake_case names).
@@ -1315,10 +1325,20 @@ class MitsubaLoader {
     uint32_t texture = PSF_NO_TEXTURE;
   };
 
-  ColorParam color_param(const Element& e, const std::string& name, const glm::vec3& fallback) {
+  // `colour_term`: the parameter is the material's colour term (diffuse
+  // reflectance, a plastic's diffuse, a conductor's specular, base_color), the
+  // one slot that vertex colours multiply (kernels/surface.cl).
+  ColorParam color_param(const Element& e, const std::string& name, const glm::vec3& fallback,
+                         bool colour_term = true) {
     const Property* p = find(e, name);
     if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture" &&
         attr(p->object, "type").value_or("") == "mesh_attribute") {
+      if (!colour_term) {
+        warn(p->object, "texture:mesh_attribute:" + name,
+             "a mesh_attribute for '" + name + "' is not supported (only for a colour term); using " +
+                 fmt(fallback));
+        return {fallback};
+      }
       // Mitsuba 3's mesh_attribute: "vertex_color" (a PLY's colours) is the
       // colour 1 times the vertex colours; other attributes are not supported.
       Element t = parse_element(p->object);
@@ -1343,7 +1363,7 @@ class MitsubaLoader {
 
   // A colour parameter that cannot be textured: a texture gives a warning and its mean.
   glm::vec3 constant_color(const Element& e, const std::string& name, const glm::vec3& fallback) {
-    ColorParam c = color_param(e, name, fallback);
+    ColorParam c = color_param(e, name, fallback, false);
     if (c.texture == PSF_NO_TEXTURE) return c.value;
     warn(find(e, name)->node, "bsdf:" + e.type + ":" + name + ":texture",
          "a texture for '" + name + "' of bsdf '" + e.type + "' is not supported; using its mean colour");

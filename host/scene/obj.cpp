@@ -574,6 +574,7 @@ Scene load_obj_scene(const std::string& path) {
       d.albedo = {{grey, grey, grey, 0}};
       d.type = PSF_MATERIAL_DIFFUSE;
       d.two_sided = 1;
+      if (!obj.mesh.colors.empty()) d.flags |= PSF_MATFLAG_VERTEX_COLOR;
       default_material = uint32_t(scene.materials.size());
       scene.materials.push_back(d);
       scene.material_names.push_back("default");
@@ -586,7 +587,13 @@ Scene load_obj_scene(const std::string& path) {
   scene.triangles = std::move(obj.mesh.triangles);
   scene.normals = std::move(obj.mesh.normals);
   scene.uvs = std::move(obj.mesh.uvs);
+  // Vertex colours as append_mesh takes them: clamped to [0, 1], a non-finite one none (x = -1).
   scene.colors = std::move(obj.mesh.colors);
+  for (glm::vec3& c : scene.colors)
+    c = std::isfinite(c.x) && std::isfinite(c.y) && std::isfinite(c.z) ? glm::clamp(c, 0.0f, 1.0f) : glm::vec3(-1.0f);
+  // With vertex colours every material (and blend partner) multiplies them in.
+  if (!scene.colors.empty())
+    for (Material& m : scene.materials) m.flags |= PSF_MATFLAG_VERTEX_COLOR;
   scene.tri_material = std::move(tri_material);
   scene.camera = camera_framing(scene.positions);
   scene.width = 512;

@@ -373,10 +373,13 @@ PlyMesh read_ply(const std::string& path) {
           glm::vec3 c;
           for (int k = 0; k < 3; ++k) {
             const PlyProperty& prop = vertex_element->props[size_t(role_of[kR + k])];
-            double scale = prop.type == PlyType::U8 || prop.type == PlyType::I8     ? 255.0
-                           : prop.type == PlyType::U16 || prop.type == PlyType::I16 ? 65535.0
-                           : prop.type == PlyType::U32 || prop.type == PlyType::I32 ? 4294967295.0
-                                                                                    : 1.0;
+            double scale = prop.type == PlyType::U8    ? 255.0
+                           : prop.type == PlyType::I8  ? 127.0
+                           : prop.type == PlyType::U16 ? 65535.0
+                           : prop.type == PlyType::I16 ? 32767.0
+                           : prop.type == PlyType::U32 ? 4294967295.0
+                           : prop.type == PlyType::I32 ? 2147483647.0
+                                                       : 1.0;
             c[k] = float(values[size_t(role_of[kR + k])] / scale);
           }
           out.mesh.colors.push_back(c);
@@ -402,6 +405,7 @@ Scene load_ply_scene(const std::string& path) {
   const float grey = ply.mesh.colors.empty() ? 0.5f : 1.0f;
   m.albedo = {{grey, grey, grey, 0}};
   m.type = PSF_MATERIAL_DIFFUSE;
+  if (!ply.mesh.colors.empty()) m.flags |= PSF_MATFLAG_VERTEX_COLOR;
   m.two_sided = 1;
   scene.materials.push_back(m);
   scene.material_names.push_back("default");
