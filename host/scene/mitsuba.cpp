@@ -1705,6 +1705,7 @@ class MitsubaLoader {
     metal.m.k = {{metal_k.x, metal_k.y, metal_k.z, 0}};
     metal.m.tex_color = base.texture;
     if (base.texture != PSF_NO_TEXTURE) metal.m.flags |= PSF_MATFLAG_REFLECTANCE;  // eta, k per hit
+    if (vertex_color_) metal.m.flags |= PSF_MATFLAG_VERTEX_COLOR;  // base_color from mesh_attribute: the metal too
     Bsdf glass = part(PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_DIELECTRIC);
     // An index of 1 (specular 0) bends nothing; the dielectric's half-vector needs it apart from 1.
     const float glass_eta = std::fabs(eta - 1.0f) < 1e-3f ? 1.001f : eta;
