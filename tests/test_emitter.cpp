@@ -215,6 +215,14 @@ uint32_t add_material(psf::Scene& s, float albedo, bool two_sided = false) {
   return uint32_t(s.materials.size() - 1);
 }
 
+// A constant environment of radiance `radiance`.
+psf::LightDesc constant_sky(glm::vec3 radiance) {
+  psf::LightDesc sky;
+  sky.type = psf::LightType::Constant;
+  sky.color = radiance;
+  return sky;
+}
+
 psf::RenderResult render(const psf::Scene& s, int spp, int max_depth = -1) {
   psf::Renderer r(psf::test::runtime(), s);
   psf::RenderOptions o;
@@ -655,10 +663,7 @@ TEST_CASE("Render: a diffuse quad under a constant environment shows albedo x L"
   s.camera.target = {0, 0, 0};
   s.camera.fov_degrees = 30;  // sees [-0.54, 0.54]^2 of the quad
   s.width = s.height = 16;
-  psf::LightDesc sky;
-  sky.type = psf::LightType::Constant;
-  sky.color = {1.0f, 0.5f, 0.25f};
-  s.lights = {sky};
+  s.lights = {constant_sky(glm::vec3(1.0f, 0.5f, 0.25f))};
   psf::RenderResult r = render(s, 64);
   CHECK(r.nonfinite == 0);
   glm::dvec3 mean(0.0);
@@ -735,10 +740,7 @@ static psf::Scene quad_under_sky(const std::vector<Material>& materials, float c
   s.camera.target = {0, 0, 0};
   s.camera.fov_degrees = 30;
   s.width = s.height = 16;
-  psf::LightDesc sky;
-  sky.type = psf::LightType::Constant;
-  sky.color = glm::vec3(1.0f);
-  s.lights = {sky};
+  s.lights = {constant_sky(glm::vec3(1.0f))};
   return s;
 }
 
@@ -847,10 +849,7 @@ TEST_CASE("Render: an OBJ mirror model (illum 3, 5, 8) reflects Ks + (1 - max Ks
     CHECK(s.material_names[top.blend - 1] == std::string(name) + " (mirror)");
     if (std::string(name) == "rough") continue;  // a rough conductor loses energy to its microfacets' shadowing
     psf::test::look_at(s, {0, 0, 2}, {0, 0, 0}, {0, 1, 0}, 30, 16);
-    psf::LightDesc sky;
-    sky.type = psf::LightType::Constant;
-    sky.color = glm::vec3(1.0f);
-    s.lights = {sky};
+    s.lights = {constant_sky(glm::vec3(1.0f))};
     psf::RenderResult r = render(s, 64);
     glm::dvec3 mean(0.0);
     for (int y = 0; y < 16; ++y)
@@ -1110,10 +1109,7 @@ TEST_CASE("Render: --visibility-ray marks a vertex occluded where its hemisphere
   s.camera.target = {0, 0, 0};
   s.camera.fov_degrees = 60;
   s.width = s.height = 32;
-  psf::LightDesc sky;
-  sky.type = psf::LightType::Constant;
-  sky.color = glm::vec3(1.0f);
-  s.lights = {sky};
+  s.lights = {constant_sky(glm::vec3(1.0f))};
   psf::Renderer renderer(psf::test::runtime(), s);
   psf::RenderOptions o;
   o.spp = 4;  // 4096 vertices, one batch
