@@ -31,7 +31,7 @@
 // after similarity (normal, albedo, visibility, finite c_j), the centre included.
 //
 // Usage: bench_filter [benchmark flags] [--scene=PATH ...] [--width=N --height=N --spp=N]
-//                     [--trials=N] [--nf_trials=N] [--pt_trials=N] [--iterations=N]
+//                     [--trials=N] [--nf_trials=N] [--pt_trials=N] [--iterations=N] [--foreshortening=0|1]
 // Without --scene: Dabrovic Sponza and the living-room from $PSF_SHARED (else
 // ../shared beside the source tree), and scenes/cornell-box.xml; absent ones are skipped.
 #include <benchmark/benchmark.h>
@@ -63,6 +63,7 @@ struct Options {
   int nf_trials = 3;                // timed nanoflann runs
   int pt_trials = 3;                // timed renders
   int iterations = 1;               // averaging passes of the filter
+  int foreshortening = 1;           // 1: radii stretched by 1 / sqrt(cos theta) (psf's default), 0: not
 };
 
 // What one tuple of the batch should get, from the host evaluation on nanoflann's lists.
@@ -94,9 +95,11 @@ int grid_level(float r) {
   return m == 0.5f ? e - 1 : e;
 }
 
-// r_i = (r0 > 0 ? r0 : d_i footprint) n_scale, as kernels/cell_keys.cl computes it.
+// r_i = (r0 > 0 ? r0 : d_i footprint) (stretch ? s_i : 1) n_scale, as
+// kernels/cell_keys.cl computes it (s_i the vertex's footprint stretch).
 float query_radius(const FilterParams& p, const PathVertex& v) {
   float r0 = p.r0 > 0.0f ? p.r0 : v.position.s[3] * p.footprint;
+  if (p.stretch) r0 *= v.albedo.s[3];
   return r0 * p.n_scale;
 }
 
@@ -203,6 +206,7 @@ psf::RenderOptions batch_options(const Options& opt) {
   o.batch_log2 = 20;
   o.keep_last_batch = true;
   o.filter.enabled = true;  // so the renderer hands back the FilterParams of the batch
+  o.filter.foreshortening = opt.foreshortening != 0;
   return o;
 }
 
@@ -257,6 +261,7 @@ int main(int argc, char** argv) {
   args.take_number("nf_trials", opt.nf_trials);
   args.take_number("pt_trials", opt.pt_trials);
   args.take_number("iterations", opt.iterations);
+  args.take_number("foreshortening", opt.foreshortening);
   if (!args.done()) return 2;
   if (opt.scenes.empty()) opt.scenes = default_scenes();
   opt.trials = std::max(1, opt.trials);
@@ -285,9 +290,9 @@ int main(int argc, char** argv) {
   report("device: %s / %s, driver %s, %s, %u compute units\n", dev.platform.c_str(), dev.name.c_str(),
          dev.driver.c_str(), dev.version.c_str(), dev.compute_units);
   report("batch: %dx%d at %d spp = %llu paths; local size %zu; filter trials %d, nanoflann trials %d, render "
-         "trials %d; %d filter iteration(s)\n",
+         "trials %d; %d filter iteration(s); foreshortening %s\n",
          opt.width, opt.height, opt.spp, (unsigned long long)paths, psf::Runtime::kDefaultLocal, opt.trials,
-         opt.nf_trials, opt.pt_trials, opt.iterations);
+         opt.nf_trials, opt.pt_trials, opt.iterations, opt.foreshortening ? "on" : "off");
   if (paths > (uint64_t(1) << 20))
     report("note: %llu paths are more than one batch of 2^20; the last batch is used\n", (unsigned long long)paths);
 

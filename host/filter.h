@@ -19,6 +19,10 @@ struct FilterOptions {
   float alpha = 0.25f;            // r(n) = r0 / n^alpha (--alpha)
   float r0 = 0.0f;                // global r0 (--r0); <= 0: per vertex from the footprint
   float footprint_pixels = 3.0f;  // r0_i covers this many pixels across (--footprint-pixels)
+  // r0_i grows by 1 / sqrt(cos theta_i) at a vertex seen under the angle theta_i,
+  // so that the ball holds the area of surface the footprint's pixels see
+  // (--foreshortening; not with a global --r0; psf_shared.h PSF_FOOTPRINT_MIN_COS).
+  bool foreshortening = true;
   int iterations = 1;             // averaging passes, each over the previous result (--iterations)
   float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
   float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)

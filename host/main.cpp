@@ -83,6 +83,7 @@ struct RenderArgs {
   std::string aov;                     // --aov list
   psf::FilterOptions fopt;             // path space filtering parameters
   std::string visibility_ray = "auto";  // --visibility-ray: auto, light or a length
+  std::string foreshortening = "on";   // --foreshortening on|off
   std::vector<std::string> defines;    // -D name=value
   int spp = 0;                         // 0: the scene's sample count, else 16
   int width = 0, height = 0;           // 0: the scene's film
@@ -230,6 +231,7 @@ int run_render(const RenderArgs& a) {
                               : a.visibility_ray == "light" ? 0.0f
                                                             : float(std::strtod(a.visibility_ray.c_str(), nullptr));
   opt.filter.enabled = a.filter == "psf";
+  opt.filter.foreshortening = a.foreshortening == "on";
   bool aov_unfiltered = false, aov_neighbours = false, aov_albedo = false, aov_normal = false, aov_depth = false;
   for (size_t b = 0; b <= a.aov.size();) {
     size_t e = a.aov.find(',', b);
@@ -359,6 +361,10 @@ int main(int argc, char** argv) {
   render->add_option("--footprint-pixels", ra.fopt.footprint_pixels,
                      "r0 covers the solid angle of N x N pixels at the vertex's distance (3)")
       ->check(finite_number(0.01, 1000.0));
+  render->add_option("--foreshortening", ra.foreshortening,
+                     "on (default): r0 grows by 1/sqrt(cos theta) where a vertex is seen at an angle theta (at most "
+                     "2x), so that the ball holds the surface the N x N pixels see; off: the solid angle's radius")
+      ->check(CLI::IsMember({"on", "off"}));
   render->add_option("--iterations", ra.fopt.iterations, "Averaging passes, each over the previous result (1)")
       ->check(CLI::Range(1, 64));
   render->add_option("--normal-threshold", ra.fopt.normal_cos, "Similar vertices: <n_i, n_j> >= this (0.95)")

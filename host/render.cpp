@@ -379,7 +379,8 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   b->alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
   if (o.filter.enabled) b->filter = std::make_unique<PathSpaceFilter>(rt, b->size);
   // r0_i = d_i sqrt(dOmega / pi), dOmega the solid angle of footprint_pixels^2
-  // pixels at the image centre (orthographic: the radius of their area).
+  // pixels at the image centre (orthographic: the radius of their area); with
+  // --foreshortening the kernels stretch it by the vertex's 1 / sqrt(cos theta).
   const Camera& cam = impl_->camera;
   const float pixel_w = 2.0f * glm::length(glm::vec3(cam.right.s[0], cam.right.s[1], cam.right.s[2])) / cam.width;
   const float pixel_h = 2.0f * glm::length(glm::vec3(cam.down.s[0], cam.down.s[1], cam.down.s[2])) / cam.height;
@@ -504,6 +505,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     fp.albedo_tol = o.filter.albedo_tol;
     fp.count = p.batch_size;
     fp.cells27 = o.filter.cells27 ? 1u : 0u;
+    fp.stretch = o.filter.foreshortening && !(o.filter.r0 > 0.0f) ? 1u : 0u;
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
     rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.filtered, b.counts, b.contrib);

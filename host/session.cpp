@@ -50,6 +50,7 @@ std::string options_text(const RenderOptions& o) {
     << " filter=" << (o.filter.enabled ? "psf" : "off");
   if (o.filter.enabled)
     s << " alpha=" << o.filter.alpha << " r0=" << o.filter.r0 << " footprint=" << o.filter.footprint_pixels
+      << " foreshortening=" << o.filter.foreshortening
       << " iterations=" << o.filter.iterations << " normal=" << o.filter.normal_cos << " albedo=" << o.filter.albedo_tol
       << " cells27=" << o.filter.cells27 << " min_removed=" << o.filter.min_removed;
   if (o.filter.enabled) {

@@ -7,7 +7,9 @@
  * cheaper than storing them in path order and reading them back at random; the
  * visibility is 0 or 1 (shade.cl), and any nonzero value counts as 1.
  * Radius: r_i = r0_i / n^alpha, with r0_i = d_i sqrt(dOmega / pi) (the footprint
- * of a few pixels at the camera path length d_i) or a global r0. Vertices are
+ * of a few pixels at the camera path length d_i) or a global r0; with
+ * FilterParams.stretch times the vertex's 1 / sqrt(cos theta_i), so that the
+ * ball holds the area of surface those pixels see (psf_shared.h). Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
  * searched) or 2^(l+1) (8 cells searched), so a cell is never smaller than the
  * query radius; only vertices of one level are neighbours. Keys map (level,
@@ -100,6 +102,7 @@ inline uint cell_key(int level, int3 c, uint key_bits) {
 inline float vertex_radius(FilterParams p, float4 position, float4 albedo) {
   if (albedo.w == 0.0f) return 0.0f;
   float r0 = p.r0 > 0.0f ? p.r0 : position.w * p.footprint;
+  if (p.stretch) r0 *= albedo.w;
   return r0 * p.n_scale;
 }
 

@@ -352,10 +352,19 @@ typedef struct {
   psf_float4 position; /* xyz x_i; w: camera path length d_i to it */
   psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: visibility, 1 or 0: of the light */
                        /* sample, or of visibility.cl's hemisphere ray */
-  psf_float4 albedo;   /* xyz the BSDF's colour term at x_i; w: 1 if the path has the vertex, else 0 */
+  psf_float4 albedo;   /* xyz the BSDF's colour term at x_i; w: 0 for a path without a vertex, else its */
+                       /* footprint stretch 1 / sqrt(max(|cos theta_i|, PSF_FOOTPRINT_MIN_COS)) >= 1, */
+                       /* theta_i between the arriving ray and the geometric normal */
   psf_float4 alpha;    /* xyz throughput alpha_i from the camera to x_i */
 } PathVertex;
 
+/* The surface a pixel sees at distance d under an angle theta has d^2 dOmega /
+ * cos theta of area: a ball of radius r0 sqrt(1 / cos theta) holds as much of
+ * it as the ball of r0 holds of a surface facing the camera (FilterParams.
+ * stretch). Cosines below this count as this, so that a grazing footprint,
+ * a long ellipse on the surface, does not blur the image more than 2x the
+ * footprint sideways. */
+#define PSF_FOOTPRINT_MIN_COS 0.25f
 /* Render-wide constants of one batch. */
 typedef struct {
   psf_uint width;          /* film width */
@@ -387,6 +396,10 @@ typedef struct {
   psf_uint count;    /* tuples in the batch */
   psf_uint key_bits; /* cell keys lie in [0, 2^key_bits) */
   psf_uint cells27;  /* 1: cells of size r searched 3x3x3; 0: cells of size 2r searched 2x2x2 */
+  psf_uint stretch;  /* 1: r0_i is multiplied by the vertex's footprint stretch (albedo.w; --foreshortening) */
+  psf_uint pad0;     /* padding */
+  psf_uint pad1;
+  psf_uint pad2;
 } FilterParams;
 
 /* The tuples of a batch in cell order: gather_tuples (tuples.cl) copies each

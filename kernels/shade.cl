@@ -182,7 +182,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     PathVertex v;
     v.position = (float4)(pos, st.prev_pos.w);
     v.normal = (float4)(n, 0.0f);
-    v.albedo = (float4)(bsdf_albedo(m), 1.0f);
+    v.albedo = (float4)(bsdf_albedo(m), rsqrt(fmax(fabs(dot(ng, wo)), PSF_FOOTPRINT_MIN_COS)));
     v.alpha = (float4)(beta, 0.0f);
     vertices[j] = v;
     st.flags |= PSF_PATH_VERTEX | PSF_PATH_VERTEX_NEW;

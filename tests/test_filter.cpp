@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <numeric>
 #include <random>
 #include <set>
@@ -24,7 +25,8 @@ struct Reference {
 };
 
 // Brute force over all pairs, written from the definition: radius r_i =
-// (r0 > 0 ? r0 : d_i footprint) n_scale; the grid level ceil(log2 r_i) must
+// (r0 > 0 ? r0 : d_i footprint) (stretch ? s_i : 1) n_scale, s_i the vertex's
+// footprint stretch (albedo.w); the grid level ceil(log2 r_i) must
 // match; |x_j - x_i| < r_i; <n_i, n_j> >= cos; |albedo_i - albedo_j| <= tol;
 // equal visibility; finite c_j; the centre always counts.
 Reference brute_force(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, const FilterParams& p,
@@ -35,6 +37,7 @@ Reference brute_force(const std::vector<PathVertex>& v, const std::vector<cl_flo
   for (size_t i = 0; i < n; ++i) {
     if (v[i].albedo.s[3] == 0.0f) continue;
     float r0 = p.r0 > 0.0f ? p.r0 : v[i].position.s[3] * p.footprint;
+    if (p.stretch) r0 = r0 * v[i].albedo.s[3];
     r[i] = r0 * p.n_scale;
     level[i] = int(std::ceil(std::log2(double(std::max(r[i], 1e-30f)))));
   }
@@ -117,6 +120,10 @@ std::vector<PathVertex> random_tuples(size_t n, uint32_t seed, float extent) {
     float a = u(rng) < 0.7f ? 0.5f : 0.5f + 0.2f * u(rng);
     t.albedo = {{a, a, 0.3f, u(rng) < 0.95f ? 1.0f : 0.0f}};
     t.alpha = {{1, 1, 1, 0}};
+    // The footprint stretch of a vertex seen at an angle: 1 (facing the camera)
+    // to 2 (PSF_FOOTPRINT_MIN_COS), used where FilterParams.stretch is set.
+    float s = 1.0f + u(rng);
+    if (t.albedo.s[3] != 0.0f && s > 1.5f) t.albedo.s[3] = std::min(s, 2.0f);
   }
   return v;
 }
@@ -276,16 +283,20 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
     SECTION(cells27 ? "27 cells of size r" : "8 cells of size 2r") {
       FilterParams p = default_params();
       p.cells27 = cells27;
-      // n = 6: keys of 4 bits, so neighbouring cells share keys (cell_key) and the
-      // filter must visit each shared one once.
-      for (auto [n, extent, footprint] : {std::tuple{3001, 1.0f, 0.02f}, std::tuple{777, 0.2f, 0.01f},
-                                          std::tuple{1, 1.0f, 0.02f}, std::tuple{64, 1.0f, 0.02f},
-                                          std::tuple{6, 0.05f, 0.02f}}) {
-        INFO("n " << n << " extent " << extent);
-        auto v = random_tuples(n, 11 + n, extent);
-        auto c = random_values(n, 12 + n);
-        p.footprint = footprint;
-        check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
+      // Radii stretched by the vertices' footprint stretch (--foreshortening) or not.
+      for (uint32_t stretch : {0u, 1u}) {
+        p.stretch = stretch;
+        // n = 6: keys of 4 bits, so neighbouring cells share keys (cell_key) and the
+        // filter must visit each shared one once.
+        for (auto [n, extent, footprint] : {std::tuple{3001, 1.0f, 0.02f}, std::tuple{777, 0.2f, 0.01f},
+                                            std::tuple{1, 1.0f, 0.02f}, std::tuple{64, 1.0f, 0.02f},
+                                            std::tuple{6, 0.05f, 0.02f}}) {
+          INFO("n " << n << " extent " << extent << " stretch " << stretch);
+          auto v = random_tuples(n, 11 + n, extent);
+          auto c = random_values(n, 12 + n);
+          p.footprint = footprint;
+          check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
+        }
       }
     }
   }
@@ -500,6 +511,50 @@ TEST_CASE("Filter: Cornell box tuples equal the brute-force equation", "[filter]
   auto dev = run_filter(b.vertices, b.values, b.params, 1);
   check_same(brute_force(b.vertices, b.values, b.params, 1), dev);
   CHECK(dev.max_count > 1);
+}
+
+TEST_CASE("Filter: a plane seen at 60 degrees averages as many paths as one facing the camera (foreshortening)",
+          "[filter]") {
+  // The pixels' footprint on a plane seen at theta has 1 / cos theta of the area
+  // it has facing the camera. A ball of the solid angle's radius holds cos theta
+  // of the paths (1/2 at 60 degrees); stretched by 1 / sqrt(cos theta) it holds
+  // as many as facing. A large white plane under a constant sky (every vertex
+  // alike: one normal, one albedo, an open hemisphere), a narrow field of view so
+  // that distance and angle barely change across the image.
+  const std::string dir = psf::test::temp_dir("psf-filter-foreshortening");
+  const std::string path = dir + "/plane.xml";
+  {
+    std::ofstream f(path);
+    f << "<scene version=\"3.0.0\">\n"
+         "  <shape type=\"rectangle\"><transform name=\"to_world\"><scale value=\"100\"/></transform>\n"
+         "    <bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5\"/></bsdf></shape>\n"
+         "  <emitter type=\"constant\"/>\n"
+         "</scene>\n";
+  }
+  const int res = psf::test::pick(64, 24);
+  auto mean_neighbours = [&](float degrees, bool foreshortening) {
+    psf::Scene scene = psf::load_scene(path);
+    const float t = glm::radians(degrees);
+    psf::test::look_at(scene, {0, -10 * std::sin(t), 10 * std::cos(t)}, {0, 0, 0}, {0, 1, 0}, 8, res);
+    psf::Renderer renderer(psf::test::runtime(), scene);
+    psf::RenderOptions o;
+    o.spp = 4;
+    o.max_depth = 2;
+    o.filter.foreshortening = foreshortening;
+    o.filter.min_removed = 0.0f;
+    auto r = renderer.render(o);
+    double sum = 0;
+    for (float n : r.neighbours) sum += n;
+    return sum / r.neighbours.size();
+  };
+  const double facing = mean_neighbours(0, true), facing_off = mean_neighbours(0, false);
+  const double tilted = mean_neighbours(60, true), tilted_off = mean_neighbours(60, false);
+  INFO("mean paths averaged: facing " << facing << " (off " << facing_off << "), at 60 degrees " << tilted
+                                      << " (off " << tilted_off << ")");
+  CHECK(facing > 10);                    // 3 x 3 pixels of 4 paths, the ball shrunk by 4^(-1/4): 18
+  CHECK(facing == Approx(facing_off).epsilon(0.01));  // cos ~ 1 (at most 4 degrees off axis): nothing to stretch
+  CHECK(tilted / facing == Approx(1.0).margin(0.1));
+  CHECK(tilted_off / facing == Approx(0.5).margin(0.07));
 }
 
 TEST_CASE("Filter: the unfiltered image of a filtered run equals --filter off bit for bit", "[filter]") {

@@ -76,6 +76,10 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, batch_size)", offsetof(FrameParams, batch_size)},
       {"offsetof(FrameParams, rr_depth)", offsetof(FrameParams, rr_depth)},
       {"offsetof(FrameParams, pad2)", offsetof(FrameParams, pad2)},
+      {"sizeof(FilterParams)", sizeof(FilterParams)},
+      {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
+      {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},
+      {"offsetof(FilterParams, stretch)", offsetof(FilterParams, stretch)},
   };
   auto& rt = psf::test::runtime();
   cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 128 * sizeof(cl_uint));
@@ -89,6 +93,6 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
   // Every buffer struct is a multiple of 16 bytes so arrays of it stay float4-aligned.
   for (size_t s : {sizeof(Ray), sizeof(Hit), sizeof(BvhTriPack), sizeof(BvhNode), sizeof(Camera),
                    sizeof(Material), sizeof(TextureInfo), sizeof(TriAttrib), sizeof(Emitter), sizeof(Environment), sizeof(PathState), sizeof(PathVertex),
-                   sizeof(FrameParams)})
+                   sizeof(FrameParams), sizeof(FilterParams)})
     CHECK(s % 16 == 0);
 }

@@ -52,7 +52,7 @@ TEST_CASE("Runtime: a failed program build reports the whole build log", "[runti
 TEST_CASE("Runtime: launches are named, timed, and fail by name", "[runtime]") {
   auto& rt = psf::test::runtime();
   rt.reset_stats();
-  // layout_report writes one entry per struct field it reports (67; test_layout
+  // layout_report writes one entry per struct field it reports (72; test_layout
   // gives it 128): a buffer of 64 was overrun since the report grew past 64.
   cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 128 * sizeof(cl_uint));
   for (int i = 0; i < 3; ++i) rt.launch("layout_report", 1, 1, out);
