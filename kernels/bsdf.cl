@@ -44,7 +44,24 @@
  *   for the side of wo, reflection chosen with probability F(wo.h).
  * - thindielectric: a thin sheet: reflection R = F + T^2 F / (1 - F^2) from the
  *   inter-reflections inside it (T = 1 - F), transmission straight through with
- *   1 - R (Mitsuba's thindielectric). */
+ *   1 - R (Mitsuba's thindielectric).
+ * - principled: Mitsuba 3's Disney-style BSDF (Burley, "Physically Based
+ *   Shading at Disney", 2012; "Extending the Disney BRDF to a BSDF with
+ *   Integrated Subsurface Scattering", 2015), lobe for lobe as Mitsuba 3.6
+ *   evaluates it (psf_shared.h has the parameters; M metallic, T spec_trans):
+ *   diffuse (1 - M)(1 - T) base / pi ((1 - F_o/2)(1 - F_i/2) + retro-reflection
+ *   R_r (F_o + F_i + F_o F_i (R_r - 1)), R_r = 2 roughness cos^2 theta_d, blended
+ *   towards the Hanrahan-Krueger-like flatness term), sheen (F_d weighted,
+ *   tinted), a GGX microfacet reflection whose Fresnel mixes the dielectric's
+ *   with Schlick's of base (metallic) and of the tinted dielectric (spec_tint),
+ *   GGX transmission sqrt(base)(1 - M) T (Walter et al. Eq. 21), and a GTR1
+ *   clearcoat 0.25 clearcoat F_cc D_cc G_cc (Schlick 0.04, alpha from 0.1 to
+ *   0.001 with clearcoat_gloss, G of GGX alpha 0.25), F = (1 - cos)^5 Schlick
+ *   weights. Not energy conserving (the lobes add), as Mitsuba's. Sampling
+ *   picks diffuse, clearcoat or the main specular lobe by the sampling rates
+ *   (diffuse weighted by (1 - M)(1 - T), clearcoat by clearcoat / 4), then for
+ *   the specular a GGX visible normal and reflection with probability
+ *   1 - T (1 - M)(1 - F) (from inside: F); the pdf is the mixture's. */
 
 #define PSF_PI 3.14159265358979323846f
 #define PSF_INV_PI 0.31830988618379067154f
@@ -241,12 +258,14 @@ inline float mf_pdf(float3 v, float3 m, float au, float av, bool beckmann) {
 
 inline bool bsdf_transmits(Material m) {
   return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-         m.type == PSF_MATERIAL_THIN_DIELECTRIC;
+         m.type == PSF_MATERIAL_THIN_DIELECTRIC ||
+         (m.type == PSF_MATERIAL_PRINCIPLED && (1.0f - m.specular.x) * m.specular.y > 0.0f);
 }
 
 /* Whether bsdf_sample reads uc (a choice between lobes). */
 inline bool bsdf_chooses_lobe(Material m) {
-  return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC || bsdf_transmits(m);
+  return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC ||
+         m.type == PSF_MATERIAL_PRINCIPLED || bsdf_transmits(m);
 }
 
 inline bool bsdf_is_plastic(Material m) {
@@ -260,6 +279,7 @@ inline bool bsdf_scatters(Material m) {
   float d = max(m.albedo.x, max(m.albedo.y, m.albedo.z));
   if (m.type == PSF_MATERIAL_DIFFUSE) return d > 0.0f;
   if (bsdf_is_plastic(m)) return fmax(d, s) > 0.0f;
+  if (m.type == PSF_MATERIAL_PRINCIPLED) return true; /* its dielectric Fresnel reflects at any base colour */
   return s > 0.0f;
 }
 
@@ -267,7 +287,7 @@ inline bool bsdf_scatters(Material m) {
  * reflectance of diffuse and plastic materials, a conductor's reflectance at
  * normal incidence, a dielectric's specular transmittance. */
 inline float3 bsdf_albedo(Material m) {
-  if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m)) return m.albedo.xyz;
+  if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PRINCIPLED) return m.albedo.xyz;
   if (m.type == PSF_MATERIAL_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_CONDUCTOR)
     return m.specular.xyz * fresnel_conductor(1.0f, m.eta.xyz, m.k.xyz);
   return m.transmittance.xyz;
@@ -278,16 +298,27 @@ inline float3 bsdf_albedo(Material m) {
  * sqrt(alpha_u alpha_v) exceeds PSF_DIFFUSE_ALPHA; plastics when that holds or
  * when the base dominates the coating, mean(albedo) (1 - F_ext) >=
  * PSF_PLASTIC_DIFFUSE_RATIO mean(specular) F_ext (F_ext, in eta.w: the coating's
- * reflectance under uniform illumination); smooth conductors and dielectrics,
- * thin dielectrics: never. */
+ * reflectance under uniform illumination); principled likewise, its base
+ * weighted by (1 - M)(1 - T) against the specular lobes' reflectance under
+ * uniform illumination in Schlick's approximation (the hemispherical mean of
+ * R0 + (1 - R0)(1 - cos)^5 is R0 + (1 - R0) / 21: M base, (1 - M) times the
+ * dielectric's R0, clearcoat / 4 times 0.04's); smooth conductors and
+ * dielectrics, thin dielectrics: never. */
 inline bool bsdf_is_diffuse(Material m) {
   if (m.type == PSF_MATERIAL_DIFFUSE) return true;
   bool rough = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-               m.type == PSF_MATERIAL_ROUGH_PLASTIC;
+               m.type == PSF_MATERIAL_ROUGH_PLASTIC || m.type == PSF_MATERIAL_PRINCIPLED;
   if (rough && m.alpha_u * m.alpha_v > PSF_DIFFUSE_ALPHA * PSF_DIFFUSE_ALPHA) return true;
   if (bsdf_is_plastic(m))
     return bsdf_mean3(m.albedo.xyz) * (1.0f - m.eta.w) >=
            PSF_PLASTIC_DIFFUSE_RATIO * bsdf_mean3(m.specular.xyz) * m.eta.w;
+  if (m.type == PSF_MATERIAL_PRINCIPLED) {
+    float metallic = m.specular.x, base = bsdf_mean3(m.albedo.xyz), r = (m.eta.x - 1.0f) / (m.eta.x + 1.0f);
+    float r0 = r * r, mean = 1.0f / 21.0f;
+    float spec = metallic * (base + (1.0f - base) * mean) + (1.0f - metallic) * (r0 + (1.0f - r0) * mean) +
+                 0.25f * m.transmittance.z * (0.04f + 0.96f * mean);
+    return (1.0f - metallic) * (1.0f - m.specular.y) * base >= PSF_PLASTIC_DIFFUSE_RATIO * spec;
+  }
   return false;
 }
 
@@ -314,6 +345,133 @@ inline float rough_transmittance(Material m, __global const half* table, float c
 inline float plastic_prob_specular(Material m, float r) {
   float ps = r * m.albedo.w, pd = (1.0f - r) * (1.0f - m.albedo.w);
   return ps + pd > 0.0f ? ps / (ps + pd) : 0.0f;
+}
+
+/* --- principled (Mitsuba 3) ---------------------------------------------- */
+
+/* (1 - c)^5 for c clamped to [0, 1]: Schlick's weight. */
+inline float principled_schlick_weight(float c) {
+  float m = clamp(1.0f - c, 0.0f, 1.0f), m2 = m * m;
+  return m2 * m2 * m;
+}
+
+/* The weight w of Schlick's F = R0 + (1 - R0) w at a microfacet cosine cos_i
+ * (negative: from inside) of an interface of relative IOR eta: the cosine on the
+ * side of the lower index (the refracted one where the ray comes from the higher). */
+inline float principled_schlick(float cos_i, float eta) {
+  float eta_it = cos_i >= 0.0f ? eta : 1.0f / eta;
+  if (eta_it > 1.0f) return principled_schlick_weight(fabs(cos_i));
+  float ct2 = 1.0f - (1.0f - cos_i * cos_i) / (eta_it * eta_it);
+  return principled_schlick_weight(sqrt(fmax(ct2, 0.0f)));
+}
+
+/* Linear RGB luminance (Rec. 709, Mitsuba's luminance()). */
+inline float principled_luminance(float3 c) { return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z; }
+
+/* The clearcoat's GTR1 distribution D(m) (Burley 2012, Eq. 4 with gamma = 1). */
+inline float principled_gtr1(float cos_m, float a) {
+  float a2 = a * a;
+  float r = (a2 - 1.0f) / (PSF_PI * log(a2) * (1.0f + (a2 - 1.0f) * cos_m * cos_m));
+  return r * cos_m > 1e-20f ? r : 0.0f;
+}
+
+/* Smith's G1 of an isotropic GGX of roughness a (the clearcoat's masking). */
+inline float principled_ggx_g1(float3 v, float3 m, float a) {
+  if (dot(v, m) * v.z <= 0.0f) return 0.0f;
+  if (v.z == 1.0f) return 1.0f;
+  float c2 = v.z * v.z, t2 = (1.0f - c2) / c2;
+  return 2.0f / (1.0f + sqrt(1.0f + a * a * t2));
+}
+
+/* The clearcoat's roughness: from 0.1 to 0.001 as clearcoat_gloss goes from 0 to 1. */
+inline float principled_clearcoat_alpha(Material m) { return mix(0.1f, 0.001f, m.transmittance.w); }
+
+/* The lobe probabilities of sampling from o's side: diffuse, clearcoat and the
+ * main specular lobe (which then reflects or refracts), summing to 1; from
+ * inside only the specular, where anything transmits. */
+inline float3 principled_lobes(Material m, bool front) {
+  if (!front) return (float3)(0.0f, 0.0f, (1.0f - m.specular.x) * m.specular.y > 0.0f ? 1.0f : 0.0f);
+  float3 p = (float3)((1.0f - m.specular.x) * (1.0f - m.specular.y) * m.k.z, 0.25f * m.transmittance.z * m.k.y, m.k.x);
+  float t = p.x + p.y + p.z;
+  return t > 0.0f ? p / t : (float3)(0.0f, 0.0f, 1.0f);
+}
+
+/* f and pdf of principled in the local frame (o = wo, i = wi). */
+inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
+  *pdf = 0.0f;
+  float co = o.z, ci = i.z;
+  if (co == 0.0f || ci == 0.0f) return (float3)(0.0f);
+  float metallic = m.specular.x, spec_trans = m.specular.y, eta = m.eta.x, au = m.alpha_u, av = m.alpha_v;
+  float brdf = (1.0f - metallic) * (1.0f - spec_trans), btdf = (1.0f - metallic) * spec_trans;
+  float3 base = m.albedo.xyz;
+  bool reflect = co * ci > 0.0f, front = co > 0.0f;
+  float eta_p = front ? eta : 1.0f / eta; /* IOR of i's side over o's side, for refraction */
+  float3 h = normalize(o + i * (reflect ? 1.0f : eta_p));
+  if (h.z < 0.0f) h = -h;
+  float oh = dot(o, h), ih = dot(i, h);
+  float side = front ? 1.0f : -1.0f; /* neither direction may see the back of the microfacet */
+  bool micro_r = reflect && oh * side > 0.0f && ih * side > 0.0f;
+  bool micro_t = !reflect && oh * side > 0.0f && ih * side < 0.0f;
+  float cos_t, eta_ti;
+  float fd = fresnel_dielectric(oh, eta, &cos_t, &eta_ti);
+  float d = mf_D(h, au, av, false);
+  float g = mf_G1(o, h, au, av, false) * mf_G1(i, h, au, av, false);
+  float3 of = front ? o : -o;
+  float pm = mf_pdf(of, h, au, av, false);
+  float3 lobes = principled_lobes(m, front);
+  float3 f = (float3)(0.0f);
+  if (micro_r && fd > 0.0f) { /* main specular reflection */
+    float3 F;
+    if (front) {
+      float w = principled_schlick(oh, eta);
+      float lum = principled_luminance(base);
+      float3 tint = lum > 0.0f ? base / lum : (float3)(1.0f);
+      float eta_it = oh >= 0.0f ? eta : 1.0f / eta, r = (eta_it - 1.0f) / (eta_it + 1.0f);
+      float3 r0 = tint * (r * r);
+      float spec_tint = m.specular.z;
+      F = (1.0f - metallic) * (1.0f - spec_tint) * fd + metallic * (base + (1.0f - base) * w) +
+          (1.0f - metallic) * spec_tint * (r0 + (1.0f - r0) * w);
+    } else {
+      F = (float3)(btdf * fd);
+    }
+    f += F * (d * g / (4.0f * fabs(co * ci)));
+    float prefl = front ? 1.0f - btdf * (1.0f - fd) : fd;
+    *pdf += lobes.z * prefl * pm / (4.0f * fabs(ih));
+  }
+  if (micro_t && btdf > 0.0f && fd < 1.0f) { /* main specular transmission, radiance scaled by 1 / eta_p^2 */
+    float denom = oh + eta_p * ih;
+    f += sqrt(base) * (btdf * fabs((1.0f - fd) * d * g * oh * ih / (co * ci * denom * denom)));
+    float ptrans = front ? btdf * (1.0f - fd) : 1.0f - fd;
+    *pdf += lobes.z * ptrans * pm * eta_p * eta_p * fabs(ih) / (denom * denom);
+  }
+  if (front && micro_r && m.transmittance.z > 0.0f) { /* clearcoat */
+    float a = principled_clearcoat_alpha(m);
+    float dcc = principled_gtr1(h.z, a);
+    float fcc = 0.04f + 0.96f * principled_schlick(oh, eta);
+    float gcc = principled_ggx_g1(o, h, 0.25f) * principled_ggx_g1(i, h, 0.25f);
+    f += (float3)(0.25f * m.transmittance.z * fcc * dcc * gcc);
+    *pdf += lobes.y * dcc * h.z / (4.0f * fabs(ih));
+  }
+  if (front && reflect && brdf > 0.0f) { /* diffuse, retro-reflection, flatness, sheen */
+    float fo = principled_schlick_weight(ci), fi = principled_schlick_weight(co);
+    float cos_d = dot(h, i), rr = 2.0f * m.eta.z * cos_d * cos_d;
+    float diffuse = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
+    float flatness = m.transmittance.y;
+    if (flatness > 0.0f) {
+      float fss = mix(1.0f, 0.5f * rr, fo) * mix(1.0f, 0.5f * rr, fi);
+      float ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
+      diffuse = mix(diffuse, ss, flatness);
+    }
+    f += base * (brdf * PSF_INV_PI * diffuse);
+    float sheen = m.specular.w;
+    if (sheen > 0.0f) {
+      float lum = principled_luminance(base);
+      float3 tint = lum > 0.0f ? base / lum : (float3)(1.0f);
+      f += mix((float3)(1.0f), tint, m.transmittance.x) * (sheen * (1.0f - metallic) * principled_schlick_weight(cos_d));
+    }
+    *pdf += lobes.x * ci * PSF_INV_PI;
+  }
+  return f;
 }
 
 /* f and pdf in the local frame (o = wo, i = wi). Delta lobes contribute nothing. */
@@ -383,6 +541,7 @@ inline float3 bsdf_eval_local(Material m, __global const half* table, float3 o, 
     /* Eq. 21 with radiance scaling 1 / eta^2: the eta^2 factors cancel. */
     return m.transmittance.xyz * fabs((1.0f - fr) * d * g * oh * ih / (co * ci * denom * denom));
   }
+  if (type == PSF_MATERIAL_PRINCIPLED) return principled_eval(m, o, i, pdf);
   return (float3)(0.0f); /* delta types */
 }
 
@@ -430,6 +589,50 @@ inline BsdfSample bsdf_fail(float3 wo) {
   bs.pdf = 0.0f;
   bs.flags = 0u;
   return bs;
+}
+
+/* The direction *i from o through the microfacet h (oh = o.h): the mirror
+ * direction, or the refracted one (cos_t, eta_ti from fresnel_dielectric of oh);
+ * false where it leaves on the wrong side of the surface. */
+inline bool microfacet_scatter(float3 o, float3 h, float oh, bool reflect, float cos_t, float eta_ti, float3* i) {
+  if (reflect) {
+    *i = 2.0f * oh * h - o;
+    return i->z * o.z > 0.0f;
+  }
+  *i = h * (oh * eta_ti + cos_t) - o * eta_ti;
+  return i->z * o.z < 0.0f;
+}
+
+/* A direction from principled's mixture (principled_lobes), uc choosing the lobe. */
+inline BsdfSample principled_sample(Material m, __global const half* table, Frame f, float3 wo, float3 o, float u1,
+                                    float u2, float uc) {
+  if (o.z == 0.0f) return bsdf_fail(wo);
+  bool front = o.z > 0.0f;
+  float3 lobes = principled_lobes(m, front);
+  float3 i;
+  if (uc < lobes.x) {
+    i = square_to_cosine_hemisphere(u1, u2);
+  } else if (uc < lobes.x + lobes.y) { /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
+    float a2 = principled_clearcoat_alpha(m);
+    a2 *= a2;
+    float c2 = (1.0f - pow(a2, 1.0f - u2)) / (1.0f - a2);
+    float st = sqrt(fmax(0.0f, 1.0f - c2)), cp;
+    float sp = psf_sincos(2.0f * PSF_PI * u1, &cp);
+    float3 h = (float3)(st * cp, st * sp, sqrt(fmax(0.0f, c2)));
+    i = 2.0f * dot(o, h) * h - o;
+    if (i.z <= 0.0f) return bsdf_fail(wo);
+  } else {
+    if (!(lobes.z > 0.0f)) return bsdf_fail(wo);
+    float us = (uc - lobes.x - lobes.y) / lobes.z; /* uniform again, for reflection or refraction */
+    float3 h = mf_sample(front ? o : -o, m.alpha_u, m.alpha_v, false, u1, u2);
+    float oh = dot(o, h);
+    float cos_t, eta_ti;
+    float fd = fresnel_dielectric(oh, m.eta.x, &cos_t, &eta_ti);
+    float btdf = (1.0f - m.specular.x) * m.specular.y;
+    if (!microfacet_scatter(o, h, oh, us < (front ? 1.0f - btdf * (1.0f - fd) : fd), cos_t, eta_ti, &i))
+      return bsdf_fail(wo);
+  }
+  return bsdf_finish(m, table, f, o, i);
 }
 
 /* bsdf_sample of the types other than diffuse. */
@@ -486,6 +689,7 @@ inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Fr
     if (uc < r) return bsdf_delta(f, mirror, m.specular.xyz, 0u);
     return bsdf_delta(f, -o, m.transmittance.xyz, BSDF_TRANSMISSION);
   }
+  if (type == PSF_MATERIAL_PRINCIPLED) return principled_sample(m, table, f, wo, o, u1, u2, uc);
   if (type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
     if (o.z == 0.0f) return bsdf_fail(wo);
     float3 of = o.z > 0.0f ? o : -o;
@@ -494,13 +698,7 @@ inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Fr
     float cos_t, eta_ti;
     float fr = fresnel_dielectric(oh, m.eta.x, &cos_t, &eta_ti);
     float3 i;
-    if (uc < fr) {
-      i = 2.0f * oh * h - o;
-      if (i.z * o.z <= 0.0f) return bsdf_fail(wo);
-    } else {
-      i = h * (oh * eta_ti + cos_t) - o * eta_ti;
-      if (i.z * o.z >= 0.0f) return bsdf_fail(wo);
-    }
+    if (!microfacet_scatter(o, h, oh, uc < fr, cos_t, eta_ti, &i)) return bsdf_fail(wo);
     return bsdf_finish(m, table, f, o, i);
   }
   return bsdf_fail(wo);

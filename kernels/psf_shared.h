@@ -153,6 +153,14 @@ typedef struct {
 #define PSF_MATERIAL_DIELECTRIC 5u       /* dielectric: smooth interface (glass, water) */
 #define PSF_MATERIAL_ROUGH_DIELECTRIC 6u /* roughdielectric: microfacet reflection and refraction */
 #define PSF_MATERIAL_THIN_DIELECTRIC 7u  /* thindielectric: thin sheet, straight transmission */
+/* principled: Mitsuba 3's Disney-style BSDF (Burley 2012, 2015). Its parameters
+ * in the Material: albedo.xyz base_color (tex_color); alpha_u, alpha_v the GGX
+ * roughness of the main lobes (from roughness and anisotropic); eta = (eta,
+ * 1 / eta^2, roughness, anisotropic); specular = (metallic, spec_trans,
+ * spec_tint, sheen); transmittance = (sheen_tint, flatness, clearcoat,
+ * clearcoat_gloss); k = the sampling rates (main specular, clearcoat, diffuse);
+ * tex_alpha: a roughness texture (x), tex_table: a metallic texture (x). */
+#define PSF_MATERIAL_PRINCIPLED 8u
 
 /* Material.flags */
 #define PSF_MATFLAG_BECKMANN 1u  /* microfacet distribution Beckmann (else GGX) */
@@ -214,9 +222,10 @@ typedef struct {
   psf_uint tex_bump;        /* bump map height texture (x channel; with PSF_MATFLAG_NORMALMAP a normal map), or none */
   float opacity;            /* with PSF_MATFLAG_MASKED: constant opacity, times tex_opacity (mask; 1 opaque) */
   float bump_scale;         /* with tex_bump: multiplier of the heights (Mitsuba's bumpmap `scale`) */
-  psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta */
+  psf_uint tex_table;       /* roughplastic: 1 x PSF_ROUGH_TABLE_RES texture, x = external transmittance by cos theta;
+                               principled: a metallic texture (x) */
   psf_uint tex_alpha;       /* roughconductor, roughdielectric: texture whose x channel is alpha (both axes; with
-                               PSF_MATFLAG_ALPHA_UV alpha_u, and y alpha_v), or none */
+                               PSF_MATFLAG_ALPHA_UV alpha_u, and y alpha_v), or none; principled: roughness (x) */
   psf_uint tex_emission;    /* texture (rgb) multiplying the emission where it is hit or sampled, or PSF_NO_TEXTURE */
   /* A blend of BSDFs (glTF's metallic and transmission between 0 and 1,
    * Mitsuba's blendbsdf): 1 + the index of the material that scatters instead of

@@ -2,9 +2,10 @@
  *
  * Reads: the hit triangle's TriAttrib (shading normals, uv), the texture table
  * and texels (texture.cl). Writes into the Material: its colour term from its
- * texture (albedo for diffuse and plastics, specular for the other types, or
- * with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), and its roughness
- * from tex_alpha.
+ * texture (albedo for diffuse, plastics and principled, specular for the other
+ * types, or with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), its
+ * roughness from tex_alpha (principled: roughness, which gives alpha_u and
+ * alpha_v with its anisotropy), and a principled's metallic from tex_table.
  *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels) -> the shading Frame
  * The shading normal is the barycentric interpolation of the vertex normals
  * (Phong 1975), else the face normal ng; the geometric normal stays with the
@@ -108,6 +109,21 @@ inline float3 vertex_color_unpack(uint c) {
   return (float3)((float)(c & 2047u) / 2047.0f, (float)((c >> 11) & 2047u) / 2047.0f, (float)(c >> 22) / 1023.0f);
 }
 
+/* Mitsuba 3's principled GGX roughness from roughness r and anisotropic k:
+ * alpha = r^2 stretched by sqrt(1 - 0.9 k) along the tangent's two axes, at
+ * least 0.001 (Burley 2012; host/scene/mitsuba.cpp computes the untextured). */
+inline void principled_alphas(Material* m, float roughness) {
+  float a = roughness * roughness, aspect = sqrt(1.0f - 0.9f * m->eta.w);
+  m->eta.z = roughness;
+  m->alpha_u = fmax(0.001f, a / aspect);
+  m->alpha_v = fmax(0.001f, a * aspect);
+}
+
+/* A principled material with a metallic texture (tex_table), which other types use for their tables. */
+inline bool surface_metallic_map(const Material* m) {
+  return m->type == PSF_MATERIAL_PRINCIPLED && m->tex_table != PSF_NO_TEXTURE;
+}
+
 inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
                                    float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                                    __global const half* texels) {
@@ -120,22 +136,27 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   }
   bool bump = m->tex_bump != PSF_NO_TEXTURE;
   Frame f;
-  if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE) {
+  if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE ||
+      surface_metallic_map(m)) {
     float4 uv01 = a->uv01;
     float2 uv0 = uv01.xy, uv1 = uv01.zw, uv2 = (float2)(a->u2, a->v2);
     float2 uv = b0 * uv0 + b1 * uv1 + b2 * uv2;
     if (m->tex_color != PSF_NO_TEXTURE) {
       float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
-      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m)) m->albedo.xyz = c;
+      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PRINCIPLED)
+        m->albedo.xyz = c;
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
     }
-    if (m->tex_alpha != PSF_NO_TEXTURE) { /* textured roughness, at Mitsuba's lower bound */
+    if (m->tex_alpha != PSF_NO_TEXTURE && m->type == PSF_MATERIAL_PRINCIPLED) {
+      principled_alphas(m, clamp(texture_eval(textures, texels, m->tex_alpha, uv).x, 0.0f, 1.0f));
+    } else if (m->tex_alpha != PSF_NO_TEXTURE) { /* textured roughness, at Mitsuba's lower bound */
       float2 t = texture_eval(textures, texels, m->tex_alpha, uv).xy;
       m->alpha_u = fmax(t.x, 1e-4f);
       m->alpha_v = (m->flags & PSF_MATFLAG_ALPHA_UV) ? fmax(t.y, 1e-4f) : m->alpha_u;
       if (m->flags & PSF_MATFLAG_ROUGH_TABLE2D) rough_table_rows(m, textures, texels);
     }
+    if (surface_metallic_map(m)) m->specular.x = clamp(texture_eval(textures, texels, m->tex_table, uv).x, 0.0f, 1.0f);
     /* dp/du and dp/dv of the triangle's uv parametrisation. */
     float2 d1 = uv1 - uv0, d2 = uv2 - uv0;
     float det = d1.x * d2.y - d1.y * d2.x;
@@ -190,7 +211,8 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   if ((m->flags & PSF_MATFLAG_VERTEX_COLOR) && (a->flags & PSF_TRI_COLORS)) {
     float3 c = b0 * vertex_color_unpack(a->color0) + b1 * vertex_color_unpack(a->color1) +
                b2 * vertex_color_unpack(a->color2);
-    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m)) m->albedo.xyz *= c;
+    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PRINCIPLED)
+      m->albedo.xyz *= c;
     else if (m->type == PSF_MATERIAL_CONDUCTOR || m->type == PSF_MATERIAL_ROUGH_CONDUCTOR) m->specular.xyz *= c;
   }
   if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) f.n = -f.n;
@@ -202,7 +224,8 @@ inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, f
                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                            __global const half* texels) {
   if ((m->flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR)) || m->tex_color != PSF_NO_TEXTURE ||
-      m->tex_bump != PSF_NO_TEXTURE || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE)
+      m->tex_bump != PSF_NO_TEXTURE || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE ||
+      surface_metallic_map(m))
     return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels);
   float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
   return frame_from_normal(n);

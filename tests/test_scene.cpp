@@ -662,14 +662,16 @@ TEST_CASE("Shapes: a PLY's vertex colours reach a BSDF through mesh_attribute 'v
   CHECK(count_warnings(coat, "a mesh_attribute for 'specular_reflectance' is not supported") == 1);
   CHECK((coat.materials[coat.tri_material[0]].flags & PSF_MATFLAG_VERTEX_COLOR) == 0u);
   CHECK(coat.colors.empty());
-  // A principled base_color from the colours tints its plastic and its metal part.
+  // A principled base_color from the colours: the one material is marked (its
+  // base colour, and through it the metallic Fresnel, reads them).
   std::string base = attribute;
   base.replace(base.find("reflectance"), 11, "base_color");
   psf::Scene pr = load("<bsdf type=\"principled\"><float name=\"metallic\" value=\"0.5\"/>" + base + "</bsdf>");
-  const Material& plastic = pr.materials[pr.tri_material[0]];
-  REQUIRE(plastic.blend >= 1u);
-  CHECK((plastic.flags & PSF_MATFLAG_VERTEX_COLOR) != 0u);
-  CHECK((pr.materials[plastic.blend - 1].flags & PSF_MATFLAG_VERTEX_COLOR) != 0u);
+  const Material& principled = pr.materials[pr.tri_material[0]];
+  CHECK(principled.type == PSF_MATERIAL_PRINCIPLED);
+  CHECK(principled.blend == 0u);
+  CHECK((principled.flags & PSF_MATFLAG_VERTEX_COLOR) != 0u);
+  CHECK(pr.colors.size() == 3);
 }
 
 TEST_CASE("Shapegroups and instances: the group's shapes drawn once per instance", "[scene]") {

@@ -1646,25 +1646,28 @@ class MitsubaLoader {
     return b;
   }
 
-  // principled (Mitsuba 3's Disney-style BSDF), approximated as glTF's
-  // metallic-roughness is (gltf.cpp): a plastic over base_color with the index
-  // of refraction `specular` stands for (Mitsuba's 2 / (1 - sqrt(0.08 specular))
-  // - 1, 1.5 for the default 0.5; `eta` when given), the conductor whose
-  // normal-incidence reflectance is base_color with probability `metallic` (a
-  // float or a texture's luminance), and a dielectric transmitting base_color
-  // with probability (1 - metallic) spec_trans; rough (GGX, alpha = roughness^2)
-  // where roughness > 0. Sheen, clearcoat, anisotropy and the tints are left out,
-  // one warning each where given.
+  // principled: Mitsuba 3's Disney-style BSDF (kernels/bsdf.cl), with its
+  // parameters as Mitsuba 3.6 reads them: `eta`, or `specular` (default 0.5)
+  // standing for eta = 2 / (1 - sqrt(0.08 specular)) - 1 (1.5 for 0.5); where
+  // spec_trans is given and not 0, an eta of 1 becomes 1.001 and a specular of
+  // 0 becomes 0.001 (Mitsuba: "not plausible for transmission"). base_color,
+  // roughness and metallic may be textures; the others' textures are replaced
+  // by their mean, one warning each.
   Bsdf bsdf_principled(const Element& e) {
-    check_properties(e, {"base_color", "roughness", "metallic", "specular", "eta", "spec_trans"});
-    warn(e.node, "bsdf:principled",
-         "bsdf 'principled' is approximated by plastic, conductor and dielectric (as glTF's metallic-roughness; "
-         "about 10 % from Mitsuba 3 on spheres under a sky)");
+    check_properties(e, {"base_color", "roughness", "anisotropic", "metallic", "spec_trans", "eta", "specular",
+                         "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat", "clearcoat_gloss",
+                         "diffuse_reflectance_sampling_rate", "main_specular_sampling_rate",
+                         "clearcoat_sampling_rate"});
+    if (find(e, "eta") && find(e, "specular"))
+      fail(find(e, "specular")->node, "bsdf 'principled' takes 'eta' or 'specular', not both");
+    Bsdf b;
+    b.m = Material{};
+    b.m.type = PSF_MATERIAL_PRINCIPLED;
     ColorParam base = color_param(e, "base_color", glm::vec3(0.5f));
-    const glm::vec3 albedo =
-        glm::clamp(base.texture != PSF_NO_TEXTURE ? store_.mean(base.texture) : base.value, 0.0f, 1.0f);
-    // A float, or a texture: its luminance's mean (roughness, spec_trans) or the
-    // texture itself (metallic, into *tex).
+    const glm::vec3 color = glm::max(base.value, glm::vec3(0.0f));
+    b.m.albedo = {{color.x, color.y, color.z, 0}};
+    b.m.tex_color = base.texture;
+    // A float in [0, 1], or a texture: into *tex where the kernels read one, else its mean.
     auto scalar = [&](const char* name, float fallback, uint32_t* tex) {
       const Property* p = find(e, name);
       if (!p || p->kind != Property::Kind::Object) return std::clamp(float(get_float(e, name, fallback)), 0.0f, 1.0f);
@@ -1672,69 +1675,50 @@ class MitsubaLoader {
       if (t == PSF_NO_TEXTURE) return fallback;
       if (tex) {
         *tex = t;
-        return 1.0f;
+        return std::clamp(store_.mean(t).x, 0.0f, 1.0f);  // the filtering-vertex rule's value; hits read the texture
       }
       warn(p->node, "bsdf:principled:" + std::string(name) + ":texture",
            std::string("a texture for '") + name + "' of bsdf 'principled' is not supported; using its mean");
       return std::clamp(store_.mean(t).x, 0.0f, 1.0f);
     };
-    uint32_t metallic_map = PSF_NO_TEXTURE;
-    const float roughness = scalar("roughness", 0.5f, nullptr);
-    const float metallic = scalar("metallic", 0.0f, &metallic_map);
-    float spec_trans = scalar("spec_trans", 0.0f, nullptr);
-    const float specular = std::clamp(float(get_float(e, "specular", 0.5)), 0.0f, 1.0f);
-    const float eta = find(e, "eta") ? get_ior(e, "eta", 1.5f) : 2.0f / (1.0f - std::sqrt(0.08f * specular)) - 1.0f;
-    const bool rough = roughness > 0.0f;
-    auto part = [&](uint32_t rough_type, uint32_t smooth_type) {
-      Bsdf b;
-      b.m = Material{};
-      b.m.type = rough ? rough_type : smooth_type;
-      b.m.alpha_u = b.m.alpha_v = std::max(roughness * roughness, 1e-4f);  // GGX: no PSF_MATFLAG_BECKMANN
-      b.m.specular = {{1, 1, 1, 0}};
-      return b;
-    };
-    Bsdf plastic = part(PSF_MATERIAL_ROUGH_PLASTIC, PSF_MATERIAL_PLASTIC);
-    plastic.m.albedo = {{albedo.x, albedo.y, albedo.z, 0}};
-    plastic.m.tex_color = base.texture;
-    plastic.m.eta = {{eta > 1.0f ? eta : 1.5f, 0, 0, 0}};
-    finish_plastic(plastic.m, (albedo.x + albedo.y + albedo.z) / 3.0f, 1.0f, store_);
-    Bsdf metal = part(PSF_MATERIAL_ROUGH_CONDUCTOR, PSF_MATERIAL_CONDUCTOR);
-    glm::vec3 metal_eta, metal_k;
-    conductor_from_reflectance(albedo, metal_eta, metal_k);
-    metal.m.eta = {{metal_eta.x, metal_eta.y, metal_eta.z, 0}};
-    metal.m.k = {{metal_k.x, metal_k.y, metal_k.z, 0}};
-    metal.m.tex_color = base.texture;
-    if (base.texture != PSF_NO_TEXTURE) metal.m.flags |= PSF_MATFLAG_REFLECTANCE;  // eta, k per hit
-    if (vertex_color_) metal.m.flags |= PSF_MATFLAG_VERTEX_COLOR;  // base_color from mesh_attribute: the metal too
-    Bsdf glass = part(PSF_MATERIAL_ROUGH_DIELECTRIC, PSF_MATERIAL_DIELECTRIC);
-    // An index of 1 (specular 0) bends nothing; the dielectric's half-vector needs it apart from 1.
-    const float glass_eta = std::fabs(eta - 1.0f) < 1e-3f ? 1.001f : eta;
-    glass.m.eta = {{glass_eta, 1.0f / (glass_eta * glass_eta), 0, 0}};
-    glass.m.transmittance = {{albedo.x, albedo.y, albedo.z, 0}};
-    if (metallic_map != PSF_NO_TEXTURE && spec_trans > 0.0f) {
-      warn(find(e, "spec_trans")->node, "bsdf:principled:spec_trans+texture",
-           "'spec_trans' with a texture for 'metallic' is not supported; ignored");
-      spec_trans = 0.0f;
+    const float roughness = scalar("roughness", 0.5f, &b.m.tex_alpha);
+    const float anisotropic = scalar("anisotropic", 0.0f, nullptr);
+    const float metallic = scalar("metallic", 0.0f, &b.m.tex_table);
+    const float spec_trans = scalar("spec_trans", 0.0f, nullptr);
+    const float spec_tint = scalar("spec_tint", 0.0f, nullptr);
+    const float sheen = scalar("sheen", 0.0f, nullptr);
+    const float sheen_tint = scalar("sheen_tint", 0.0f, nullptr);
+    const float flatness = scalar("flatness", 0.0f, nullptr);
+    const float clearcoat = scalar("clearcoat", 0.0f, nullptr);
+    const float clearcoat_gloss = scalar("clearcoat_gloss", 0.0f, nullptr);
+    const Property* st = find(e, "spec_trans");
+    const bool has_spec_trans = st && (st->kind == Property::Kind::Object || spec_trans != 0.0f);
+    float eta;
+    if (find(e, "eta")) {
+      eta = get_ior(e, "eta", 1.5f);
+      if (has_spec_trans && eta == 1.0f) eta = 1.001f;
+    } else {
+      float specular = std::clamp(float(get_float(e, "specular", 0.5)), 0.0f, 1.0f);
+      if (has_spec_trans && specular == 0.0f) specular = 1e-3f;
+      eta = 2.0f / (1.0f - std::sqrt(0.08f * specular)) - 1.0f;
     }
-    if (metallic_map == PSF_NO_TEXTURE && metallic >= 1.0f) return metal;
-    // `b` hands the shading point to `partner` with probability `weight` (times texture `tex`).
-    auto blend = [](Bsdf& b, const Bsdf& partner, float weight, uint32_t tex) {
-      b.m.blend_weight = weight;
-      b.m.tex_blend = tex;
-      b.blend = std::make_shared<const Bsdf>(partner);
+    auto rate = [&](const char* name) {
+      float r = float(get_float(e, name, 1.0));
+      if (!(r >= 0.0f)) fail(find(e, name)->node, std::string("'") + name + "' must be at least 0");
+      return r;
     };
-    if (spec_trans <= 0.0f) {
-      if (metallic > 0.0f) blend(plastic, metal, metallic, metallic_map);
-      return plastic;
-    }
-    // Metal with probability M, glass with (1 - M) t, plastic with (1 - M)(1 - t):
-    // the plastic hands over to the glass with w1 = M + (1 - M) t, the glass to
-    // the metal with M / w1.
-    const float w1 = metallic + (1.0f - metallic) * spec_trans;
-    if (metallic > 0.0f) blend(glass, metal, metallic / w1, PSF_NO_TEXTURE);
-    if (w1 >= 1.0f) return glass;
-    blend(plastic, glass, w1, PSF_NO_TEXTURE);
-    return plastic;
+    const float main_rate = rate("main_specular_sampling_rate"), clearcoat_rate = rate("clearcoat_sampling_rate"),
+                diffuse_rate = rate("diffuse_reflectance_sampling_rate");
+    // GGX alpha = roughness^2 stretched by sqrt(1 - 0.9 anisotropic), at least 0.001
+    // (surface.cl principled_alphas does the same with a roughness texture).
+    const float alpha = roughness * roughness, aspect = std::sqrt(1.0f - 0.9f * anisotropic);
+    b.m.alpha_u = std::max(0.001f, alpha / aspect);
+    b.m.alpha_v = std::max(0.001f, alpha * aspect);
+    b.m.eta = {{eta, 1.0f / (eta * eta), roughness, anisotropic}};
+    b.m.specular = {{metallic, spec_trans, spec_tint, sheen}};
+    b.m.transmittance = {{sheen_tint, flatness, clearcoat, clearcoat_gloss}};
+    b.m.k = {{main_rate, clearcoat_rate, diffuse_rate, 0}};
+    return b;
   }
 
   // bumpmap: the nested BSDF with its shading normal perturbed by the gradient of
