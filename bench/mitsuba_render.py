@@ -177,9 +177,12 @@ def main():
             continue
         result = None
         for line in p.stdout.splitlines():
-            if line.startswith("{"):
+            # Mitsuba's log lines go to stdout too, ending in a colour reset
+            # (ESC [0m) that then starts the next line: find the object.
+            start = line.find('{"ok"')
+            if start >= 0:
                 try:
-                    result = json.loads(line)
+                    result = json.loads(line[start:])
                 except ValueError:
                     pass
         if result and result.get("ok"):
