@@ -166,6 +166,12 @@ ResumeState load_state(const std::string& path, const std::string& hash, const s
     return it->second;
   };
   ResumeState st;
+  // Another psf may render the same scene and options differently (a BSDF or
+  // the filter's radius changed): its sums cannot be continued.
+  const std::string version = attr("psf:version");
+  if (version != PSF_VERSION)
+    throw std::invalid_argument("--resume " + path + ": rendered by psf " + version + ", not by this psf " +
+                                PSF_VERSION + ", whose images of the scene may differ");
   st.scene_hash = attr("psf:scene_hash");
   st.options = attr("psf:options");
   if (st.scene_hash != hash)

@@ -2,7 +2,8 @@
  *
  * Interface used by shade.cl (directions point away from the surface; wo towards
  * the previous vertex, wi the sampled or light direction; `table` is the
- * material's tex_table row in the texel buffer, used by roughplastic only):
+ * material's tex_table row in the texel buffer, read by roughplastic only:
+ * principled's tex_table is its metallic texture, which surface.cl reads):
  *   bsdf_sample(m, table, frame, wo, u1, u2, uc) -> BsdfSample {wi, weight = f |cos| / pdf, pdf, flags}
  *   bsdf_eval(m, table, frame, wo, wi, &pdf)    -> f (without the cosine), pdf of bsdf_sample choosing wi
  *   bsdf_albedo(m)                              -> the colour term path space filtering compares
@@ -259,7 +260,7 @@ inline float mf_pdf(float3 v, float3 m, float au, float av, bool beckmann) {
 inline bool bsdf_transmits(Material m) {
   return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
          m.type == PSF_MATERIAL_THIN_DIELECTRIC ||
-         (m.type == PSF_MATERIAL_PRINCIPLED && (1.0f - m.specular.x) * m.specular.y > 0.0f);
+         (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.y > 0.0f); /* by spec_trans, whatever metallic's texel */
 }
 
 /* Whether bsdf_sample reads uc (a choice between lobes). */
@@ -365,6 +366,19 @@ inline float principled_schlick(float cos_i, float eta) {
   return principled_schlick_weight(sqrt(fmax(ct2, 0.0f)));
 }
 
+/* The dielectric Fresnel reflectance of principled's interface: exactly 0 where
+ * the indices match (eta 1, Mitsuba's `specular` 0), as Mitsuba's fresnel()
+ * has it, which then leaves out the whole main reflection lobe, tints
+ * included (fresnel_dielectric rounds to tiny values there, or to 0). */
+inline float principled_fresnel(float cos_i, float eta, float* cos_t, float* eta_ti) {
+  if (eta == 1.0f) {
+    *cos_t = -cos_i;
+    *eta_ti = 1.0f;
+    return 0.0f;
+  }
+  return fresnel_dielectric(cos_i, eta, cos_t, eta_ti);
+}
+
 /* Linear RGB luminance (Rec. 709, Mitsuba's luminance()). */
 inline float principled_luminance(float3 c) { return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z; }
 
@@ -413,14 +427,18 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
   bool micro_r = reflect && oh * side > 0.0f && ih * side > 0.0f;
   bool micro_t = !reflect && oh * side > 0.0f && ih * side < 0.0f;
   float cos_t, eta_ti;
-  float fd = fresnel_dielectric(oh, eta, &cos_t, &eta_ti);
+  float fd = principled_fresnel(oh, eta, &cos_t, &eta_ti);
   float d = mf_D(h, au, av, false);
   float g = mf_G1(o, h, au, av, false) * mf_G1(i, h, au, av, false);
   float3 of = front ? o : -o;
   float pm = mf_pdf(of, h, au, av, false);
   float3 lobes = principled_lobes(m, front);
   float3 f = (float3)(0.0f);
-  if (micro_r && fd > 0.0f) { /* main specular reflection */
+  if (micro_r) { /* main specular reflection: sampled even where fd = 0, so its pdf counts there too */
+    float prefl = front ? 1.0f - btdf * (1.0f - fd) : fd;
+    *pdf += lobes.z * prefl * pm / (4.0f * fabs(ih));
+  }
+  if (micro_r && fd > 0.0f) {
     float3 F;
     if (front) {
       float w = principled_schlick(oh, eta);
@@ -435,12 +453,10 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
       F = (float3)(btdf * fd);
     }
     f += F * (d * g / (4.0f * fabs(co * ci)));
-    float prefl = front ? 1.0f - btdf * (1.0f - fd) : fd;
-    *pdf += lobes.z * prefl * pm / (4.0f * fabs(ih));
   }
-  if (micro_t && btdf > 0.0f && fd < 1.0f) { /* main specular transmission, radiance scaled by 1 / eta_p^2 */
+  if (micro_t && btdf > 0.0f) { /* main specular transmission, radiance scaled by 1 / eta_p^2 */
     float denom = oh + eta_p * ih;
-    f += sqrt(base) * (btdf * fabs((1.0f - fd) * d * g * oh * ih / (co * ci * denom * denom)));
+    if (fd < 1.0f) f += sqrt(base) * (btdf * fabs((1.0f - fd) * d * g * oh * ih / (co * ci * denom * denom)));
     float ptrans = front ? btdf * (1.0f - fd) : 1.0f - fd;
     *pdf += lobes.z * ptrans * pm * eta_p * eta_p * fabs(ih) / (denom * denom);
   }
@@ -623,13 +639,13 @@ inline BsdfSample principled_sample(Material m, __global const half* table, Fram
     if (i.z <= 0.0f) return bsdf_fail(wo);
   } else {
     if (!(lobes.z > 0.0f)) return bsdf_fail(wo);
-    float us = (uc - lobes.x - lobes.y) / lobes.z; /* uniform again, for reflection or refraction */
     float3 h = mf_sample(front ? o : -o, m.alpha_u, m.alpha_v, false, u1, u2);
     float oh = dot(o, h);
     float cos_t, eta_ti;
-    float fd = fresnel_dielectric(oh, m.eta.x, &cos_t, &eta_ti);
+    float fd = principled_fresnel(oh, m.eta.x, &cos_t, &eta_ti);
     float btdf = (1.0f - m.specular.x) * m.specular.y;
-    if (!microfacet_scatter(o, h, oh, us < (front ? 1.0f - btdf * (1.0f - fd) : fd), cos_t, eta_ti, &i))
+    float prefl = front ? 1.0f - btdf * (1.0f - fd) : fd; /* reflection, else refraction, within the lobe */
+    if (!microfacet_scatter(o, h, oh, uc < lobes.x + lobes.y + lobes.z * prefl, cos_t, eta_ti, &i))
       return bsdf_fail(wo);
   }
   return bsdf_finish(m, table, f, o, i);

@@ -262,7 +262,8 @@ dvec3 ref_principled(const Params& p, const dvec3& o, const dvec3& i) {
   if (h.z < 0) h = -h;
   const double oh = glm::dot(o, h), ih = glm::dot(i, h), side = front ? 1 : -1;
   const bool ok_r = reflect && oh * side > 0 && ih * side > 0, ok_t = !reflect && oh * side > 0 && ih * side < 0;
-  const double F = ref_fresnel(oh, eta), D = ref_D(h, ax, ay, false);
+  // Index matched (eta 1, specular 0): no reflection at all, as Mitsuba's fresnel() gives exactly 0.
+  const double F = eta == 1 ? 0.0 : ref_fresnel(oh, eta), D = ref_D(h, ax, ay, false);
   const double G = ref_G1(o, h, ax, ay, false) * ref_G1(i, h, ax, ay, false);
   const double lum = 0.212671 * base.x + 0.715160 * base.y + 0.072169 * base.z;
   const dvec3 tint = lum > 0 ? base / lum : dvec3(1);
@@ -590,6 +591,16 @@ std::vector<Params> test_materials() {
   p.sheen_tint = 0.5;
   p.main_rate = 0.5;
   p.clearcoat_rate = 2;
+  add(p);
+  p = {};
+  p.type = PSF_MATERIAL_PRINCIPLED;
+  p.label = "principled specular 0 (eta 1: no specular reflection), roughness 0.5";
+  p.albedo = {0.6, 0.5, 0.4};
+  p.eta = dvec3(1.0);
+  p.roughness = 0.5;
+  add(p);
+  p.label = "principled specular 0, metallic 0.5 (neither lobe of the Fresnel mix reflects)";
+  p.metallic = 0.5;
   add(p);
   p = {};
   p.type = PSF_MATERIAL_PRINCIPLED;
@@ -1372,7 +1383,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   uint32_t normal_y = store.pixels(ramp, 1, 1, {0.5f, 0.8f, 0.9f, 1});
   uint32_t roughness = store.pixels(ramp, 1, 1, {0.3f, 0.3f, 0.3f, 1});
   uint32_t roughness_uv = store.pixels(ramp, 1, 1, {0.3f, 0.05f, 0.0f, 1});  // alpha_u, alpha_v
-  uint32_t metallic = store.pixels(ramp, 1, 1, {0.4f, 0.4f, 0.4f, 1});
+  uint32_t metallic = store.pixels(ramp, 2, 1, {0.2f, 0.2f, 0.2f, 1, 0.6f, 0.6f, 0.6f, 1});  // 0.2 to 0.6 in u
   std::vector<Material> mats(12);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
@@ -1486,11 +1497,12 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(N[11].s[3] == Approx(0.05f).margin(1e-3));
   CHECK(C[4].s[3] == Approx(0.1f));
   CHECK(N[4].s[3] == Approx(0.3f));
-  // principled: alpha = 0.3^2 / and * sqrt(1 - 0.9 * 0.5), metallic 0.4, the base colour.
+  // principled: alpha = 0.3^2 / and * sqrt(1 - 0.9 * 0.5), metallic from its ramp at
+  // u = 0.3 (bilinear between texel centres 0.25 and 0.75: 0.2 + 0.1 * 0.4), the base colour.
   const double aspect = std::sqrt(1 - 0.45);
   CHECK(C[12].s[3] == Approx(0.09 / aspect).epsilon(3e-3));
   CHECK(N[12].s[3] == Approx(0.09 * aspect).epsilon(3e-3));
-  CHECK(SP[12].s[0] == Approx(0.4f).margin(2e-3));
+  CHECK(SP[12].s[0] == Approx(0.24f).margin(2e-3));
   CHECK(near(v3(A[12]), {0.2f, 0.4f, 0.6f}));
 }
 
@@ -1994,6 +2006,22 @@ TEST_CASE("Materials: Mitsuba's principled loads with its parameters as Mitsuba 
   CHECK(t.specular.s[3] == Approx(0.2158f).margin(2e-3));  // sRGB 128 is linear 0.2158, as Mitsuba decodes it
   CHECK(count_warnings(s, "a texture for 'sheen' of bsdf 'principled' is not supported; using its mean") == 1);
   CHECK(count_warnings(s, "bsdf 'principled'") == 1);  // no other warning: every parameter is read
+  // Values outside [0, 1] are clamped with a warning; a specular beyond 12.5 stands for no IOR.
+  std::string range = dir.write(
+      "range.xml",
+      "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"principled\">"
+      "<float name=\"sheen\" value=\"1.5\"/><float name=\"specular\" value=\"2\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"twosided\"><bsdf type=\"principled\">"
+      "<float name=\"spec_trans\" value=\"0.5\"/></bsdf></bsdf></shape>\n</scene>\n");
+  psf::Scene r = psf::load_scene(range);
+  CHECK(r.materials.at(r.tri_material.at(0)).specular.s[3] == 1.0f);
+  CHECK(r.materials.at(r.tri_material.at(0)).eta.s[0] == Approx(2.0 / (1.0 - std::sqrt(0.16)) - 1.0).epsilon(1e-5));
+  CHECK(count_warnings(r, ":2: 'sheen' of bsdf 'principled' is 1.5, outside [0, 1]; clamped") == 1);
+  CHECK(count_warnings(r, ":3: twosided around a transmissive BSDF has no effect") == 1);
+  std::string high = dir.write("high.xml",
+                               "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"principled\">\n"
+                               "<float name=\"specular\" value=\"13\"/>\n</bsdf></shape>\n</scene>\n");
+  expect_scene_error(high, 3, "must lie in [0, 12.5)");
   // eta and specular together: an error at the line of specular, as in Mitsuba.
   std::string both = dir.write("both.xml",
                                "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"principled\">\n"

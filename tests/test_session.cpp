@@ -72,6 +72,12 @@ TEST_CASE("Session: an incompatible --resume is refused with a clear message", "
   Run foreign = psf_run(box("--spp 4 --resume " + (d / "plain.exr").string() + " -o " + out));
   CHECK(foreign.status == 2);
   CHECK(foreign.output.find("not a psf render") != std::string::npos);
+  // A render of another psf version (here one before the principled BSDF and the
+  // foreshortened footprint) is refused before anything else is compared.
+  psf::write_exr((d / "old.exr").string(), plain, {{"psf:version", "0.1.0"}});
+  Run old = psf_run(box("--spp 4 --resume " + (d / "old.exr").string() + " -o " + out));
+  CHECK(old.status == 2);
+  CHECK(old.output.find("rendered by psf 0.1.0, not by this psf " PSF_VERSION) != std::string::npos);
   CHECK_FALSE(fs::exists(out));
 }
 

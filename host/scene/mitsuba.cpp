@@ -212,6 +212,13 @@ std::string fmt(const glm::vec3& v) {
   return s.str();
 }
 
+std::string fmt(float v) {
+  std::ostringstream s;
+  s.precision(4);
+  s << v;
+  return s.str();
+}
+
 // One XML file of the scene (the main file or an <include>d one).
 struct XmlFile {
   std::string path;                 // path as opened
@@ -1571,16 +1578,16 @@ class MitsubaLoader {
     check_properties(e, {});
     std::vector<pugi::xml_node> nested = objects(e, "bsdf");
     Bsdf b = bsdf(nested_bsdf(e));
-    auto transmissive = [](uint32_t type) {
-      return type == PSF_MATERIAL_DIELECTRIC || type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-             type == PSF_MATERIAL_THIN_DIELECTRIC;
+    auto transmissive = [](const Material& m) {
+      return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
+             m.type == PSF_MATERIAL_THIN_DIELECTRIC || (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.s[1] > 0.0f);
     };
-    if (transmissive(b.m.type))
+    if (transmissive(b.m))
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
     if (nested.size() > 2) fail(nested[2], "bsdf 'twosided' takes one or two nested BSDFs");
     if (nested.size() > 1) {
       Bsdf back = bsdf(nested[1]);
-      if (transmissive(back.m.type))
+      if (transmissive(back.m))
         warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
       if (b.blend || back.blend) {
         warn(e.node, "bsdf:twosided2-blend", "twosided with separate front and back BSDFs, one of them a blendbsdf, "
@@ -1667,10 +1674,17 @@ class MitsubaLoader {
     const glm::vec3 color = glm::max(base.value, glm::vec3(0.0f));
     b.m.albedo = {{color.x, color.y, color.z, 0}};
     b.m.tex_color = base.texture;
-    // A float in [0, 1], or a texture: into *tex where the kernels read one, else its mean.
+    // A float in [0, 1] (Mitsuba's stated range: others are clamped into it, with a
+    // warning), or a texture: into *tex where the kernels read one, else its mean.
     auto scalar = [&](const char* name, float fallback, uint32_t* tex) {
       const Property* p = find(e, name);
-      if (!p || p->kind != Property::Kind::Object) return std::clamp(float(get_float(e, name, fallback)), 0.0f, 1.0f);
+      if (!p || p->kind != Property::Kind::Object) {
+        const float v = float(get_float(e, name, fallback));
+        if (v < 0.0f || v > 1.0f)
+          warn(p->node, "bsdf:principled:" + std::string(name) + ":range",
+               std::string("'") + name + "' of bsdf 'principled' is " + fmt(v) + ", outside [0, 1]; clamped");
+        return std::clamp(v, 0.0f, 1.0f);
+      }
       uint32_t t = texture(p->object, TextureUse::Height, "using " + fmt(glm::vec3(fallback)) + " for '" + name + "'");
       if (t == PSF_NO_TEXTURE) return fallback;
       if (tex) {
@@ -1698,7 +1712,10 @@ class MitsubaLoader {
       eta = get_ior(e, "eta", 1.5f);
       if (has_spec_trans && eta == 1.0f) eta = 1.001f;
     } else {
-      float specular = std::clamp(float(get_float(e, "specular", 0.5)), 0.0f, 1.0f);
+      // Any specular in [0, 12.5) stands for an eta (1 at 0, 1.5 at 0.5, 2.33 at 2).
+      float specular = float(get_float(e, "specular", 0.5));
+      if (!(specular >= 0.0f && specular < 12.5f))
+        fail(find(e, "specular")->node, "'specular' of bsdf 'principled' must lie in [0, 12.5) (" + fmt(specular) + ")");
       if (has_spec_trans && specular == 0.0f) specular = 1e-3f;
       eta = 2.0f / (1.0f - std::sqrt(0.08f * specular)) - 1.0f;
     }
@@ -1816,7 +1833,7 @@ class MitsubaLoader {
         const Bsdf& inner = bsdf(n);
         const Material& im = inner.m;
         bool coloured = im.type == PSF_MATERIAL_DIFFUSE || im.type == PSF_MATERIAL_PLASTIC ||
-                        im.type == PSF_MATERIAL_ROUGH_PLASTIC;
+                        im.type == PSF_MATERIAL_ROUGH_PLASTIC || im.type == PSF_MATERIAL_PRINCIPLED;
         const psf_float4& c = coloured ? im.albedo : im.specular;
         albedo += glm::vec3(c.s[0], c.s[1], c.s[2]) / float(nested.size());
         b.two_sided = b.two_sided || inner.two_sided;
