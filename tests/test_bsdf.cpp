@@ -2242,6 +2242,50 @@ TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals an
   CHECK((attrs[2].flags & PSF_TRI_NORMALS) == 0u);
 }
 
+TEST_CASE("Materials: Mitsuba's null BSDF lets rays through", "[bsdf]") {
+  // A diffuse quad under a constant sky, seen through a null rectangle that
+  // covers the view (and casts no shadow): the same image as without it.
+  TempDir dir;
+  auto scene = [&](const std::string& extra) {
+    return dir.write(
+        "null.xml",
+        "<scene version=\"3.0.0\">\n"
+        "<sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/><transform name=\"to_world\">"
+        "<lookat origin=\"0, 0, 3\" target=\"0, 0, 0\" up=\"0, 1, 0\"/></transform><film type=\"hdrfilm\">"
+        "<integer name=\"width\" value=\"16\"/><integer name=\"height\" value=\"16\"/></film></sensor>\n"
+        "<emitter type=\"constant\"><rgb name=\"radiance\" value=\"1\"/></emitter>\n"
+        "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.6\"/></bsdf></shape>\n" +
+            extra + "</scene>\n");
+  };
+  const std::string null_quad =
+      "<shape type=\"rectangle\"><transform name=\"to_world\"><scale value=\"3\"/><translate z=\"1\"/></transform>"
+      "<bsdf type=\"null\"/></shape>\n";
+  auto& rt = psf::test::runtime();
+  psf::RenderOptions o;
+  o.spp = 16;
+  o.filter.enabled = false;
+  psf::Scene plain = psf::load_scene(scene(""));
+  psf::Image want = psf::Renderer(rt, plain).render(o).image;
+  psf::Scene with_null = psf::load_scene(scene(null_quad));
+  CHECK(with_null.triangles.size() == plain.triangles.size() + 2);
+  CHECK(count_warnings(with_null, "null") == 0);
+  psf::Image got = psf::Renderer(rt, with_null).render(o).image;
+  REQUIRE(got.rgb.size() == want.rgb.size());
+  float worst = 0;
+  for (size_t k = 0; k < got.rgb.size(); ++k) worst = std::max(worst, std::abs(got.rgb[k] - want.rgb[k]));
+  CHECK(worst <= 1e-6f);
+  double centre = 0;  // the quad's albedo under the sky, over the central 8 x 8 pixels
+  for (int y = 4; y < 12; ++y)
+    for (int x = 4; x < 12; ++x) centre += want.rgb[(y * 16 + x) * 3] / 64.0;
+  CHECK(centre == Approx(0.6).epsilon(0.02));
+  // An area emitter on a null shape: opaque (light sampling needs its hits), with a warning.
+  psf::Scene lamp = psf::load_scene(scene(
+      "<shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"1\"/></transform><bsdf type=\"null\"/>"
+      "<emitter type=\"area\"><rgb name=\"radiance\" value=\"2\"/></emitter></shape>\n"));
+  CHECK(count_warnings(lamp, "an area emitter on a shape with a null BSDF") == 1);
+  CHECK((lamp.materials.at(lamp.tri_material.back()).flags & PSF_MATFLAG_MASKED) == 0u);
+}
+
 TEST_CASE("Materials: mask cut-outs are alpha-tested during ray traversal", "[bsdf]") {
   // An emitting square (radiance 1) at z = 2 facing the camera behind a black
   // diffuse square at z = 1 whose opacity is 0 on its left half and 1 on its

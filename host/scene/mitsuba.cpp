@@ -281,6 +281,7 @@ struct Bsdf {
   // A colour of it (or of a BSDF inside) is the mesh's vertex colour (Mitsuba 3's
   // mesh_attribute "vertex_color"): the colour term is 1, times the vertex colours.
   bool vertex_color = false;
+  bool null = false;  // Mitsuba's null BSDF: rays pass through (a mask of opacity 0)
 };
 
 // Element tags that hold a plugin (a nested object) rather than a property value.
@@ -1228,6 +1229,14 @@ class MitsubaLoader {
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
+    if (b.null && emits) {
+      // Rays that skip the surface would never reach the emitter, and light
+      // sampling, whose MIS weights count on them, would be short of them.
+      warn(emitter_node, "bsdf:null+emitter",
+           "an area emitter on a shape with a null BSDF: the shape is drawn as an opaque black emitter (Mitsuba "
+           "lets rays pass through it)");
+      b.m.flags &= ~PSF_MATFLAG_MASKED;
+    }
 
     auto with_emission = [&](const Bsdf& from) {
       Material m = from.m;
@@ -1264,7 +1273,8 @@ class MitsubaLoader {
         {"roughdielectric", &MitsubaLoader::bsdf_dielectric}, {"thindielectric", &MitsubaLoader::bsdf_dielectric},
         {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
         {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap},
-        {"blendbsdf", &MitsubaLoader::bsdf_blend},          {"principled", &MitsubaLoader::bsdf_principled}};
+        {"blendbsdf", &MitsubaLoader::bsdf_blend},          {"principled", &MitsubaLoader::bsdf_principled},
+        {"null", &MitsubaLoader::bsdf_null}};
     return plugins;
   }
 
@@ -1816,6 +1826,19 @@ class MitsubaLoader {
     if (b.m.opacity < 1.0f || index != PSF_NO_TEXTURE) b.m.flags |= PSF_MATFLAG_MASKED;
     else b.m.flags &= ~PSF_MATFLAG_MASKED;
     b.name.clear();
+    return b;
+  }
+
+  // null: a surface rays pass through (Mitsuba's boundaries of media, which psf
+  // does not render, and helper geometry): a black material of opacity 0, never
+  // hit by ray casting (raycast.cl's alpha test).
+  Bsdf bsdf_null(const Element& e) {
+    check_properties(e, {});
+    Bsdf b;
+    b.m = diffuse_material(glm::vec3(0.0f));
+    b.m.flags |= PSF_MATFLAG_MASKED;
+    b.m.opacity = 0.0f;
+    b.null = true;
     return b;
   }
 
