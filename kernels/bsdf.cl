@@ -379,8 +379,12 @@ inline float principled_fresnel(float cos_i, float eta, float* cos_t, float* eta
   return fresnel_dielectric(cos_i, eta, cos_t, eta_ti);
 }
 
-/* Linear RGB luminance (Rec. 709, Mitsuba's luminance()). */
-inline float principled_luminance(float3 c) { return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z; }
+/* The base colour over its luminance (Rec. 709, Mitsuba's luminance()), 1 for
+ * black: the hue that spec_tint and sheen_tint tint towards. */
+inline float3 principled_tint(float3 base) {
+  float lum = 0.212671f * base.x + 0.715160f * base.y + 0.072169f * base.z;
+  return lum > 0.0f ? base / lum : (float3)(1.0f);
+}
 
 /* The clearcoat's GTR1 distribution D(m) (Burley 2012, Eq. 4 with gamma = 1). */
 inline float principled_gtr1(float cos_m, float a) {
@@ -442,10 +446,8 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
     float3 F;
     if (front) {
       float w = principled_schlick(oh, eta);
-      float lum = principled_luminance(base);
-      float3 tint = lum > 0.0f ? base / lum : (float3)(1.0f);
       float eta_it = oh >= 0.0f ? eta : 1.0f / eta, r = (eta_it - 1.0f) / (eta_it + 1.0f);
-      float3 r0 = tint * (r * r);
+      float3 r0 = principled_tint(base) * (r * r);
       float spec_tint = m.specular.z;
       F = (1.0f - metallic) * (1.0f - spec_tint) * fd + metallic * (base + (1.0f - base) * w) +
           (1.0f - metallic) * spec_tint * (r0 + (1.0f - r0) * w);
@@ -480,11 +482,9 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
     }
     f += base * (brdf * PSF_INV_PI * diffuse);
     float sheen = m.specular.w;
-    if (sheen > 0.0f) {
-      float lum = principled_luminance(base);
-      float3 tint = lum > 0.0f ? base / lum : (float3)(1.0f);
-      f += mix((float3)(1.0f), tint, m.transmittance.x) * (sheen * (1.0f - metallic) * principled_schlick_weight(cos_d));
-    }
+    if (sheen > 0.0f)
+      f += mix((float3)(1.0f), principled_tint(base), m.transmittance.x) *
+           (sheen * (1.0f - metallic) * principled_schlick_weight(cos_d));
     *pdf += lobes.x * ci * PSF_INV_PI;
   }
   return f;
