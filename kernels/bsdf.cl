@@ -438,6 +438,8 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
   float pm = mf_pdf(of, h, au, av, false);
   float3 lobes = principled_lobes(m, front);
   float3 f = (float3)(0.0f);
+  /* Schlick's weight at the microfacet, for the front's tinted specular and its clearcoat. */
+  float w = front && micro_r ? principled_schlick(oh, eta) : 0.0f;
   if (micro_r) { /* main specular reflection: sampled even where fd = 0, so its pdf counts there too */
     float prefl = front ? 1.0f - btdf * (1.0f - fd) : fd;
     *pdf += lobes.z * prefl * pm / (4.0f * fabs(ih));
@@ -445,7 +447,6 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
   if (micro_r && fd > 0.0f) {
     float3 F;
     if (front) {
-      float w = principled_schlick(oh, eta);
       float eta_it = oh >= 0.0f ? eta : 1.0f / eta, r = (eta_it - 1.0f) / (eta_it + 1.0f);
       float3 r0 = principled_tint(base) * (r * r);
       float spec_tint = m.specular.z;
@@ -465,7 +466,7 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
   if (front && micro_r && m.transmittance.z > 0.0f) { /* clearcoat */
     float a = principled_clearcoat_alpha(m);
     float dcc = principled_gtr1(h.z, a);
-    float fcc = 0.04f + 0.96f * principled_schlick(oh, eta);
+    float fcc = 0.04f + 0.96f * w;
     float gcc = principled_ggx_g1(o, h, 0.25f) * principled_ggx_g1(i, h, 0.25f);
     f += (float3)(0.25f * m.transmittance.z * fcc * dcc * gcc);
     *pdf += lobes.y * dcc * h.z / (4.0f * fabs(ih));
