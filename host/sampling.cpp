@@ -13,7 +13,7 @@ const std::vector<JoeKuoRow>& joe_kuo_rows() {
 
 std::vector<uint32_t> sobol_matrices() {
   constexpr int B = PSF_SOBOL_BITS;
-  std::vector<uint32_t> c(size_t(PSF_SOBOL_DIMS) * B);
+  std::vector<uint32_t> c(size_t(PSF_SOBOL_DIMS) * B);  // by dimension first, transposed at the end
   for (int b = 0; b < B; ++b) c[b] = 1u << (B - 1 - b);  // dimension 1: van der Corput
   const auto& rows = joe_kuo_rows();
   for (int dim = 1; dim < PSF_SOBOL_DIMS; ++dim) {
@@ -31,7 +31,10 @@ std::vector<uint32_t> sobol_matrices() {
       }
     }
   }
-  return c;
+  std::vector<uint32_t> t(c.size());
+  for (int dim = 0; dim < PSF_SOBOL_DIMS; ++dim)
+    for (int b = 0; b < B; ++b) t[size_t(b) * PSF_SOBOL_DIMS + dim] = c[size_t(dim) * B + b];
+  return t;
 }
 
 }  // namespace psf

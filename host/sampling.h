@@ -17,7 +17,8 @@ struct JoeKuoRow {
 const std::vector<JoeKuoRow>& joe_kuo_rows();
 
 // Generator matrices: PSF_SOBOL_DIMS x 32 columns, column b of dimension d at
-// [d * 32 + b] (the direction number v_{b+1} scaled to 32 bits).
+// [b * PSF_SOBOL_DIMS + d] (the direction number v_{b+1} scaled to 32 bits), so
+// that the kernels read the columns of consecutive dimensions as one vector.
 std::vector<uint32_t> sobol_matrices();
 
 }  // namespace psf

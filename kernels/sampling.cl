@@ -10,50 +10,52 @@
  * seed, so any path index maps to the same sample on every device and batch size.
  * Dimensions >= PSF_SOBOL_DIMS use hashed random numbers instead. */
 
-inline uint psf_hash(uint x) {
-  /* lowbias32 (Wellons): a well-mixing 32-bit integer hash. */
-  x ^= x >> 16;
-  x *= 0x7feb352du;
-  x ^= x >> 15;
-  x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
+/* The hash and scrambling functions are defined for uint and for uint8 (eight
+ * dimensions of one sample at once, sample_bits8_keyed) from one body each. */
+#define PSF_DEFINE_SCRAMBLE(T, SUFFIX)                                                  \
+  /* lowbias32 (Wellons): a well-mixing 32-bit integer hash. */                         \
+  inline T psf_hash##SUFFIX(T x) {                                                      \
+    x ^= x >> 16;                                                                       \
+    x *= 0x7feb352du;                                                                   \
+    x ^= x >> 15;                                                                       \
+    x *= 0x846ca68bu;                                                                   \
+    x ^= x >> 16;                                                                       \
+    return x;                                                                           \
+  }                                                                                     \
+  inline T psf_hash_combine##SUFFIX(T seed, T v) {                                      \
+    return psf_hash##SUFFIX(seed ^ (v + 0x9e3779b9u + (seed << 6) + (seed >> 2)));      \
+  }                                                                                     \
+  inline T reverse_bits32##SUFFIX(T x) {                                                \
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);                            \
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);                            \
+    x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);                            \
+    x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);                            \
+    return (x >> 16) | (x << 16);                                                       \
+  }                                                                                     \
+  /* Burley's improved Laine-Karras permutation (on bit-reversed values). */            \
+  inline T laine_karras_permutation##SUFFIX(T x, T seed) {                              \
+    x ^= x * 0x3d20adeau;                                                               \
+    x += seed;                                                                          \
+    x *= (seed >> 16) | 1u;                                                             \
+    x ^= x * 0x05526c56u;                                                               \
+    x ^= x * 0x53a22864u;                                                               \
+    return x;                                                                           \
+  }                                                                                     \
+  inline T nested_uniform_scramble##SUFFIX(T x, T seed) {                               \
+    return reverse_bits32##SUFFIX(laine_karras_permutation##SUFFIX(reverse_bits32##SUFFIX(x), seed)); \
+  }
 
-inline uint psf_hash_combine(uint seed, uint v) {
-  return psf_hash(seed ^ (v + 0x9e3779b9u + (seed << 6) + (seed >> 2)));
-}
+PSF_DEFINE_SCRAMBLE(uint, )
+PSF_DEFINE_SCRAMBLE(uint8, 8)
 
-inline uint reverse_bits32(uint x) {
-  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-  x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
-  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
-  return (x >> 16) | (x << 16);
-}
-
+/* Column b of dimension d of the generator matrices is sobol[b * PSF_SOBOL_DIMS + d]
+ * (host/sampling.cpp), so that eight consecutive dimensions' columns are one vector. */
 inline uint sobol_unscrambled(__global const uint* sobol, uint index, uint dim) {
   uint x = 0u;
-  __global const uint* m = sobol + dim * PSF_SOBOL_BITS;
+  __global const uint* m = sobol + dim;
   for (uint b = 0u; index != 0u; index >>= 1, ++b)
-    if (index & 1u) x ^= m[b];
+    if (index & 1u) x ^= m[b * PSF_SOBOL_DIMS];
   return x;
-}
-
-/* Burley's improved Laine-Karras permutation (on bit-reversed values). */
-inline uint laine_karras_permutation(uint x, uint seed) {
-  x ^= x * 0x3d20adeau;
-  x += seed;
-  x *= (seed >> 16) | 1u;
-  x ^= x * 0x05526c56u;
-  x ^= x * 0x53a22864u;
-  return x;
-}
-
-inline uint nested_uniform_scramble(uint x, uint seed) {
-  x = reverse_bits32(x);
-  x = laine_karras_permutation(x, seed);
-  return reverse_bits32(x);
 }
 
 /* The part of the scrambling seed that every dimension of one pixel's sequence
@@ -66,6 +68,24 @@ inline uint sample_bits_keyed(__global const uint* sobol, uint key, uint index, 
   uint s = psf_hash_combine(key, dim);
   if (dim < PSF_SOBOL_DIMS) return nested_uniform_scramble(sobol_unscrambled(sobol, index, dim), s);
   return psf_hash_combine(psf_hash_combine(s, index), 0x51ed270bu);
+}
+
+/* Dimensions dim..dim+7 of sample `index`, lane k = sample_bits_keyed(sobol, key,
+ * index, dim + k) bit for bit: one pass over the index's bits for all eight (a
+ * bounce's dimensions, shade.cl), the scrambling in 8-wide arithmetic. */
+inline uint8 sample_bits8_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
+  const uint8 d = (uint8)(dim) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
+  const uint8 s = psf_hash_combine8((uint8)(key), d);
+  if (dim + 8u > PSF_SOBOL_DIMS) { /* past the table: each lane on its own */
+    uint x[8];
+    for (uint k = 0u; k < 8u; ++k) x[k] = sample_bits_keyed(sobol, key, index, dim + k);
+    return vload8(0, x);
+  }
+  uint8 x = (uint8)(0u);
+  __global const uint* m = sobol + dim;
+  for (uint b = 0u; index != 0u; index >>= 1, ++b)
+    if (index & 1u) x ^= vload8(0, m + b * PSF_SOBOL_DIMS);
+  return nested_uniform_scramble8(x, s);
 }
 
 /* 32-bit value of dimension `dim` of sample `index` of `pixel`, scrambled. */
@@ -107,12 +127,28 @@ inline float sample_1d(__global const uint* sobol, uint seed, uint pixel, uint i
   return sample_1d_keyed(sobol, pixel_seed(seed, pixel), index, dim);
 }
 
+/* sample_1d_keyed of dimensions dim..dim+7 (bits_to_float of each lane, exactly). */
+inline float8 sample_8d_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
+  return convert_float8(sample_bits8_keyed(sobol, key, index, dim) >> 8) * (1.0f / 16777216.0f);
+}
+
 /* Writes `dims` dimensions of the points first..first+count-1 (row per point):
- * unscrambled when scramble == 0, else scrambled with (seed, pixel). */
+ * unscrambled when scramble == 0, else scrambled with (seed, pixel); with
+ * scramble == 2 by sample_bits8_keyed, in groups as shade.cl's bounces draw them. */
 __kernel void sobol_points(__global const uint* sobol, uint first, uint count, uint dims,
                            uint scramble, uint seed, uint pixel, __global uint* out) {
   uint i = get_global_id(0);
   if (i >= count) return;
+  if (scramble == 2u) { /* dimensions 0, 1 one at a time, then groups as a bounce's (shade.cl) */
+    const uint key = pixel_seed(seed, pixel);
+    for (uint d = 0u; d < min(dims, 2u); ++d) out[i * dims + d] = sample_bits_keyed(sobol, key, first + i, d);
+    for (uint g = 2u; g < dims; g += PSF_DIMS_PER_BOUNCE) {
+      uint x[8];
+      vstore8(sample_bits8_keyed(sobol, key, first + i, g), 0, x);
+      for (uint k = 0u; k < PSF_DIMS_PER_BOUNCE && g + k < dims; ++k) out[i * dims + g + k] = x[k];
+    }
+    return;
+  }
   for (uint d = 0u; d < dims; ++d) {
     uint x = scramble ? sample_bits(sobol, seed, pixel, first + i, d)
                       : sobol_unscrambled(sobol, first + i, d);

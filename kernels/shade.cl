@@ -40,9 +40,17 @@ inline float power_heuristic(float a, float b) {
   return (a2 + b2) > 0.0f ? a2 / (a2 + b2) : 0.0f;
 }
 
-/* Dimension `offset` of this bounce of path `st`; key = pixel_seed(seed, st.pixel). */
-inline float bounce_sample(FrameParams params, __global const uint* sobol, uint key, PathState st, uint offset) {
-  return sample_1d_keyed(sobol, key, st.sample, params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * st.depth + offset);
+/* The dimensions of this bounce of path `st` (PSF_DIMS_PER_BOUNCE of them, and
+ * the next bounce's first), drawn together; key = pixel_seed(seed, st.pixel). */
+inline float8 bounce_samples(FrameParams params, __global const uint* sobol, uint key, PathState st) {
+  return sample_8d_keyed(sobol, key, st.sample, params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * st.depth);
+}
+
+/* Dimension `offset` (PSF_DIM_*) of a bounce's samples. */
+inline float bounce_sample(float8 u, uint offset) {
+  float a[8];
+  vstore8(u, 0, a);
+  return a[offset];
 }
 
 /* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
@@ -189,6 +197,8 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     beta = (float3)(1.0f);
   }
 
+  const float8 samples = scatter ? bounce_samples(params, sobol, key, st) : (float8)(0.0f);
+
   /* Next-event estimation: one point on one emitter, chosen by power. */
   if (scatter && params.num_emitters > 0u) {
     LightSample ls;
@@ -202,9 +212,9 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
       ls.delta = 0u;
     } else {
       ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
-                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_SELECT),
-                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_UV),
-                          bounce_sample(params, sobol, key, st, PSF_DIM_LIGHT_UV + 1u));
+                          bounce_sample(samples, PSF_DIM_LIGHT_SELECT),
+                          bounce_sample(samples, PSF_DIM_LIGHT_UV),
+                          bounce_sample(samples, PSF_DIM_LIGHT_UV + 1u));
       if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
         ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
     }
@@ -227,15 +237,15 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
 
   /* BSDF sampling for the next segment, then Russian roulette. */
   if (scatter) {
-    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_UV),
-                                bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_UV + 1u),
-                                bsdf_chooses_lobe(m) ? bounce_sample(params, sobol, key, st, PSF_DIM_BSDF_LOBE) : 0.5f);
+    BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(samples, PSF_DIM_BSDF_UV),
+                                bounce_sample(samples, PSF_DIM_BSDF_UV + 1u),
+                                bsdf_chooses_lobe(m) ? bounce_sample(samples, PSF_DIM_BSDF_LOBE) : 0.5f);
     beta *= bs.weight;
     if (segments >= params.rr_depth) {
       /* Survival by the throughput since the filtering vertex: any probability
        * keeps the estimate unbiased, and this one does not depend on alpha. */
       float q = fmin(max3(beta), 0.95f);
-      if (bounce_sample(params, sobol, key, st, PSF_DIM_RR) >= q) scatter = false;
+      if (bounce_sample(samples, PSF_DIM_RR) >= q) scatter = false;
       else beta /= q;
     }
     if (scatter && max3(bs.weight) > 0.0f) {
