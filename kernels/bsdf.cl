@@ -37,6 +37,11 @@
  *   tabulated external transmittance T(cos) = 1 - (directional albedo of the
  *   microfacet reflection) and its internal reflectance (Mitsuba 3's
  *   roughplastic; the host computes them, host/scene/materials.cpp).
+ * - pplastic: Mitsuba 3's polarized plastic in its RGB variants, roughconductor's
+ *   lobe with dielectric Fresnel F(wo.h) added to albedo (1 - F(cos_o))
+ *   (1 - F(cos_i)) / pi, with no internal reflections and no 1 / eta^2 (not
+ *   energy conserving, as Mitsuba says). The lobe is chosen by the constant
+ *   specular sampling weight mean(s) / (mean(albedo) + mean(s)).
  * - dielectric: Fresnel reflection or refraction (Snell), chosen with
  *   probability F; refraction scales radiance by (eta_i / eta_t)^2 (Veach 1997,
  *   Sec. 5.2; Mitsuba's TransportMode::Radiance).
@@ -266,7 +271,7 @@ inline bool bsdf_transmits(Material m) {
 /* Whether bsdf_sample reads uc (a choice between lobes). */
 inline bool bsdf_chooses_lobe(Material m) {
   return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC ||
-         m.type == PSF_MATERIAL_PRINCIPLED || bsdf_transmits(m);
+         m.type == PSF_MATERIAL_PPLASTIC || m.type == PSF_MATERIAL_PRINCIPLED || bsdf_transmits(m);
 }
 
 inline bool bsdf_is_plastic(Material m) {
@@ -279,7 +284,7 @@ inline bool bsdf_scatters(Material m) {
                  max(m.transmittance.x, max(m.transmittance.y, m.transmittance.z)));
   float d = max(m.albedo.x, max(m.albedo.y, m.albedo.z));
   if (m.type == PSF_MATERIAL_DIFFUSE) return d > 0.0f;
-  if (bsdf_is_plastic(m)) return fmax(d, s) > 0.0f;
+  if (bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC) return fmax(d, s) > 0.0f;
   if (m.type == PSF_MATERIAL_PRINCIPLED) return true; /* its dielectric Fresnel reflects at any base colour */
   return s > 0.0f;
 }
@@ -288,7 +293,9 @@ inline bool bsdf_scatters(Material m) {
  * reflectance of diffuse and plastic materials, a conductor's reflectance at
  * normal incidence, a dielectric's specular transmittance. */
 inline float3 bsdf_albedo(Material m) {
-  if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PRINCIPLED) return m.albedo.xyz;
+  if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC ||
+      m.type == PSF_MATERIAL_PRINCIPLED)
+    return m.albedo.xyz;
   if (m.type == PSF_MATERIAL_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_CONDUCTOR)
     return m.specular.xyz * fresnel_conductor(1.0f, m.eta.xyz, m.k.xyz);
   return m.transmittance.xyz;
@@ -299,7 +306,7 @@ inline float3 bsdf_albedo(Material m) {
  * sqrt(alpha_u alpha_v) exceeds PSF_DIFFUSE_ALPHA; plastics when that holds or
  * when the base dominates the coating, mean(albedo) (1 - F_ext) >=
  * PSF_PLASTIC_DIFFUSE_RATIO mean(specular) F_ext (F_ext, in eta.w: the coating's
- * reflectance under uniform illumination); principled likewise, its base
+ * reflectance under uniform illumination; pplastic's likewise); principled likewise, its base
  * weighted by (1 - M)(1 - T) against the specular lobes' reflectance under
  * uniform illumination in Schlick's approximation (the hemispherical mean of
  * R0 + (1 - R0)(1 - cos)^5 is R0 + (1 - R0) / 21: M base, (1 - M) times the
@@ -308,9 +315,10 @@ inline float3 bsdf_albedo(Material m) {
 inline bool bsdf_is_diffuse(Material m) {
   if (m.type == PSF_MATERIAL_DIFFUSE) return true;
   bool rough = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-               m.type == PSF_MATERIAL_ROUGH_PLASTIC || m.type == PSF_MATERIAL_PRINCIPLED;
+               m.type == PSF_MATERIAL_ROUGH_PLASTIC || m.type == PSF_MATERIAL_PPLASTIC ||
+               m.type == PSF_MATERIAL_PRINCIPLED;
   if (rough && m.alpha_u * m.alpha_v > PSF_DIFFUSE_ALPHA * PSF_DIFFUSE_ALPHA) return true;
-  if (bsdf_is_plastic(m))
+  if (bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC)
     return bsdf_mean3(m.albedo.xyz) * (1.0f - m.eta.w) >=
            PSF_PLASTIC_DIFFUSE_RATIO * bsdf_mean3(m.specular.xyz) * m.eta.w;
   if (m.type == PSF_MATERIAL_PRINCIPLED) {
@@ -532,6 +540,20 @@ inline float3 bsdf_eval_local(Material m, __global const half* table, float3 o, 
     return m.specular.xyz * (fr * d * g / (4.0f * o.z * i.z)) +
            plastic_base(m) * (m.eta.y * to * ti * PSF_INV_PI);
   }
+  if (type == PSF_MATERIAL_PPLASTIC) { /* Mitsuba 3's pplastic outside its polarized variants */
+    if (o.z <= 0.0f || i.z <= 0.0f) return (float3)(0.0f);
+    float3 h = normalize(o + i);
+    float oh = dot(o, h), ps = m.albedo.w;
+    float c, e;
+    float fr = fresnel_dielectric(oh, m.eta.x, &c, &e);
+    float fo = fresnel_dielectric(o.z, m.eta.x, &c, &e), fi = fresnel_dielectric(i.z, m.eta.x, &c, &e);
+    float d = mf_D(h, au, av, beckmann);
+    float g = mf_G1(o, h, au, av, beckmann) * mf_G1(i, h, au, av, beckmann);
+    float pm = oh > 0.0f && dot(i, h) > 0.0f ? mf_pdf(o, h, au, av, beckmann) / (4.0f * oh) : 0.0f;
+    *pdf = ps * pm + (1.0f - ps) * i.z * PSF_INV_PI;
+    return m.specular.xyz * (fr * d * g / (4.0f * o.z * i.z)) +
+           m.albedo.xyz * ((1.0f - fo) * (1.0f - fi) * PSF_INV_PI);
+  }
   if (type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
     float co = o.z, ci = i.z;
     if (co == 0.0f || ci == 0.0f) return (float3)(0.0f);
@@ -679,9 +701,10 @@ inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Fr
     if (uc < ps) return bsdf_delta(f, mirror, m.specular.xyz * (fo / ps), 0u);
     return bsdf_finish(m, table, f, o, square_to_cosine_hemisphere(u1, u2));
   }
-  if (type == PSF_MATERIAL_ROUGH_PLASTIC) {
+  if (type == PSF_MATERIAL_ROUGH_PLASTIC || type == PSF_MATERIAL_PPLASTIC) {
     if (o.z <= 0.0f) return bsdf_fail(wo);
-    float ps = plastic_prob_specular(m, 1.0f - rough_transmittance(m, table, o.z));
+    float ps = type == PSF_MATERIAL_PPLASTIC ? m.albedo.w
+                                             : plastic_prob_specular(m, 1.0f - rough_transmittance(m, table, o.z));
     float3 i;
     if (uc < ps) {
       float3 h = mf_sample(o, au, av, beckmann, u1, u2);

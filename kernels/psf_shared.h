@@ -161,6 +161,14 @@ typedef struct {
  * clearcoat_gloss); k = the sampling rates (main specular, clearcoat, diffuse);
  * tex_alpha: a roughness texture (x), tex_table: a metallic texture (x). */
 #define PSF_MATERIAL_PRINCIPLED 8u
+/* pplastic: Mitsuba 3's polarized plastic as its RGB variants render it, a
+ * microfacet reflection (GGX or Beckmann) added to a Lambertian base attenuated
+ * by two smooth refractions, (1 - F(cos_o)) (1 - F(cos_i)). albedo.xyz
+ * diffuse_reflectance (tex_color), albedo.w the specular sampling weight;
+ * specular.xyz specular_reflectance; eta = (int/ext IOR, 1 / eta^2, 0, the
+ * Fresnel reflectance under uniform illumination F_dr(eta), for the
+ * filtering-vertex rule); alpha_u, alpha_v. */
+#define PSF_MATERIAL_PPLASTIC 9u
 
 /* Material.flags */
 #define PSF_MATFLAG_BECKMANN 1u  /* microfacet distribution Beckmann (else GGX) */

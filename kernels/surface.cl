@@ -143,7 +143,8 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     float2 uv = b0 * uv0 + b1 * uv1 + b2 * uv2;
     if (m->tex_color != PSF_NO_TEXTURE) {
       float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
-      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PRINCIPLED)
+      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PPLASTIC ||
+          m->type == PSF_MATERIAL_PRINCIPLED)
         m->albedo.xyz = c;
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
@@ -211,7 +212,8 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   if ((m->flags & PSF_MATFLAG_VERTEX_COLOR) && (a->flags & PSF_TRI_COLORS)) {
     float3 c = b0 * vertex_color_unpack(a->color0) + b1 * vertex_color_unpack(a->color1) +
                b2 * vertex_color_unpack(a->color2);
-    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PRINCIPLED)
+    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PPLASTIC ||
+        m->type == PSF_MATERIAL_PRINCIPLED)
       m->albedo.xyz *= c;
     else if (m->type == PSF_MATERIAL_CONDUCTOR || m->type == PSF_MATERIAL_ROUGH_CONDUCTOR) m->specular.xyz *= c;
   }

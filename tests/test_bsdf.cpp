@@ -106,6 +106,12 @@ Material to_material(const Params& p, psf::detail::TextureStore& store) {
     psf::detail::finish_plastic(m, float((p.albedo.x + p.albedo.y + p.albedo.z) / 3),
                                 float((p.specular.x + p.specular.y + p.specular.z) / 3), store);
   }
+  if (p.type == PSF_MATERIAL_PPLASTIC) {  // psf_shared.h: the sampling weight in albedo.w, eta = (eta, 1 / eta^2, 0, F_dr)
+    double d_mean = (p.albedo.x + p.albedo.y + p.albedo.z) / 3, s_mean = (p.specular.x + p.specular.y + p.specular.z) / 3;
+    m.albedo = f4(p.albedo, s_mean / (d_mean + s_mean));
+    m.eta = {{float(p.eta.x), float(1 / (p.eta.x * p.eta.x)), 0,
+              float(psf::detail::fresnel_diffuse_reflectance(p.eta.x))}};
+  }
   if (p.type == PSF_MATERIAL_PRINCIPLED) {  // the layout of psf_shared.h, alphas as Mitsuba's calc_dist_params
     double aspect = std::sqrt(1 - 0.9 * p.anisotropic), a = p.roughness * p.roughness;
     m.alpha_u = float(std::max(0.001, a / aspect));
@@ -359,6 +365,13 @@ dvec3 ref_eval(const Params& p, const dvec3& o, const dvec3& i) {
       return p.transmittance * (std::abs(oh * ih) / std::abs(o.z * i.z) * eta_o * eta_o * (1 - F) *
                                 ref_D(h, p.au, p.av, p.beckmann) * g / (denom * denom));
     }
+    case PSF_MATERIAL_PPLASTIC: {  // Mitsuba 3's pplastic outside its polarized variants
+      if (o.z <= 0 || i.z <= 0) return dvec3(0);
+      dvec3 h = glm::normalize(o + i);
+      return p.specular * ref_fresnel(glm::dot(o, h), p.eta.x) *
+                 ref_microfacet_reflection(o, i, p.au, p.av, p.beckmann) +
+             p.albedo * ((1 - ref_fresnel(o.z, p.eta.x)) * (1 - ref_fresnel(i.z, p.eta.x)) / kPi);
+    }
     case PSF_MATERIAL_PRINCIPLED:
       return ref_principled(p, o, i);
     default:
@@ -536,6 +549,21 @@ std::vector<Params> test_materials() {
   p.nonlinear = false;
   p.au = p.av = 0.4;
   p.eta = dvec3(1.49);
+  add(p);
+  p = {};
+  p.label = "pplastic ggx 0.2";
+  p.type = PSF_MATERIAL_PPLASTIC;
+  p.albedo = {0.6, 0.3, 0.2};
+  p.eta = dvec3(1.49 / 1.000277);
+  p.au = p.av = 0.2;
+  add(p);
+  p.label = "pplastic beckmann 0.3 x 0.15 (anisotropic), specular 0.5";
+  p.beckmann = true;
+  p.albedo = {0.2, 0.5, 0.7};
+  p.specular = {0.4, 0.5, 0.6};
+  p.eta = dvec3(1.5);
+  p.au = 0.3;
+  p.av = 0.15;
   add(p);
   p = {};
   p.label = "roughdielectric ggx 0.3";
@@ -979,6 +1007,9 @@ TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
     p.au = p.av = 0.3;
     p.label = "roughplastic ggx 0.3";
     ms.push_back(rig.add(p));
+    p.type = PSF_MATERIAL_PPLASTIC;  // no more energy than comes in (Mitsuba's note): the reflection
+    p.label = "pplastic ggx 0.3";    // stays below what the two refractions lose
+    ms.push_back(rig.add(p));
     p = {};
     p.type = PSF_MATERIAL_ROUGH_DIELECTRIC;
     p.eta = dvec3(1.5);
@@ -1043,6 +1074,47 @@ TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
     CHECK(mean >= 0.66);
     furnace(ms[4], normal, mean, se);
     CHECK(mean >= 0.28);
+  }
+}
+
+TEST_CASE("BSDF: pplastic gives Mitsuba 3's values", "[bsdf]") {
+  // Mitsuba 3.6.4 scalar_rgb, pplastic with diffuse_reflectance (rgb), alpha,
+  // distribution and int_ior as below (ext_ior air): bsdf.eval(si, wo) / wo.z and
+  // bsdf.pdf, si.wi = o. The pdf only for GGX: psf samples Beckmann normals
+  // from D cos (as its roughconductor does), Mitsuba from the visible normals.
+  struct Case {
+    bool beckmann;
+    double alpha, ior;
+    dvec3 albedo, o, i, f;
+    double pdf;
+  };
+  const std::vector<Case> cases = {
+      {false, 0.2, 1.49, {0.6, 0.3, 0.2}, {0.3, 0.1, 0.8}, {-0.2, 0.4, 0.7}, {0.18396307, 0.09594548, 0.06660629}, 0.19794706},
+      {false, 0.2, 1.49, {0.6, 0.3, 0.2}, {0, 0, 1}, {0.5, 0, 0.6}, {0.18248733, 0.09474485, 0.06549735}, 0.16741262},
+      {false, 0.2, 1.49, {0.6, 0.3, 0.2}, {0.7, 0.2, 0.3}, {-0.6, -0.1, 0.4}, {0.54359825, 0.46768345, 0.44237854}, 1.69071817},
+      {true, 0.3, 1.5, {0.2, 0.5, 0.7}, {0.3, 0.1, 0.8}, {-0.2, 0.4, 0.7}, {0.07389623, 0.16167706, 0.22019762}, -1},
+      {true, 0.3, 1.5, {0.2, 0.5, 0.7}, {0, 0, 1}, {0.5, 0, 0.6}, {0.07213363, 0.15963648, 0.21797171}, -1},
+      {true, 0.3, 1.5, {0.2, 0.5, 0.7}, {0.7, 0.2, 0.3}, {-0.6, -0.1, 0.4}, {0.39870585, 0.47432739, 0.52474173}, -1},
+  };
+  Rig rig;
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> wo, wi;
+  for (const Case& c : cases) {
+    Params p;
+    p.type = PSF_MATERIAL_PPLASTIC;
+    p.beckmann = c.beckmann;
+    p.au = p.av = c.alpha;
+    p.eta = dvec3(c.ior / 1.000277);
+    p.albedo = c.albedo;
+    mat.push_back(rig.add(p));
+    wo.push_back(glm::normalize(c.o));
+    wi.push_back(glm::normalize(c.i));
+  }
+  auto got = rig.eval(mat, wo, wi);
+  for (size_t k = 0; k < cases.size(); ++k) {
+    INFO("case " << k);
+    for (int c = 0; c < 3; ++c) CHECK(got[k][c] == Approx(cases[k].f[c]).epsilon(2e-4));  // float rounding
+    if (cases[k].pdf >= 0) CHECK(got[k].w == Approx(cases[k].pdf).epsilon(2e-4));
   }
 }
 
@@ -1260,6 +1332,18 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   p.spec_trans = 1;
   wants.push_back({p, false});
   const size_t first_principled = wants.size() - 5;
+  // pplastic: the plastics' rule, F_dr(1.5) = 0.092 for the reflection.
+  p = {};
+  p.type = PSF_MATERIAL_PPLASTIC;
+  p.eta = dvec3(1.5);
+  p.albedo = dvec3(0.8);
+  p.au = p.av = 0.1;
+  wants.push_back({p, true});  // 0.8 (1 - 0.092) >= 4 * 0.092
+  p.albedo = dvec3(0.05);
+  wants.push_back({p, false});
+  p.au = p.av = 0.5;
+  wants.push_back({p, true});  // rough
+  const size_t first_pplastic = wants.size() - 3;
   for (const Want& w : wants) r2.add(w.p);
   auto props = r2.props();
   for (size_t i = 0; i < wants.size(); ++i) {
@@ -1271,6 +1355,7 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   CHECK(dvec3(props[1]).x == Approx(1.0).margin(1e-5));
   CHECK(dvec3(props[7]).x == Approx(0.8));
   CHECK(dvec3(props[first_principled + 1]).x == Approx(0.2));  // principled: the base colour
+  CHECK(dvec3(props[first_pplastic]).x == Approx(0.8));        // pplastic: the diffuse reflectance
 }
 
 TEST_CASE("Textures: lookups match a scalar bilinear reference", "[bsdf]") {
@@ -2249,6 +2334,54 @@ TEST_CASE("Materials: OBJ/MTL mapping, textures ignoring case, vertex normals an
   attrs = psf::triangle_attributes(m);
   CHECK((attrs[0].flags & PSF_TRI_NORMALS) != 0u);
   CHECK((attrs[2].flags & PSF_TRI_NORMALS) == 0u);
+}
+
+TEST_CASE("Materials: Mitsuba 3's pplastic loads with its parameters", "[bsdf]") {
+  TempDir dir;
+  std::string xml = dir.write(
+      "scene.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<bsdf type=\"pplastic\" id=\"a\"><rgb name=\"diffuse_reflectance\" value=\"0.1, 0.2, 0.3\"/>"
+      "<rgb name=\"specular_reflectance\" value=\"0.5\"/><string name=\"distribution\" value=\"ggx\"/>"
+      "<float name=\"alpha_u\" value=\"0.2\"/><float name=\"alpha_v\" value=\"0.3\"/>"
+      "<float name=\"int_ior\" value=\"1.6\"/><float name=\"ext_ior\" value=\"1.2\"/></bsdf>\n"
+      "<bsdf type=\"pplastic\" id=\"b\"/>\n"
+      "<shape type=\"rectangle\"><ref id=\"a\"/></shape>\n"
+      "<shape type=\"rectangle\"><ref id=\"b\"/></shape>\n"
+      "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  REQUIRE(s.materials.size() == 2);
+  std::string warnings;
+  for (const std::string& w : s.warnings) warnings += w + "\n";
+  INFO(warnings);
+  CHECK(count_warnings(s, "pplastic") == 0);
+  CHECK(count_warnings(s, "not supported") == 0);
+  const Material& a = s.materials[0];
+  CHECK(a.type == PSF_MATERIAL_PPLASTIC);
+  CHECK(xyz(a.albedo) == dvec3(0.1f, 0.2f, 0.3f));
+  CHECK(a.albedo.s[3] == Approx(0.5 / (0.2 + 0.5)));  // mean(specular) / (mean(diffuse) + mean(specular))
+  CHECK(xyz(a.specular) == dvec3(0.5f));
+  CHECK((a.flags & PSF_MATFLAG_BECKMANN) == 0u);
+  CHECK(a.alpha_u == Approx(0.2f));
+  CHECK(a.alpha_v == Approx(0.3f));
+  CHECK(a.eta.s[0] == Approx(1.6 / 1.2));
+  CHECK(a.eta.s[1] == Approx(1.2 * 1.2 / (1.6 * 1.6)));
+  CHECK(a.eta.s[3] == Approx(psf::detail::fresnel_diffuse_reflectance(1.6 / 1.2)));
+  const Material& b = s.materials[1];  // Mitsuba's defaults
+  CHECK(b.type == PSF_MATERIAL_PPLASTIC);
+  CHECK(xyz(b.albedo) == dvec3(0.5f));
+  CHECK(b.albedo.s[3] == Approx(1.0 / 1.5));
+  CHECK((b.flags & PSF_MATFLAG_BECKMANN) != 0u);
+  CHECK(b.alpha_u == Approx(0.1f));
+  CHECK(b.eta.s[0] == Approx(1.49 / 1.000277));
+  // As in Mitsuba, the two indices must differ.
+  std::string same = dir.write("same.xml",
+                               "<scene version=\"3.0.0\">\n"
+                               "<bsdf type=\"pplastic\" id=\"a\">\n"
+                               "<float name=\"int_ior\" value=\"1.3\"/><float name=\"ext_ior\" value=\"1.3\"/></bsdf>\n"
+                               "<shape type=\"rectangle\"><ref id=\"a\"/></shape>\n"
+                               "</scene>\n");
+  expect_scene_error(same, 2, "must be positive and differ");
 }
 
 TEST_CASE("Materials: Mitsuba's null BSDF lets rays through", "[bsdf]") {

@@ -715,7 +715,7 @@ TEST_CASE("<alias> gives an element a second id", "[scene]") {
 
 TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]") {
   psf::Scene s = load_text(
-      "<bsdf type=\"pplastic\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
+      "<bsdf type=\"ward\" id=\"p\"><rgb name=\"diffuse_reflectance\" value=\"0.3\"/></bsdf>\n"
       "<bsdf type=\"mixturebsdf\" id=\"c\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.2\"/></bsdf>"
       "<bsdf type=\"conductor\"/></bsdf>\n"
       "<shape type=\"rectangle\"><ref id=\"p\"/></shape>\n"
@@ -726,7 +726,7 @@ TEST_CASE("Unsupported plugins are approximated with one warning each", "[scene]
       "<emitter type=\"sunsky\"/>\n");
   CHECK(s.warnings.size() == 5);
   CHECK(count_warnings(s, "no <sensor>") == 1);
-  CHECK(count_warnings(s, ":2: bsdf 'pplastic'") == 1);
+  CHECK(count_warnings(s, ":2: bsdf 'ward'") == 1);
   CHECK(count_warnings(s, ":3: bsdf 'mixturebsdf'") == 1);
   CHECK(count_warnings(s, ":7: texture file 'x.png' not found") == 1);  // the default reflectance instead
   CHECK(count_warnings(s, ":8: emitter 'sunsky'") == 1);

@@ -1274,7 +1274,7 @@ class MitsubaLoader {
         {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
         {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap},
         {"blendbsdf", &MitsubaLoader::bsdf_blend},          {"principled", &MitsubaLoader::bsdf_principled},
-        {"null", &MitsubaLoader::bsdf_null}};
+        {"null", &MitsubaLoader::bsdf_null},                {"pplastic", &MitsubaLoader::bsdf_pplastic}};
     return plugins;
   }
 
@@ -1552,6 +1552,34 @@ class MitsubaLoader {
     if (rough) microfacet(e, m, true);
     glm::vec3 dm = d.texture != PSF_NO_TEXTURE ? store_.mean(d.texture) : d.value;
     finish_plastic(m, (dm.x + dm.y + dm.z) / 3.0f, (s.x + s.y + s.z) / 3.0f, store_);
+    return b;
+  }
+
+  // pplastic (Mitsuba 3's polarized plastic, as its RGB variants render it):
+  // int_ior (polypropylene) / ext_ior (air), which must differ;
+  // diffuse_reflectance (0.5, texture), specular_reflectance (1), a microfacet
+  // distribution (Beckmann by default, alpha 0.1). The lobe choice is Mitsuba's
+  // constant mean(specular) / (mean(diffuse) + mean(specular)).
+  Bsdf bsdf_pplastic(const Element& e) {
+    check_properties(e, {"int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance", "alpha", "alpha_u",
+                         "alpha_v", "distribution", "sample_visible"});
+    Bsdf b;
+    Material& m = b.m;
+    m = Material{};
+    m.type = PSF_MATERIAL_PPLASTIC;
+    float int_ior = get_ior(e, "int_ior", 1.49f), ext_ior = get_ior(e, "ext_ior", 1.000277f);
+    if (!(int_ior > 0.0f) || !(ext_ior > 0.0f) || int_ior == ext_ior)
+      fail(e.node, "the interior and exterior indices of refraction must be positive and differ");
+    float eta = int_ior / ext_ior;
+    ColorParam d = color_param(e, "diffuse_reflectance", glm::vec3(0.5f));
+    glm::vec3 s = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
+    glm::vec3 dm = d.texture != PSF_NO_TEXTURE ? store_.mean(d.texture) : d.value;
+    float d_mean = (dm.x + dm.y + dm.z) / 3.0f, s_mean = (s.x + s.y + s.z) / 3.0f;
+    m.albedo = {{d.value.x, d.value.y, d.value.z, d_mean + s_mean > 0.0f ? s_mean / (d_mean + s_mean) : 0.0f}};
+    m.tex_color = d.texture;
+    m.specular = {{s.x, s.y, s.z, 0}};
+    m.eta = {{eta, float(1.0 / (double(eta) * eta)), 0, float(fresnel_diffuse_reflectance(eta))}};
+    microfacet(e, m, false);
     return b;
   }
 
@@ -1856,7 +1884,8 @@ class MitsubaLoader {
         const Bsdf& inner = bsdf(n);
         const Material& im = inner.m;
         bool coloured = im.type == PSF_MATERIAL_DIFFUSE || im.type == PSF_MATERIAL_PLASTIC ||
-                        im.type == PSF_MATERIAL_ROUGH_PLASTIC || im.type == PSF_MATERIAL_PRINCIPLED;
+                        im.type == PSF_MATERIAL_ROUGH_PLASTIC || im.type == PSF_MATERIAL_PPLASTIC ||
+                        im.type == PSF_MATERIAL_PRINCIPLED;
         const psf_float4& c = coloured ? im.albedo : im.specular;
         albedo += glm::vec3(c.s[0], c.s[1], c.s[2]) / float(nested.size());
         b.two_sided = b.two_sided || inner.two_sided;
