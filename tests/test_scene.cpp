@@ -396,6 +396,33 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
   CHECK(v05.max_depth == -1);
   CHECK(v05.rr_depth == 2);
   CHECK(v05.hide == (PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA));  // Mitsuba 0.5: every emitter
+  // Mitsuba's volumetric and path replay path tracers are path tracing without media.
+  for (const char* type : {"volpath", "volpathmis", "prb"}) {
+    psf::Scene v = load_text(std::string("<integrator type=\"") + type +
+                             "\"><integer name=\"max_depth\" value=\"7\"/><integer name=\"rr_depth\" value=\"3\"/>"
+                             "</integrator>\n");
+    INFO(type);
+    CHECK(v.max_depth == 7);
+    CHECK(v.rr_depth == 3);
+    CHECK(count_warnings(v, "integrator") == 0);
+  }
+  // hide_emitters as Mitsuba 3.6 renders it: volpath and volpathmis hide area
+  // emitters as well, prb (as path) the environment only.
+  const uint32_t all = PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
+  for (const auto& [type, hide] : std::vector<std::pair<std::string, uint32_t>>{
+           {"volpath", all}, {"volpathmis", all}, {"prbvolpath", all}, {"prb", PSF_HIDE_ENVIRONMENT},
+           {"prb_basic", PSF_HIDE_ENVIRONMENT}}) {
+    psf::Scene v = load_text("<integrator type=\"" + type +
+                             "\"><boolean name=\"hide_emitters\" value=\"true\"/></integrator>\n" + shape);
+    INFO(type);
+    CHECK(v.hide == hide);
+  }
+  psf::Scene o = load_text(
+      "<integrator type=\"volpath_simple\"><integer name=\"maxDepth\" value=\"4\"/></integrator>\n", {}, "0.5.0");
+  CHECK(o.max_depth == 4);
+  CHECK(count_warnings(o, "integrator") == 0);
+  psf::Scene b = load_text("<integrator type=\"bdpt\"/>\n");
+  CHECK(count_warnings(b, "integrator 'bdpt' is not supported yet; using path tracing") == 1);
   psf::Scene plain = load_text("<integrator type=\"direct\"/>\n" + shape);
   CHECK(plain.max_depth == 2);
   CHECK(plain.rr_depth == 5);

@@ -839,17 +839,27 @@ class MitsubaLoader {
   void load_integrator(pugi::xml_node node) {
     Element e = parse_element(node);
     const bool direct = e.type == "direct";
-    if (e.type != "path" && !direct)
+    // The volumetric path tracers (Mitsuba 3's volpath, volpathmis, prbvolpath,
+    // Mitsuba 0.5's volpath, volpath_simple) and the path replay ones (prb,
+    // prb_basic) render what path does where there are no media, which psf does
+    // not render (a <medium> warns on its own): their estimates have the same
+    // expectation, and they take the same max_depth and rr_depth.
+    static const std::set<std::string> like_path = {"path", "volpath", "volpathmis", "volpath_simple",
+                                                    "prbvolpath", "prb", "prb_basic"};
+    if (!like_path.count(e.type) && !direct)
       warn(node, "integrator:" + e.type, "integrator '" + e.type + "' is not supported yet; using path tracing");
     // direct: emitters seen directly plus one bounce of direct light.
     scene_.max_depth = direct ? 2 : get_int(e, "max_depth", -1);
     scene_.rr_depth = direct ? 5 : get_int(e, "rr_depth", 5);
     if (scene_.rr_depth < 1) fail(find(e, "rr_depth")->node, "'rr_depth' must be at least 1");
-    // hide_emitters: Mitsuba 3's path tracer (3.6) hides the environment from
-    // camera rays (an area emitter hit stays visible); its direct integrator,
-    // and Mitsuba 0.5's, hide every emitter they see.
+    // hide_emitters: Mitsuba 3's path tracer (3.6; prb and prb_basic alike)
+    // hides the environment from camera rays (an area emitter hit stays
+    // visible); its direct integrator, its volumetric path tracers and Mitsuba
+    // 0.5's integrators hide every emitter they see.
+    const bool hides_area = direct || version_major_ < 2 || e.type == "volpath" || e.type == "volpathmis" ||
+                            e.type == "prbvolpath";
     if (get_bool(e, "hide_emitters", false))
-      scene_.hide = version_major_ >= 2 && !direct ? PSF_HIDE_ENVIRONMENT : PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA;
+      scene_.hide = hides_area ? PSF_HIDE_ENVIRONMENT | PSF_HIDE_AREA : PSF_HIDE_ENVIRONMENT;
     for (const auto& [name, p] : e.props)
       if (direct ? name != "hide_emitters" : name != "max_depth" && name != "rr_depth" && name != "hide_emitters")
         warn(p.node, "integrator:" + name,
