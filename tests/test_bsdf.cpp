@@ -101,16 +101,10 @@ Material to_material(const Params& p, psf::detail::TextureStore& store) {
   m.alpha_u = float(p.au);
   m.alpha_v = float(p.av);
   m.flags = (p.beckmann ? PSF_MATFLAG_BECKMANN : 0u) | (p.nonlinear ? PSF_MATFLAG_NONLINEAR : 0u);
-  if (p.type == PSF_MATERIAL_PLASTIC || p.type == PSF_MATERIAL_ROUGH_PLASTIC) {
+  if (p.type == PSF_MATERIAL_PLASTIC || p.type == PSF_MATERIAL_ROUGH_PLASTIC || p.type == PSF_MATERIAL_PPLASTIC) {
     m.eta = f4(dvec3(p.eta.x, 0, 0));
     psf::detail::finish_plastic(m, float((p.albedo.x + p.albedo.y + p.albedo.z) / 3),
                                 float((p.specular.x + p.specular.y + p.specular.z) / 3), store);
-  }
-  if (p.type == PSF_MATERIAL_PPLASTIC) {  // psf_shared.h: the sampling weight in albedo.w, eta = (eta, 1 / eta^2, 0, F_dr)
-    double d_mean = (p.albedo.x + p.albedo.y + p.albedo.z) / 3, s_mean = (p.specular.x + p.specular.y + p.specular.z) / 3;
-    m.albedo = f4(p.albedo, s_mean / (d_mean + s_mean));
-    m.eta = {{float(p.eta.x), float(1 / (p.eta.x * p.eta.x)), 0,
-              float(psf::detail::fresnel_diffuse_reflectance(p.eta.x))}};
   }
   if (p.type == PSF_MATERIAL_PRINCIPLED) {  // the layout of psf_shared.h, alphas as Mitsuba's calc_dist_params
     double aspect = std::sqrt(1 - 0.9 * p.anisotropic), a = p.roughness * p.roughness;

@@ -266,8 +266,8 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
   const double eta = m.eta.s[0];
   m.eta.s[1] = float(1.0 / (eta * eta));
   m.albedo.s[3] = diffuse_mean + specular_mean > 0.0f ? specular_mean / (diffuse_mean + specular_mean) : 0.0f;
-  if (m.type == PSF_MATERIAL_PLASTIC) {
-    m.eta.s[2] = float(fresnel_diffuse_reflectance(1.0 / eta));
+  if (m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_PPLASTIC) {
+    m.eta.s[2] = m.type == PSF_MATERIAL_PLASTIC ? float(fresnel_diffuse_reflectance(1.0 / eta)) : 0.0f;
     m.eta.s[3] = float(fresnel_diffuse_reflectance(eta));
     return;
   }

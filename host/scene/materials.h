@@ -119,12 +119,12 @@ double fresnel_diffuse_reflectance(double eta);
 // from D(m) cos(theta_m). GGX (beckmann false) or Beckmann, isotropic alpha.
 double rough_reflectance(double mu, double alpha, double eta, bool beckmann);
 
-// Fills the derived constants of a plastic or roughplastic material from its
-// type, albedo, specular, eta.x, alpha and flags: eta.y = 1 / eta^2, eta.z the
-// internal and eta.w the external diffuse reflectance of the coating, albedo.w
-// the specular sampling weight s / (d + s) of the means `diffuse_mean` and
-// `specular_mean` (Mitsuba's), and for roughplastic tex_table, the external
-// transmittance table (Mitsuba 3's roughplastic).
+// Fills the derived constants of a plastic, roughplastic or pplastic material
+// from its type, albedo, specular, eta.x, alpha and flags: eta.y = 1 / eta^2,
+// eta.z the internal (pplastic: 0) and eta.w the external diffuse reflectance of
+// the coating, albedo.w the specular sampling weight s / (d + s) of the means
+// `diffuse_mean` and `specular_mean` (Mitsuba's), and for roughplastic
+// tex_table, the external transmittance table (Mitsuba 3's roughplastic).
 void finish_plastic(Material& m, float diffuse_mean, float specular_mean, TextureStore& store);
 
 // An image file's texels as linear RGBA floats, rows from the top: OpenEXR through

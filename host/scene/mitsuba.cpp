@@ -1580,16 +1580,15 @@ class MitsubaLoader {
     float int_ior = get_ior(e, "int_ior", 1.49f), ext_ior = get_ior(e, "ext_ior", 1.000277f);
     if (!(int_ior > 0.0f) || !(ext_ior > 0.0f) || int_ior == ext_ior)
       fail(e.node, "the interior and exterior indices of refraction must be positive and differ");
-    float eta = int_ior / ext_ior;
     ColorParam d = color_param(e, "diffuse_reflectance", glm::vec3(0.5f));
     glm::vec3 s = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
-    glm::vec3 dm = d.texture != PSF_NO_TEXTURE ? store_.mean(d.texture) : d.value;
-    float d_mean = (dm.x + dm.y + dm.z) / 3.0f, s_mean = (s.x + s.y + s.z) / 3.0f;
-    m.albedo = {{d.value.x, d.value.y, d.value.z, d_mean + s_mean > 0.0f ? s_mean / (d_mean + s_mean) : 0.0f}};
+    m.albedo = {{d.value.x, d.value.y, d.value.z, 0}};
     m.tex_color = d.texture;
     m.specular = {{s.x, s.y, s.z, 0}};
-    m.eta = {{eta, float(1.0 / (double(eta) * eta)), 0, float(fresnel_diffuse_reflectance(eta))}};
+    m.eta = {{int_ior / ext_ior, 0, 0, 0}};
     microfacet(e, m, false);
+    glm::vec3 dm = d.texture != PSF_NO_TEXTURE ? store_.mean(d.texture) : d.value;
+    finish_plastic(m, (dm.x + dm.y + dm.z) / 3.0f, (s.x + s.y + s.z) / 3.0f, store_);
     return b;
   }
 
