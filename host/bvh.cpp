@@ -210,7 +210,8 @@ BvhTriPack empty_pack() {
 // Collapses the binary BVH into wide nodes, depth first (a node before its children).
 class Collapser {
  public:
-  using LeafFn = std::function<uint32_t(const BinaryNode&)>;  // writes a leaf's packs, returns the first
+  // Writes a leaf's packs; returns the first and sets *count to their number.
+  using LeafFn = std::function<uint32_t(const BinaryNode&, uint32_t* count)>;
   Collapser(const std::vector<BinaryNode>& bin, std::vector<BvhNode>& out, LeafFn leaf)
       : bin_(bin), out_(out), leaf_(std::move(leaf)) {}
 
@@ -246,8 +247,9 @@ class Collapser {
       const BinaryNode& n = bin_[kids[s]];
       uint32_t child;
       if (n.count > 0) {
-        uint32_t packs = (n.count + PSF_BVH_WIDTH - 1) / PSF_BVH_WIDTH;
-        child = PSF_LEAF_BIT | ((packs - 1u) << PSF_LEAF_COUNT_SHIFT) | leaf_(n);
+        uint32_t packs = 0;
+        uint32_t first = leaf_(n, &packs);
+        child = PSF_LEAF_BIT | ((packs - 1u) << PSF_LEAF_COUNT_SHIFT) | first;
       } else {
         child = emit(kids[s], depth + 1);
       }
@@ -277,15 +279,21 @@ bool finite(const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y
 
 Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
               const BvhParams& params) {
+  return build_bvh(positions, triangles, {}, params);
+}
+
+Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
+              const std::vector<BvhSphere>& spheres, const BvhParams& params) {
   static_assert(PSF_BVH_WIDTH == 4 || PSF_BVH_WIDTH == 8, "PSF_BVH_WIDTH must be 4 or 8");
   auto t0 = std::chrono::steady_clock::now();
-  if (triangles.size() > PSF_LEAF_FIRST_MASK)
-    throw std::invalid_argument("build_bvh: " + std::to_string(triangles.size()) +
-                                " triangles exceed the leaf encoding (2^27)");
+  if (triangles.size() + spheres.size() > PSF_LEAF_FIRST_MASK)
+    throw std::invalid_argument("build_bvh: " + std::to_string(triangles.size() + spheres.size()) +
+                                " primitives exceed the leaf encoding (2^27)");
+  const size_t first_sphere = triangles.size();
   Bvh bvh;
-  std::vector<Box> boxes(triangles.size());
+  std::vector<Box> boxes(triangles.size() + spheres.size());
   std::vector<uint32_t> ids;
-  ids.reserve(triangles.size());
+  ids.reserve(boxes.size());
   for (size_t t = 0; t < triangles.size(); ++t) {
     const glm::uvec3& tri = triangles[t];
     for (int k = 0; k < 3; ++k)
@@ -306,24 +314,38 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
     boxes[t].grow(b);
     boxes[t].grow(c);
     ids.push_back(static_cast<uint32_t>(t));
+    bvh.triangle_count += 1;
+  }
+  for (size_t k = 0; k < spheres.size(); ++k) {
+    const BvhSphere& s = spheres[k];
+    if (!finite(s.center) || !(s.radius > 0.0f) || !std::isfinite(s.radius)) {
+      bvh.skipped += 1;
+      continue;
+    }
+    boxes[first_sphere + k].grow(s.center - glm::vec3(s.radius));
+    boxes[first_sphere + k].grow(s.center + glm::vec3(s.radius));
+    ids.push_back(static_cast<uint32_t>(first_sphere + k));
+    bvh.sphere_count += 1;
   }
 
   if (ids.empty()) {
     bvh.nodes.push_back(empty_node());
     bvh.depth = 1;
   } else {
-    bvh.triangle_count = static_cast<uint32_t>(ids.size());
     BinaryBuilder builder(boxes, params);
     builder.build(std::move(ids));
     const std::vector<uint32_t>& order = builder.index();
-    // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, appended in leaf order.
-    auto write_leaf = [&](const BinaryNode& leaf) {
+    // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, then its spheres in
+    // packs of their own, appended in leaf order.
+    auto write_leaf = [&](const BinaryNode& leaf, uint32_t* count) {
       uint32_t first = static_cast<uint32_t>(bvh.packs.size());
+      uint32_t lanes = 0;
       for (uint32_t k = 0; k < leaf.count; ++k) {
-        if (k % PSF_BVH_WIDTH == 0) bvh.packs.push_back(empty_pack());
-        BvhTriPack& p = bvh.packs.back();
-        int lane = k % PSF_BVH_WIDTH;
         uint32_t t = order[leaf.first + k];
+        if (t >= first_sphere) continue;
+        if (lanes++ % PSF_BVH_WIDTH == 0) bvh.packs.push_back(empty_pack());
+        BvhTriPack& p = bvh.packs.back();
+        int lane = (lanes - 1) % PSF_BVH_WIDTH;
         const glm::uvec3& tri = triangles[t];
         const glm::vec3 &a = positions[tri.x], &b = positions[tri.y], &c = positions[tri.z];
         glm::vec3 e1 = b - a, e2 = c - a;
@@ -340,6 +362,21 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
         p.inv_size[lane] = static_cast<float>(1.0 / std::sqrt(glm::length(n)));
         p.prim[lane] = t;
       }
+      lanes = 0;
+      for (uint32_t k = 0; k < leaf.count; ++k) {
+        uint32_t t = order[leaf.first + k];
+        if (t < first_sphere) continue;
+        if (lanes++ % PSF_BVH_WIDTH == 0) bvh.packs.push_back(empty_pack());
+        BvhTriPack& p = bvh.packs.back();
+        int lane = (lanes - 1) % PSF_BVH_WIDTH;
+        const BvhSphere& s = spheres[t - first_sphere];
+        p.v0_x[lane] = s.center.x;
+        p.v0_y[lane] = s.center.y;
+        p.v0_z[lane] = s.center.z;
+        p.e1_x[lane] = s.radius;
+        p.prim[lane] = t | PSF_PRIM_SPHERE;
+      }
+      *count = static_cast<uint32_t>(bvh.packs.size()) - first;
       return first;
     };
     Collapser collapser(builder.nodes(), bvh.nodes, write_leaf);

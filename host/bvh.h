@@ -20,13 +20,21 @@ struct BvhParams {
   unsigned max_leaf = PSF_LEAF_MAX_TRIS;  // a node with more triangles is always split
 };
 
+// An analytic sphere for the BVH: its prim index is the number of triangles
+// plus its position in the list (psf_shared.h PSF_PRIM_SPHERE).
+struct BvhSphere {
+  glm::vec3 center{0.0f};
+  float radius = 1.0f;
+};
+
 struct Bvh {
   std::vector<BvhNode> nodes;      // node 0 is the root
   std::vector<BvhTriPack> packs;   // leaf triangles, PSF_BVH_WIDTH per pack, in leaf order
   uint32_t triangle_count = 0;     // triangles in the packs (scene triangles less `skipped`)
+  uint32_t sphere_count = 0;       // spheres in the packs (less those `skipped`)
   double build_ms = 0.0;           // wall time of build_bvh
   int depth = 0;                   // levels of wide nodes (1: the root only)
-  uint32_t skipped = 0;            // degenerate or non-finite triangles left out
+  uint32_t skipped = 0;            // degenerate or non-finite triangles and spheres left out
 };
 
 // Builds the wide BVH over `triangles` (indices into `positions`). Triangles of
@@ -35,6 +43,11 @@ struct Bvh {
 // all empty. Throws std::invalid_argument on an out-of-range vertex index.
 Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
               const BvhParams& params = {});
+// The same over triangles and analytic spheres (prims triangles.size() + k),
+// each leaf's triangles and spheres in packs of their own; spheres of radius
+// <= 0 or with non-finite values are left out.
+Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
+              const std::vector<BvhSphere>& spheres, const BvhParams& params = {});
 
 // Decodes a leaf child reference (PSF_LEAF_BIT set): first pack and number of packs.
 inline uint32_t leaf_first(uint32_t child) { return child & PSF_LEAF_FIRST_MASK; }

@@ -21,13 +21,9 @@ psf_float4 f4(const glm::vec3& v, float w = 0.0f) { return {{v.x, v.y, v.z, w}};
 
 // Radius of the bounding sphere of the scene's vertices (1 when there are none).
 float scene_radius(const Scene& scene) {
-  if (scene.positions.empty()) return 1.0f;
-  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
-  for (const glm::vec3& p : scene.positions) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
-    lo = glm::min(lo, p);
-    hi = glm::max(hi, p);
-  }
+  glm::vec3 lo, hi;
+  scene_bounds(scene, lo, hi);
+  if (lo.x > hi.x) return 1.0f;
   float r = 0.5f * glm::length(hi - lo);
   return std::isfinite(r) && r > 0.0f ? r : 1.0f;
 }
@@ -152,34 +148,55 @@ LightTable build_light_table(const Scene& scene) {
   std::vector<double> power;
   std::map<uint32_t, glm::vec3> means;  // of the emission textures
 
-  // Emissive triangles (area lights): every triangle of an emissive material.
-  for (size_t i = 0; i < scene.triangles.size(); ++i) {
-    const Material& m = scene.materials[scene.tri_material[i]];
+  // An area light of material m and the given area: its table entry (the caller
+  // fills in the geometry) and power. With an emission texture, the light is
+  // chosen by its mean (any choice keeps next-event estimation unbiased; the
+  // sample carries the texel's value).
+  auto add_area_light = [&](const Material& m, float area, uint32_t prim, uint32_t type) -> Emitter& {
     glm::vec3 le(m.emission.s[0], m.emission.s[1], m.emission.s[2]);
-    if (lum(le) <= 0.0f) continue;
-    // With an emission texture, the light is chosen by its mean (any choice
-    // keeps next-event estimation unbiased; the sample carries the texel's value).
     glm::vec3 scale(1.0f);
     if (m.tex_emission != PSF_NO_TEXTURE) {
       auto it = means.find(m.tex_emission);
       if (it == means.end()) it = means.emplace(m.tex_emission, texture_mean(scene, m.tex_emission)).first;
       scale = it->second;
     }
+    Emitter e{};
+    e.radiance = f4(le);
+    e.prim = prim;
+    e.two_sided = m.two_sided;
+    e.type = type;
+    e.tex_emission = m.tex_emission;
+    t.emitters.push_back(e);
+    power.push_back(kPi * double(area) * lum(le * scale) * (m.two_sided ? 2.0 : 1.0));
+    return t.emitters.back();
+  };
+  auto emits = [](const Material& m) { return lum(glm::vec3(m.emission.s[0], m.emission.s[1], m.emission.s[2])) > 0.0f; };
+
+  // Emissive triangles (area lights): every triangle of an emissive material.
+  for (size_t i = 0; i < scene.triangles.size(); ++i) {
+    const Material& m = scene.materials[scene.tri_material[i]];
+    if (!emits(m)) continue;
     const auto& tri = scene.triangles[i];
     glm::vec3 a = scene.positions[tri[0]], b = scene.positions[tri[1]], c = scene.positions[tri[2]];
     float area = 0.5f * glm::length(glm::cross(b - a, c - a));
     if (!(area > 0.0f) || !std::isfinite(area)) continue;
-    Emitter e{};
+    Emitter& e = add_area_light(m, area, uint32_t(i), PSF_EMITTER_TRIANGLE);
     e.v0 = f4(a, area);
     e.e1 = f4(b - a);
     e.e2 = f4(c - a);
-    e.radiance = f4(le);
-    e.prim = uint32_t(i);
-    e.two_sided = m.two_sided;
-    e.type = PSF_EMITTER_TRIANGLE;
-    e.tex_emission = m.tex_emission;
-    t.emitters.push_back(e);
-    power.push_back(kPi * double(area) * lum(le * scale) * (m.two_sided ? 2.0 : 1.0));
+  }
+
+  // Emissive analytic spheres: sampled uniformly by area (emitter.cl).
+  for (size_t k = 0; k < scene.spheres.size(); ++k) {
+    const SphereShape& sp = scene.spheres[k];
+    const Material& m = scene.materials[sp.material];
+    if (!emits(m)) continue;
+    float area = float(4.0 * kPi * double(sp.radius) * double(sp.radius));
+    if (!(area > 0.0f) || !std::isfinite(area)) continue;
+    Emitter& e = add_area_light(m, area, uint32_t(scene.triangles.size() + k), PSF_EMITTER_SPHERE);
+    e.v0 = f4(sp.center, area);
+    e.e1 = f4(sp.axis_x, sp.radius);
+    e.e2 = f4(sp.axis_y, sp.flip ? -1.0f : 1.0f);
   }
 
   const double radius = scene_radius(scene);
@@ -260,7 +277,7 @@ LightTable build_light_table(const Scene& scene) {
   double total = 0.0;
   for (double p : power) total += p;
   t.cdf.resize(t.emitters.size());
-  t.tri_light_pdf.assign(scene.triangles.size(), 0.0f);
+  t.tri_light_pdf.assign(scene.triangles.size() + scene.spheres.size(), 0.0f);
   double run = 0.0;
   for (size_t i = 0; i < t.emitters.size(); ++i) {
     float pmf = float(power[i] / total);
@@ -268,7 +285,7 @@ LightTable build_light_table(const Scene& scene) {
     e.radiance.s[3] = pmf;
     run += power[i];
     t.cdf[i] = float(run / total);
-    if (e.type == PSF_EMITTER_TRIANGLE) t.tri_light_pdf[e.prim] = pmf / e.v0.s[3];
+    if (e.type == PSF_EMITTER_TRIANGLE || e.type == PSF_EMITTER_SPHERE) t.tri_light_pdf[e.prim] = pmf / e.v0.s[3];
     if (e.type == PSF_EMITTER_ENVIRONMENT) t.env.scale.s[3] = pmf;
   }
   if (!t.cdf.empty()) t.cdf.back() = 1.0f;

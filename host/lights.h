@@ -15,7 +15,7 @@ namespace psf {
 struct LightTable {
   std::vector<Emitter> emitters;    // one entry per emissive triangle, delta light and the environment
   std::vector<float> cdf;           // selection cdf over `emitters` by power (last entry 1), then its guide table
-  std::vector<float> tri_light_pdf; // per scene triangle: selection probability / area if emissive, else 0
+  std::vector<float> tri_light_pdf; // per prim (triangles, then spheres): selection probability / area if emissive, else 0
   Environment env{};                // the environment (env.present 0: none)
   std::vector<float> env_data;      // its texels and cdfs (layout in psf_shared.h); one 0 when none
 };

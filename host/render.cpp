@@ -49,7 +49,9 @@ struct Renderer::Impl {
 
   Impl(Runtime& r, const Scene& s) : rt(r), scene(s) {
     camera = make_camera(scene.camera, scene.width, scene.height);
-    Bvh bvh = build_bvh(scene.positions, scene.triangles);
+    std::vector<BvhSphere> spheres;
+    for (const SphereShape& sp : scene.spheres) spheres.push_back({sp.center, sp.radius});
+    Bvh bvh = build_bvh(scene.positions, scene.triangles, spheres);
     bool masked = mark_masked(bvh, masked_triangles(scene)) > 0;  // mask materials: alpha-tested ray casts
     caster = std::make_unique<RayCaster>(rt, bvh);
     sobol = rt.upload(sobol_matrices());
@@ -79,11 +81,21 @@ struct Renderer::Impl {
 
   void upload_geometry() {
     std::vector<psf_float4> pos;
-    pos.reserve(scene.triangles.size() * 3);
+    pos.reserve((scene.triangles.size() + scene.spheres.size()) * 3);
     for (const auto& t : scene.triangles)
       for (int k = 0; k < 3; ++k) pos.push_back(f4(scene.positions[t[k]]));
+    // A sphere's three entries (shade.cl): centre and radius, its local x axis
+    // and the normal's sign (-1: flip_normals), its local y axis.
+    std::vector<uint32_t> prim_material = scene.tri_material;
+    for (const SphereShape& sp : scene.spheres) {
+      pos.push_back(f4(sp.center, sp.radius));
+      pos.push_back(f4(sp.axis_x, sp.flip ? -1.0f : 1.0f));
+      pos.push_back(f4(sp.axis_y));
+      prim_material.push_back(sp.material);
+    }
+    if (pos.empty()) pos.push_back(f4(glm::vec3(0.0f)));  // no zero-size buffers
     tri_pos = rt.upload(pos);
-    tri_material = rt.upload(scene.tri_material);
+    tri_material = rt.upload(prim_material);
     materials = rt.upload(scene.materials);
 
     // Lights: emissive triangles, delta lights and the environment, chosen by power (host/lights.cpp).
@@ -91,13 +103,10 @@ struct Renderer::Impl {
     num_emitters = uint32_t(lights.emitters.size());
     bool environment_only = num_emitters > 0;
     for (const Emitter& e : lights.emitters) environment_only = environment_only && e.type == PSF_EMITTER_ENVIRONMENT;
-    if (environment_only && !scene.positions.empty()) {
-      glm::vec3 lo = scene.positions[0], hi = lo;
-      for (const glm::vec3& q : scene.positions) {
-        lo = glm::min(lo, q);
-        hi = glm::max(hi, q);
-      }
-      auto_visibility_ray = 0.01f * glm::length(hi - lo);
+    if (environment_only) {
+      glm::vec3 lo, hi;
+      scene_bounds(scene, lo, hi);
+      if (lo.x <= hi.x) auto_visibility_ray = 0.01f * glm::length(hi - lo);
     }
     emitters = rt.upload(lights.emitters);
     emitter_cdf = rt.upload(lights.cdf);
@@ -417,6 +426,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
   p.dim_bounce0 = s.camera.aperture > 0.0f ? PSF_DIM_BOUNCE0_LENS : PSF_DIM_BOUNCE0;
   p.hide = s.scene.hide;
+  p.first_sphere = uint32_t(s.scene.triangles.size());
   auto& states = b.states;
   auto& vertices = b.vertices;
   auto& hits = b.hits;

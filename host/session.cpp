@@ -312,7 +312,9 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   const uint64_t batch = uint64_t(1) << plan.log2;
   result.batch_log2 = plan.log2;
   if (!o.quiet)
-    std::cerr << "psf: " << scene.triangles.size() << " triangles, " << scene.width << "x" << scene.height << ", "
+    std::cerr << "psf: " << scene.triangles.size() << " triangles, "
+              << (scene.spheres.empty() ? std::string() : std::to_string(scene.spheres.size()) + " spheres, ")
+              << scene.width << "x" << scene.height << ", "
               << (time_only ? std::string("until --time") : std::to_string(spp) + " spp") << "; batches of 2^"
               << plan.log2 << " = " << batch << " paths, " << format_bytes(plan.bytes) << " of batch buffers\n";
 

@@ -13,6 +13,9 @@
  *   triangle:    uniform by area (Turk 1990: b1 = sqrt(u) (1 - v), b2 = sqrt(u) v);
  *                pdf = P(light) / area * r^2 / cos_l; with an emission texture
  *                the caller multiplies the radiance by it at (prim, b1, b2)
+ *   sphere:      uniform by area (z = 1 - 2u, phi = 2 pi v in its frame), the
+ *                same pdf; (b1, b2) is the point's uv (its TriAttrib's uvs are
+ *                the identity); points facing away from p have cos_l <= 0
  *   point:       delta; radiance I / r^2, pdf = P(light)
  *   spot:        delta; I / r^2 times Mitsuba's falloff: 1 inside the beam width,
  *                (cutoff - angle) / (cutoff - beam width) up to the cutoff, 0 beyond
@@ -40,7 +43,7 @@ typedef struct {
   float pdf;       /* solid-angle pdf of this sample, or the selection probability of a delta light (0: none) */
   uint delta;      /* 1: a delta light (no MIS) */
   uint tex;        /* a triangle's emission texture (radiance is to be multiplied by it at (prim, b1, b2)), or none */
-  uint prim;       /* the triangle */
+  uint prim;       /* the triangle or sphere (prim index) */
   float b1, b2;    /* barycentrics of the point on it */
 } LightSample;
 
@@ -273,9 +276,24 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
     ls.delta = 1u;
     return ls;
   }
-  float su = sqrt(ua);
-  float3 lp = em.v0.xyz + su * (1.0f - ub) * em.e1.xyz + su * ub * em.e2.xyz;
-  float3 ln = normalize(cross(em.e1.xyz, em.e2.xyz));
+  float3 lp, ln;
+  if (em.type == PSF_EMITTER_SPHERE) {
+    /* Uniform by area: z = 1 - 2 ua, phi = 2 pi ub in the sphere's frame, so
+     * that (ub, acos(z) / pi) is the point's uv. */
+    float z = 1.0f - 2.0f * ua, rho = sqrt(fmax(0.0f, 1.0f - z * z)), cos_phi;
+    float sin_phi = psf_sincos(2.0f * PSF_ENV_PI * ub, &cos_phi);
+    float3 n = rho * cos_phi * em.e1.xyz + rho * sin_phi * em.e2.xyz + z * cross(em.e1.xyz, em.e2.xyz);
+    lp = em.v0.xyz + em.e1.w * n;
+    ln = n * em.e2.w;
+    ls.b1 = ub;
+    ls.b2 = em.tex_emission != PSF_NO_TEXTURE ? acos(clamp(z, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI) : 0.0f;
+  } else {
+    float su = sqrt(ua);
+    lp = em.v0.xyz + su * (1.0f - ub) * em.e1.xyz + su * ub * em.e2.xyz;
+    ln = normalize(cross(em.e1.xyz, em.e2.xyz));
+    ls.b1 = su * (1.0f - ub);
+    ls.b2 = su * ub;
+  }
   float3 d = lp - p;
   float d2 = dot(d, d);
   if (!(d2 > 0.0f)) return ls;
@@ -288,13 +306,12 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
   ls.radiance = em.radiance.xyz;
   ls.tex = em.tex_emission;
   ls.prim = em.prim;
-  ls.b1 = su * (1.0f - ub);
-  ls.b2 = su * ub;
   return ls;
 }
 
 /* Solid-angle pdf with which emitter_sample would have chosen the point hit at
- * distance `dist` on triangle `prim` with cosine `cos_l` to its normal. */
+ * distance `dist` on triangle or sphere `prim` with cosine `cos_l` to its normal
+ * (both sampled uniformly by area: the pdf per area is tri_light_pdf[prim]). */
 inline float emitter_pdf_hit(__global const float* tri_light_pdf, uint prim, float dist, float cos_l) {
   return cos_l > 0.0f ? tri_light_pdf[prim] * dist * dist / cos_l : 0.0f;
 }

@@ -74,7 +74,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(FrameParams, max_depth);
   out[i++] = PSF_OFFSET(FrameParams, batch_size);
   out[i++] = PSF_OFFSET(FrameParams, rr_depth);
-  out[i++] = PSF_OFFSET(FrameParams, pad2);
+  out[i++] = PSF_OFFSET(FrameParams, first_sphere);
   out[i++] = sizeof(FilterParams);
   out[i++] = PSF_OFFSET(FilterParams, count);
   out[i++] = PSF_OFFSET(FilterParams, cells27);

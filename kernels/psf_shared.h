@@ -61,6 +61,13 @@ typedef cl_uint psf_uint;
 /* Bit of BvhTriPack.prim marking an alpha-tested triangle (a mask material):
  * raycast.cl's masked kernels test its opacity; hits report the prim without it. */
 #define PSF_PRIM_MASKED 0x80000000u
+/* Bit of BvhTriPack.prim marking a sphere pack's lanes (every lane of a pack is
+ * one kind): v0 holds the centre, e1_x the radius (0 in unused lanes, never hit),
+ * the other arrays are unused; hits report the prim without it, and u = v = 0
+ * (shade.cl computes the sphere's uv). Scene primitives are the triangles, then
+ * the analytic spheres: prim >= FrameParams.first_sphere is sphere
+ * prim - first_sphere. */
+#define PSF_PRIM_SPHERE 0x40000000u
 #define PSF_EMPTY_CHILD 0xFFFFFFFFu
 /* A BVH child reference with this bit set is a leaf: bits 0..26 its first
  * triangle pack (BvhTriPack), bits 27..30 the number of packs minus one. */
@@ -301,18 +308,20 @@ typedef struct {
 #define PSF_EMITTER_SPOT 2u        /* point light restricted to a cone */
 #define PSF_EMITTER_DIRECTIONAL 3u /* parallel light from infinitely far away */
 #define PSF_EMITTER_ENVIRONMENT 4u /* the Environment (envmap or constant) */
+#define PSF_EMITTER_SPHERE 5u      /* an emissive analytic sphere (area light) */
 
 /* One entry of the next-event estimation table: an emissive triangle, a delta
  * light or the environment (whose data is the Environment struct). */
 typedef struct {
-  psf_float4 v0;       /* triangle: xyz first vertex, w area; point, spot: xyz position */
-  psf_float4 e1;       /* triangle: xyz v1 - v0; spot: xyz unit axis, w cos(cutoff); directional: xyz unit direction of travel */
-  psf_float4 e2;       /* triangle: xyz v2 - v0; spot: x cutoff angle, y 1 / (cutoff - beam width) (radians), w cos(beam width) */
+  psf_float4 v0;       /* triangle: xyz first vertex, w area; sphere: xyz centre, w area; point, spot: xyz position */
+  psf_float4 e1;       /* triangle: xyz v1 - v0; sphere: xyz its local x axis, w radius; spot: xyz unit axis, */
+                       /* w cos(cutoff); directional: xyz unit direction of travel */
+  psf_float4 e2;       /* triangle: xyz v2 - v0; sphere: xyz its local y axis, w 1 or -1 (flip_normals: inwards); spot: x cutoff angle, y 1 / (cutoff - beam width) (radians), w cos(beam width) */
   psf_float4 radiance; /* xyz radiance (triangle), intensity (point, spot) or irradiance (directional); w: selection probability */
-  psf_uint prim;       /* triangle: index in scene order */
-  psf_uint two_sided;  /* triangle: 1 emits on both sides */
+  psf_uint prim;       /* triangle, sphere: prim index in scene order */
+  psf_uint two_sided;  /* triangle, sphere: 1 emits on both sides */
   psf_uint type;       /* PSF_EMITTER_* */
-  psf_uint tex_emission; /* triangle: its material's tex_emission (radiance times the texture at the point) */
+  psf_uint tex_emission; /* triangle, sphere: its material's tex_emission (radiance times the texture at the point) */
 } Emitter;
 
 /* The environment: radiance from infinitely far away along every direction that
@@ -395,7 +404,7 @@ typedef struct {
   psf_uint rr_depth;       /* Russian roulette starts at this depth */
   psf_uint dim_bounce0;    /* first sample dimension of the bounces: PSF_DIM_BOUNCE0, or _LENS with a thin lens */
   psf_uint hide;           /* PSF_HIDE_*: what camera rays do not see (Mitsuba's hide_emitters) */
-  psf_uint pad2;           /* padding */
+  psf_uint first_sphere;   /* prim index of the first analytic sphere (the number of triangles) */
 } FrameParams;
 
 #define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */

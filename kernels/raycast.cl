@@ -36,6 +36,9 @@
  *   hit's uv) exceeds a hash of the ray and the triangle in [0,1) (stochastic
  *   transparency: binary cut-outs exactly, partial opacity on average). The
  *   unmasked kernels never test and cost nothing extra.
+ * - Ray/sphere (analytic spheres, sphere packs): sphere_pack_test below. Spheres
+ *   are never alpha-tested (host/scene keeps masked spheres as triangles), and
+ *   their hits carry u = v = 0.
  * No barriers; kernels guard the rounded-up tail of the global range. */
 
 #if PSF_BVH_WIDTH == 8
@@ -187,6 +190,43 @@ BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float
   return bvh_lane_mask(ok);
 }
 
+/* Ray/sphere test of the PSF_BVH_WIDTH spheres of sphere pack `p` (centres in
+ * v0, radii in e1_x) at once, in the form of Haines et al., "Precision
+ * improvements for ray/sphere intersection" (Ray Tracing Gems, 2019, ch. 7):
+ * with f = org - centre and unit direction d, the squared distance of the line
+ * from the centre is |f - (f.d) d|^2, which keeps the discriminant accurate far
+ * from the sphere, and the two roots are c / q and q with q = b + sign(b)
+ * sqrt(disc), b = -f.d, c = |f|^2 - r^2 (no cancellation). The nearer root in
+ * (tmin, tmax) is taken, else the farther (a ray starting inside). Returns the
+ * mask of lanes hit; *t_out their ray parameters (infinity elsewhere). */
+BVH_INLINE uint sphere_pack_test(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
+                                 float tmax, bvh_floatw* t_out) {
+  float inv_len = 1.0f / dir_len;
+  float3 d = dir * inv_len;
+  bvh_floatw fx = (bvh_floatw)(org.x) - BVH_VLOAD(0, p + PACK_V0);
+  bvh_floatw fy = (bvh_floatw)(org.y) - BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH);
+  bvh_floatw fz = (bvh_floatw)(org.z) - BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH);
+  bvh_floatw r = BVH_VLOAD(0, p + PACK_E1);
+  bvh_floatw b = -(fx * d.x + fy * d.y + fz * d.z);
+  bvh_floatw lx = fx + b * d.x, ly = fy + b * d.y, lz = fz + b * d.z;
+  bvh_floatw r2 = r * r;
+  bvh_floatw disc = r2 - (lx * lx + ly * ly + lz * lz);
+  bvh_floatw c = (fx * fx + fy * fy + fz * fz) - r2;
+  bvh_floatw q = b + copysign(sqrt(fmax(disc, (bvh_floatw)(0.0f))), b);
+  bvh_floatw t0 = c / q * inv_len, t1 = q * inv_len; /* q = 0: t0 NaN, which fails below */
+  bvh_intw hit = (disc >= 0.0f) & (r > 0.0f);
+  bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
+  bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
+  bvh_intw ok_f = hit & (tf > tmin) & (tf < tmax);
+  *t_out = select(select((bvh_floatw)(INFINITY), tf, ok_f), tn, ok_n);
+  return bvh_lane_mask(ok_n | ok_f);
+}
+
+/* Whether pack `p` holds spheres (its first lane, always used, says). */
+inline bool pack_is_spheres(__global const float* p) {
+  return (((__global const uint*)(p + PACK_PRIM))[0] & PSF_PRIM_SPHERE) != 0u;
+}
+
 /* Records lane k of a pack test in *hit. */
 BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_floatw u, bvh_floatw v, Hit* hit) {
   float tl[PSF_BVH_WIDTH], ul[PSF_BVH_WIDTH], vl[PSF_BVH_WIDTH];
@@ -196,7 +236,7 @@ BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_flo
   hit->t = tl[k];
   hit->u = ul[k];
   hit->v = vl[k];
-  hit->prim = ((__global const uint*)(p + PACK_PRIM))[k] & ~PSF_PRIM_MASKED;
+  hit->prim = ((__global const uint*)(p + PACK_PRIM))[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE);
 }
 
 /* The scene data the alpha test reads (masked kernels); a null pointer to it
@@ -260,7 +300,13 @@ BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint 
   for (uint k = first; k < end; ++k) {
     __global const float* p = (__global const float*)(packs + k);
     bvh_floatw t, u, v;
-    uint mask = pack_test(p, org, dir, dir_len, tmin, hit->t, &t, &u, &v);
+    uint mask;
+    if (pack_is_spheres(p)) {
+      mask = sphere_pack_test(p, org, dir, dir_len, tmin, hit->t, &t);
+      u = v = (bvh_floatw)(0.0f);
+    } else {
+      mask = pack_test(p, org, dir, dir_len, tmin, hit->t, &t, &u, &v);
+    }
     if (mask == 0u) continue;
     if (as) {
       mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
@@ -389,7 +435,13 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
       for (uint k = first; k < end; ++k) {
         __global const float* p = (__global const float*)(packs + k);
         bvh_floatw t, u, v;
-        uint mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);
+        uint mask;
+        if (pack_is_spheres(p)) {
+          mask = sphere_pack_test(p, org, dir, dir_len, tmin, hit.t, &t);
+          u = v = (bvh_floatw)(0.0f);
+        } else {
+          mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);
+        }
         if (mask != 0u && as) mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
         if (mask != 0u) {
           pack_take(p, bvh_first_lane(mask), t, u, v, &hit);

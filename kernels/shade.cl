@@ -150,13 +150,20 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     states[j] = st;
     return false;
   }
-  float3 p0 = tri_pos[3u * hit.prim].xyz, p1 = tri_pos[3u * hit.prim + 1u].xyz, p2 = tri_pos[3u * hit.prim + 2u].xyz;
-  float3 ng = cross(p1 - p0, p2 - p0);
-  float area2 = length(ng);
-  ng = area2 > 0.0f ? ng / area2 : (float3)(0.0f, 0.0f, 1.0f);
   float ray_len = length(ray.dir.xyz);
   float3 wo = -ray.dir.xyz / ray_len;
   float3 pos = ray.org.xyz + hit.t * ray.dir.xyz;
+  float3 p0, p1, p2, ng;
+  if (hit.prim >= params.first_sphere) { /* an analytic sphere: its point, normal, uv and dp/du, dp/dv (surface.cl) */
+    surface_sphere(tri_pos + 3u * hit.prim, &pos, &ng, &hit.u, &hit.v, &p0, &p1, &p2);
+  } else {
+    p0 = tri_pos[3u * hit.prim].xyz;
+    p1 = tri_pos[3u * hit.prim + 1u].xyz;
+    p2 = tri_pos[3u * hit.prim + 2u].xyz;
+    ng = cross(p1 - p0, p2 - p0);
+    float area2 = length(ng);
+    ng = area2 > 0.0f ? ng / area2 : (float3)(0.0f, 0.0f, 1.0f);
+  }
   float dist = hit.t * ray_len;
   st.prev_pos.w += dist;
   Material m = materials[tri_material[hit.prim]];

@@ -75,7 +75,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, max_depth)", offsetof(FrameParams, max_depth)},
       {"offsetof(FrameParams, batch_size)", offsetof(FrameParams, batch_size)},
       {"offsetof(FrameParams, rr_depth)", offsetof(FrameParams, rr_depth)},
-      {"offsetof(FrameParams, pad2)", offsetof(FrameParams, pad2)},
+      {"offsetof(FrameParams, first_sphere)", offsetof(FrameParams, first_sphere)},
       {"sizeof(FilterParams)", sizeof(FilterParams)},
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},

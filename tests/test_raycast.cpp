@@ -186,6 +186,18 @@ std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool an
   return rt.download<Hit>(hb, rays.size());
 }
 
+// Counts ray i's failure, if its closest or any-hit verdict failed, and shows
+// the first few.
+void report(size_t i, const Ray& ray, const Hit& closest, const Verdict& c, const Hit& any, const Verdict& a,
+            size_t& failures) {
+  if ((c.ok && a.ok) || ++failures > 5) return;
+  INFO("ray " << i << " org " << ray.org.s[0] << " " << ray.org.s[1] << " " << ray.org.s[2] << " dir " << ray.dir.s[0]
+              << " " << ray.dir.s[1] << " " << ray.dir.s[2] << " t [" << ray.org.s[3] << ", " << ray.dir.s[3] << "]");
+  INFO("closest: prim " << closest.prim << " t " << closest.t << ": " << c.why);
+  INFO("any: prim " << any.prim << " t " << any.t << ": " << a.why);
+  CHECK((c.ok && a.ok));
+}
+
 // Casts closest and any-hit rays and checks every result against the reference.
 // Returns the number of rays whose closest hit was a triangle.
 size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact = 0.99) {
@@ -198,14 +210,7 @@ size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact
     Verdict a = judge(m, rays[i], any[i], true);
     exact += c.exact;
     hits += closest[i].prim != PSF_NO_HIT;
-    if ((!c.ok || !a.ok) && ++failures <= 5) {
-      INFO("ray " << i << " org " << rays[i].org.s[0] << " " << rays[i].org.s[1] << " " << rays[i].org.s[2]
-                  << " dir " << rays[i].dir.s[0] << " " << rays[i].dir.s[1] << " " << rays[i].dir.s[2] << " t ["
-                  << rays[i].org.s[3] << ", " << rays[i].dir.s[3] << "]");
-      INFO("closest: prim " << closest[i].prim << " t " << closest[i].t << ": " << c.why);
-      INFO("any: prim " << any[i].prim << " t " << any[i].t << ": " << a.why);
-      CHECK((c.ok && a.ok));
-    }
+    report(i, rays[i], closest[i], c, any[i], a, failures);
   }
   INFO(failures << " of " << rays.size() << " rays fail");
   CHECK(failures == 0);
@@ -651,4 +656,204 @@ TEST_CASE("Raycast: one leaf's worth of triangles gives a root with one leaf", "
   for (int s = 0; s < PSF_BVH_WIDTH; ++s) used += bvh.nodes[0].child[s] != PSF_EMPTY_CHILD;
   CHECK(used >= 1);
   check_scene(m, rays_in_box(8, 300, vec3(-0.5f), vec3(1.5f, 1.5f, 3.0f), 10.0f));
+}
+
+namespace {
+
+// The reference for analytic spheres: both roots of |org + t dir - c|^2 = r^2 in
+// double (the textbook quadratic; double keeps it accurate at these scales).
+struct RefSphere {
+  bool valid = false;  // the line meets the sphere
+  double t0 = 0, t1 = 0;  // roots, t0 <= t1
+  double margin = 0;      // how far inside the sphere's outline the line passes, relative to r
+};
+
+RefSphere ref_sphere(const psf::BvhSphere& s, const Ray& ray) {
+  dvec3 o(ray.org.s[0], ray.org.s[1], ray.org.s[2]), d(ray.dir.s[0], ray.dir.s[1], ray.dir.s[2]);
+  dvec3 f = o - dvec3(s.center);
+  double a = glm::dot(d, d), b = glm::dot(f, d), c = glm::dot(f, f) - double(s.radius) * s.radius;
+  double disc = b * b - a * c;
+  RefSphere r;
+  if (disc < 0) return r;
+  double sq = std::sqrt(disc);
+  r.valid = true;
+  r.t0 = (-b - sq) / a;
+  r.t1 = (-b + sq) / a;
+  // Distance of the line from the centre against r: 1 - dist / r.
+  double dist = glm::length(f - d * (b / a));
+  r.margin = 1.0 - dist / s.radius;
+  return r;
+}
+
+// Judges closest and any-hit results in a scene of triangles (prims [0, T)) and
+// spheres (prims T + k). Sphere hits must be at a root within t tolerance
+// kSlack (|t| + (|org - c| + r) / |dir|); a sphere whose line passes within 1e-4 r
+// of its outline, or whose root lies within tolerance of tmin or tmax, may be hit
+// or missed.
+Verdict judge_mixed(const Mesh& m, const std::vector<psf::BvhSphere>& spheres, const Ray& ray, const Hit& hit,
+                    bool any) {
+  const uint32_t first = uint32_t(m.triangles.size());
+  const double inf = std::numeric_limits<double>::infinity();
+  const double tmin = ray.org.s[3], tmax = ray.dir.s[3];
+  dvec3 o(ray.org.s[0], ray.org.s[1], ray.org.s[2]), d(ray.dir.s[0], ray.dir.s[1], ray.dir.s[2]);
+  uint32_t strict_prim = PSF_NO_HIT;
+  double strict_t = inf, clear_t = inf;
+  for (uint32_t i = 0; i < first; ++i) {
+    RefIsect r = ref_isect(m, i, ray);
+    if (ref_inside(r, 0.0, 0.0, ray) && r.t < strict_t) strict_t = r.t, strict_prim = i;
+    if (r.valid) {
+      double tt = t_tolerance(r, ray);
+      if (ref_inside(r, -r.bary_tol, -tt, ray)) clear_t = std::min(clear_t, r.t + tt);
+    }
+  }
+  auto sphere_tol = [&](const psf::BvhSphere& s, double t) {
+    return kSlack * (std::abs(t) + (glm::length(o - dvec3(s.center)) + s.radius) / glm::length(d));
+  };
+  for (uint32_t k = 0; k < spheres.size(); ++k) {
+    RefSphere r = ref_sphere(spheres[k], ray);
+    if (!r.valid) continue;
+    for (double t : {r.t0, r.t1}) {
+      if (t > tmin && t < tmax && t < strict_t) strict_t = t, strict_prim = first + k;
+      double tt = sphere_tol(spheres[k], t);
+      if (r.margin > 1e-4 && t > tmin + tt && t < tmax - tt) clear_t = std::min(clear_t, t + tt);
+    }
+  }
+  Verdict v;
+  if (std::isnan(hit.t)) {
+    v.ok = false;
+    v.why = "NaN in the hit";
+    return v;
+  }
+  if (hit.prim == PSF_NO_HIT) {
+    v.exact = strict_prim == PSF_NO_HIT;
+    if (clear_t < inf) {
+      v.ok = false;
+      v.why = "device misses, reference hits prim " + std::to_string(strict_prim) + " at t " + std::to_string(strict_t);
+    }
+    return v;
+  }
+  v.exact = any ? strict_prim != PSF_NO_HIT : hit.prim == strict_prim;
+  if (hit.prim < first) {
+    RefIsect r = ref_isect(m, hit.prim, ray);
+    double tt = r.valid ? t_tolerance(r, ray) : 0.0;
+    if (!ref_inside(r, r.bary_tol, tt, ray) || std::abs(hit.t - r.t) > tt) {
+      v.ok = false;
+      v.why = "device reports triangle " + std::to_string(hit.prim) + " which the reference does not hit there";
+    }
+  } else if (hit.prim - first < spheres.size()) {
+    const psf::BvhSphere& s = spheres[hit.prim - first];
+    RefSphere r = ref_sphere(s, ray);
+    double tt = sphere_tol(s, hit.t);
+    bool at_root = r.valid && (std::abs(hit.t - r.t0) <= tt || std::abs(hit.t - r.t1) <= tt);
+    if (!at_root || !(hit.t > tmin - tt && hit.t < tmax + tt)) {
+      v.ok = false;
+      v.why = "device reports sphere " + std::to_string(hit.prim - first) + " at t " + std::to_string(hit.t) +
+              ", not at a root in range (reference " + std::to_string(r.t0) + ", " + std::to_string(r.t1) + ")";
+    } else if (hit.u != 0.0f || hit.v != 0.0f) {
+      v.ok = false;
+      v.why = "a sphere hit carries u = v = 0";
+    }
+  } else {
+    v.ok = false;
+    v.why = "device reports prim " + std::to_string(hit.prim) + " out of range";
+    return v;
+  }
+  if (v.ok && !any && hit.t > clear_t) {
+    v.ok = false;
+    v.why = "prim " + std::to_string(strict_prim) + " is clearly closer (t " + std::to_string(strict_t) + ")";
+  }
+  return v;
+}
+
+size_t check_mixed(const Mesh& m, const std::vector<psf::BvhSphere>& spheres, const std::vector<Ray>& rays,
+                   double min_exact = 0.99) {
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, spheres);
+  CHECK(bvh.sphere_count == spheres.size());
+  std::vector<Hit> closest = cast(bvh, rays, false);
+  std::vector<Hit> any = cast(bvh, rays, true);
+  size_t exact = 0, sphere_hits = 0, failures = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    Verdict c = judge_mixed(m, spheres, rays[i], closest[i], false);
+    Verdict a = judge_mixed(m, spheres, rays[i], any[i], true);
+    exact += c.exact;
+    sphere_hits += closest[i].prim != PSF_NO_HIT && closest[i].prim >= m.triangles.size();
+    report(i, rays[i], closest[i], c, any[i], a, failures);
+  }
+  INFO(failures << " of " << rays.size() << " rays fail");
+  CHECK(failures == 0);
+  INFO(exact << " of " << rays.size() << " rays report exactly the reference's prim");
+  CHECK(double(exact) >= min_exact * double(rays.size()));
+  return sphere_hits;
+}
+
+}  // namespace
+
+TEST_CASE("Raycast: analytic spheres among triangles match the brute-force reference", "[raycast]") {
+  // Spheres of radii from 1e-3 to 0.2 (and one enclosing everything, so rays
+  // start inside it) mixed with a triangle soup; leaves then hold both kinds.
+  for (uint32_t seed : {5u, 6u, 7u}) {
+    INFO("seed " << seed);
+    Mesh m = random_soup(seed, seed == 6 ? 0 : psf::test::pick(600, 60), 0.06f);
+    std::mt19937 rng(seed * 13 + 3);
+    std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+    std::vector<psf::BvhSphere> spheres;
+    const int count = psf::test::pick(500, 60);
+    for (int k = 0; k < count; ++k) {
+      float r = 0.2f * std::pow(10.0f, -2.3f * u01(rng));
+      spheres.push_back({vec3(u01(rng), u01(rng), u01(rng)), r});
+    }
+    spheres.push_back({vec3(0.5f), 3.0f});
+    std::vector<Ray> rays;
+    for (size_t i = 0, n = psf::test::pick(3001, 301); i < n; ++i) {
+      vec3 o = vec3(-0.2f) + 1.4f * vec3(u01(rng), u01(rng), u01(rng));
+      vec3 d = uniform_sphere(rng) * (0.5f + 2.0f * u01(rng));  // not normalised
+      float tmin = i % 3 == 0 ? 0.0f : 0.01f * u01(rng);
+      float tmax = i % 4 == 0 ? std::numeric_limits<float>::max() : 0.1f + u01(rng);
+      rays.push_back(make_ray(o, d, tmin, tmax));
+    }
+    size_t sphere_hits = check_mixed(m, spheres, rays);
+    CHECK(sphere_hits > rays.size() / 4);  // the spheres, and the enclosing one, are hit
+  }
+}
+
+TEST_CASE("Raycast: rays leaving a sphere's surface miss it outwards and cross it inwards", "[raycast]") {
+  // As the renderer offsets them (shade.cl): from a point moved 1e-4 of its
+  // distance off the surface. Outwards (into the normal's hemisphere) the sphere
+  // is behind; inwards the ray crosses to the far side, at the chord's length.
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  for (float radius : {0.01f, 1.0f, 300.0f}) {
+    INFO("radius " << radius);
+    psf::BvhSphere s{vec3(3.0f, -2.0f, 7.0f) * radius, radius};
+    psf::Bvh bvh = psf::build_bvh({}, {}, {s});
+    std::vector<Ray> rays;
+    std::vector<double> chords;  // expected t of the inward rays' hits
+    for (int i = 0, n_rays = psf::test::pick(2000, 200); i < n_rays; ++i) {
+      vec3 n = uniform_sphere(rng);
+      vec3 w = uniform_sphere(rng);
+      bool inward = i % 2 == 1;
+      if ((glm::dot(w, n) > 0.0f) == inward) w = -w;
+      vec3 p = s.center + radius * n;
+      float off = 1e-4f * std::max(1.0f, std::max(std::fabs(p.x), std::max(std::fabs(p.y), std::fabs(p.z))));
+      vec3 o = p + (inward ? -n : n) * off;
+      rays.push_back(make_ray(o, w * 2.0f, 0.0f, std::numeric_limits<float>::infinity()));
+      chords.push_back(ref_sphere(s, rays.back()).t1);  // the far root, from the offset origin
+    }
+    std::vector<Hit> hits = cast(bvh, rays, false);
+    std::vector<Hit> any = cast(bvh, rays, true);
+    int bad = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      bool inward = i % 2 == 1;
+      const double tol = kSlack * (chords[i] + (glm::length(glm::dvec3(rays[i].org.s[0], rays[i].org.s[1],
+                                                                        rays[i].org.s[2]) - dvec3(s.center)) + radius) / 2.0);
+      bool ok = inward ? hits[i].prim == 0 && any[i].prim == 0 && std::abs(hits[i].t - chords[i]) <= tol
+                       : hits[i].prim == PSF_NO_HIT && any[i].prim == PSF_NO_HIT;
+      if (!ok && ++bad <= 3) {
+        INFO("ray " << i << (inward ? " inwards" : " outwards") << ": prim " << hits[i].prim << " t " << hits[i].t
+                    << ", chord " << chords[i]);
+        CHECK(ok);
+      }
+    }
+    CHECK(bad == 0);
+  }
 }

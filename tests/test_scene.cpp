@@ -525,10 +525,16 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
   CHECK(near(emission(s.materials[2]), {1, 2, 3}));
   CHECK(s.materials[2].two_sided == 0);  // area emitters emit from the front only
 
+  // The sphere is analytic (an identity to_world).
+  REQUIRE(s.spheres.size() == 1);
+  CHECK(near(s.spheres[0].center, {10, 0, 0}));
+  CHECK(s.spheres[0].radius == 2.0f);
+  CHECK(s.spheres[0].material == 1);
+  CHECK(!s.spheres[0].flip);
   // Every triangle faces away from its shape's centre (outward), except the flipped rectangle.
   const glm::vec3 centres[4] = {{0, 0, 0}, {0, 0, -1}, {10, 0, 0}, {0, 0, 1}};
   size_t tri = 0;
-  const size_t counts[4] = {12, 64, 2 * 64 + 2 * 64 * 30, 2};
+  const size_t counts[4] = {12, 64, 0, 2};
   for (int shape = 0; shape < 4; ++shape) {
     for (size_t k = 0; k < counts[shape]; ++k, ++tri) {
       REQUIRE(tri < s.triangles.size());
@@ -539,8 +545,45 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
     }
   }
   CHECK(tri == s.triangles.size());
-  for (const glm::vec3& p : std::vector<glm::vec3>(s.positions.begin() + 24 + 65, s.positions.end() - 4))
-    CHECK(glm::length(p - glm::vec3(10, 0, 0)) == Approx(2.0f).epsilon(1e-5));
+}
+
+TEST_CASE("Shapes: spheres are analytic under a similarity to_world, else tessellated", "[scene]") {
+  // Rotation, uniform scale and translation: the centre and radius go through
+  // to_world, the frame's axes are the rotation's columns; flip_normals is kept.
+  psf::Scene s = load_text(
+      "<shape type=\"sphere\"><point name=\"center\" x=\"1\" y=\"0\" z=\"0\"/><float name=\"radius\" value=\"0.5\"/>"
+      "<boolean name=\"flip_normals\" value=\"true\"/>"
+      "<transform name=\"to_world\"><rotate z=\"1\" angle=\"90\"/><scale value=\"3\"/><translate y=\"2\"/></transform>"
+      "</shape>\n");
+  REQUIRE(s.spheres.size() == 1);
+  CHECK(s.triangles.empty());
+  const psf::SphereShape& sp = s.spheres[0];
+  CHECK(near(sp.center, {0, 5, 0}));  // (1, 0, 0) turned to (0, 1, 0), scaled by 3, moved up by 2
+  CHECK(sp.radius == Approx(1.5f));
+  CHECK(near(sp.axis_x, {0, 1, 0}));
+  CHECK(near(sp.axis_y, {-1, 0, 0}));
+  CHECK(sp.flip);
+  glm::vec3 lo, hi;
+  psf::scene_bounds(s, lo, hi);
+  CHECK(near(lo, {-1.5f, 3.5f, -1.5f}));
+  CHECK(near(hi, {1.5f, 6.5f, 1.5f}));
+
+  // A non-uniform scale (an ellipsoid), a mirroring one, and a mask BSDF (cut-outs
+  // are alpha tests on triangles): tessellated, each with its vertices on the
+  // transformed sphere.
+  psf::Scene t = load_text(
+      "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"2\" y=\"1\" z=\"1\"/></transform></shape>\n"
+      "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"-1\" y=\"1\" z=\"1\"/></transform></shape>\n"
+      "<shape type=\"sphere\"><bsdf type=\"mask\"><float name=\"opacity\" value=\"0.5\"/>"
+      "<bsdf type=\"diffuse\"/></bsdf></shape>\n");
+  CHECK(t.spheres.empty());
+  REQUIRE(t.triangles.size() == 3 * size_t(2 * 64 + 2 * 64 * 30));
+  const size_t per = t.positions.size() / 3;
+  for (size_t i = 0; i < per; ++i) {
+    glm::vec3 p = t.positions[i];
+    CHECK(p.x * p.x / 4 + p.y * p.y + p.z * p.z == Approx(1.0f).epsilon(1e-5));
+    CHECK(glm::length(t.positions[per + i]) == Approx(1.0f).epsilon(1e-5));
+  }
 }
 
 TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <sstream>
 #include <thread>
 #include <utility>
@@ -29,7 +30,12 @@ float pack_tangent(const glm::vec4& t) {
 }  // namespace
 
 std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
-  std::vector<TriAttrib> out(scene.triangles.size());
+  std::vector<TriAttrib> out(scene.triangles.size() + scene.spheres.size());
+  for (size_t k = scene.triangles.size(); k < out.size(); ++k) {
+    out[k].uv01 = {{0, 0, 1, 0}};
+    out[k].u2 = 0;
+    out[k].v2 = 1;
+  }
   const bool has_normals = scene.normals.size() == scene.positions.size();
   const bool has_tangents = has_normals && scene.tangents.size() == scene.positions.size();
   const bool has_uvs = scene.uvs.size() == scene.positions.size();
@@ -85,6 +91,22 @@ std::vector<TriAttrib> triangle_attributes(const Scene& scene) {
     }
   }
   return out;
+}
+
+void scene_bounds(const Scene& scene, glm::vec3& lo, glm::vec3& hi) {
+  lo = glm::vec3(std::numeric_limits<float>::max());
+  hi = glm::vec3(-std::numeric_limits<float>::max());
+  auto finite = [](const glm::vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); };
+  for (const glm::vec3& p : scene.positions)
+    if (finite(p)) {
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+    }
+  for (const SphereShape& s : scene.spheres)
+    if (finite(s.center) && std::isfinite(s.radius)) {
+      lo = glm::min(lo, s.center - glm::vec3(s.radius));
+      hi = glm::max(hi, s.center + glm::vec3(s.radius));
+    }
 }
 
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes) {

@@ -1155,8 +1155,36 @@ class MitsubaLoader {
     }
     uint32_t mat =
         material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0], emitters.empty() ? pugi::xml_node() : emitters[0]);
-    append_mesh(scene_, mesh, parent * get_transform(e, "to_world"), mat, get_bool(e, "flip_normals", false),
-                file_of(node).path, line_of(node));
+    const glm::mat4 to_world = parent * get_transform(e, "to_world");
+    const bool flip = get_bool(e, "flip_normals", false);
+    if (e.type == "sphere" && add_analytic_sphere(e, to_world, mat, flip)) return;
+    append_mesh(scene_, mesh, to_world, mat, flip, file_of(node).path, line_of(node));
+  }
+
+  // A sphere whose to_world is a rotation, uniform scale and translation (as
+  // Mitsuba 3 expects of its spheres) goes in as an analytic sphere, unless its
+  // material is alpha-tested (masks cut triangles only); otherwise the caller
+  // draws its tessellation (an ellipsoid for a non-uniform scale).
+  bool add_analytic_sphere(const Element& e, const glm::mat4& to_world, uint32_t mat, bool flip) {
+    if (mat < scene_.materials.size() && (scene_.materials[mat].flags & PSF_MATFLAG_MASKED)) return false;
+    const glm::mat3 a(to_world);
+    const float s = std::cbrt(glm::determinant(a));
+    if (!(s > 0.0f) || !std::isfinite(s)) return false;
+    const glm::mat3 q = a / s;  // a rotation if a is a similarity
+    const glm::mat3 qtq = glm::transpose(q) * q;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (std::fabs(qtq[i][j] - (i == j ? 1.0f : 0.0f)) > 1e-4f) return false;
+    SphereShape sp;
+    sp.center = glm::vec3(to_world * glm::vec4(get_point(e, "center", glm::vec3(0.0f)), 1.0f));
+    sp.radius = s * float(get_float(e, "radius", 1.0));
+    sp.axis_x = glm::normalize(q[0]);
+    sp.axis_y = glm::normalize(q[1] - sp.axis_x * glm::dot(sp.axis_x, q[1]));
+    sp.flip = flip;
+    sp.material = mat;
+    if (!std::isfinite(sp.radius) || !std::isfinite(sp.center.x + sp.center.y + sp.center.z)) return false;
+    scene_.spheres.push_back(sp);
+    return true;
   }
 
   TriMesh shape_obj(const Element& e) {

@@ -50,6 +50,19 @@ struct CameraDesc {
   float filter_stddev = 0.5f;
 };
 
+// An analytic sphere (Mitsuba's sphere under a to_world of rotation, uniform
+// scale and translation): intersected exactly, shaded with its own normal and
+// Mitsuba's uv (phi / 2pi, theta / pi in its local frame, z up), sampled as a
+// light by area. Its prim index follows the triangles' (psf_shared.h).
+struct SphereShape {
+  glm::vec3 center{0.0f};
+  float radius = 1.0f;
+  glm::vec3 axis_x{1, 0, 0};  // the local frame's x and y axes in world space (unit,
+  glm::vec3 axis_y{0, 1, 0};  // orthogonal); z = x cross y
+  bool flip = false;          // flip_normals: the normal points inwards
+  uint32_t material = 0;
+};
+
 struct Scene {
   std::vector<glm::vec3> positions;      // vertex positions in world space
   std::vector<glm::uvec3> triangles;     // vertex indices of each triangle
@@ -62,6 +75,7 @@ struct Scene {
   // x < 0: none. It multiplies the colour term of the triangle's material.
   std::vector<glm::vec3> colors;
   std::vector<uint32_t> tri_material;    // material index of each triangle
+  std::vector<SphereShape> spheres;      // analytic spheres (prims triangles.size() + k)
   std::vector<Material> materials;       // albedo and emission (psf_shared.h)
   std::vector<std::string> material_names;  // per material: bsdf id or MTL name, for messages and tests
   std::vector<TextureInfo> textures;     // texture table; entry 0 (PSF_NO_TEXTURE) a placeholder; may be empty
@@ -84,8 +98,14 @@ struct Scene {
 Scene load_scene(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params = {});
 
 // The shading attributes of every triangle (psf_shared.h TriAttrib): the vertex
-// normals and uvs of `scene`, barycentric uvs where a vertex has none.
+// normals and uvs of `scene`, barycentric uvs where a vertex has none; then
+// one per analytic sphere, with the uvs (0,0), (1,0), (0,1), so that shade.cl's
+// barycentrics (b1, b2) are the sphere's uv, and no vertex normals.
 std::vector<TriAttrib> triangle_attributes(const Scene& scene);
+
+// The axis-aligned bounds of the scene's triangles' vertices and spheres (finite
+// values only); lo > hi where there are none.
+void scene_bounds(const Scene& scene, glm::vec3& lo, glm::vec3& hi);
 
 // The materials as the device gets them: PSF_MATFLAG_NORMALS set on those with
 // a triangle with vertex normals in `attributes` (so that the others skip reading
