@@ -7,15 +7,19 @@
  *   emitter_sample(...)  -> LightSample {wi, dist, radiance, pdf, delta}: one light
  *                           chosen by the cdf, then a point or direction on it
  *   emitter_pdf_hit(...) -> solid-angle pdf of hitting an emitter triangle by chance (for MIS)
+ *   emitter_pdf_sphere(...) -> the same for a sphere light, from the point p
  *   env_radiance(...)    -> radiance of the environment along a world direction
  *   env_pdf(...)         -> solid-angle pdf of env_sample for that direction
  * Light types and their samples:
  *   triangle:    uniform by area (Turk 1990: b1 = sqrt(u) (1 - v), b2 = sqrt(u) v);
  *                pdf = P(light) / area * r^2 / cos_l; with an emission texture
  *                the caller multiplies the radiance by it at (prim, b1, b2)
- *   sphere:      uniform by area (z = 1 - 2u, phi = 2 pi v in its frame), the
- *                same pdf; (b1, b2) is the point's uv (its TriAttrib's uvs are
- *                the identity); points facing away from p have cos_l <= 0
+ *   sphere:      seen from outside (one-sided, emitting outwards): uniform in the
+ *                cone of directions it subtends (pbrt's and Mitsuba 3's sphere
+ *                sampling), pdf = P(light) / (2 pi (1 - cos theta_max)); else
+ *                uniform by area (z = 1 - 2u, phi = 2 pi v in its frame) with
+ *                the triangle's pdf, points facing away from p having cos_l <= 0;
+ *                (b1, b2) is the point's uv (its TriAttrib's uvs are the identity)
  *   point:       delta; radiance I / r^2, pdf = P(light)
  *   spot:        delta; I / r^2 times Mitsuba's falloff: 1 inside the beam width,
  *                (cutoff - angle) / (cutoff - beam width) up to the cutoff, 0 beyond
@@ -229,6 +233,35 @@ inline float spot_falloff(Emitter em, float cos_a) {
   return clamp((em.e2.x - acos(clamp(cos_a, -1.0f, 1.0f))) * em.e2.y, 0.0f, 1.0f);
 }
 
+/* Whether a sphere light (centre c, radius r, normal sign, two-sided flag) is
+ * sampled from p by the cone of directions it subtends: an outward-emitting,
+ * one-sided sphere seen from outside (Mitsuba 3's sphere does the same); else
+ * uniformly by area. Light sampling and emitter_pdf_sphere decide alike. */
+inline bool sphere_cone_sampled(float3 c, float r, float sign, uint two_sided, float3 p) {
+  float3 d = c - p;
+  return sign > 0.0f && !two_sided && dot(d, d) > r * r;
+}
+
+/* 1 - cos(theta_max) of the cone of a sphere of radius r whose centre lies at
+ * squared distance d2 > r^2, without cancellation: s / (1 + sqrt(1 - s)), s = r^2 / d2. */
+inline float sphere_cone_width(float r, float d2) {
+  float s = fmin(r * r / d2, 1.0f);
+  return s / (1.0f + sqrt(1.0f - s));
+}
+
+/* Solid-angle pdf with which emitter_sample reaches a point of the sphere light
+ * `prim` (its tri_pos entries `sp`, surface.cl surface_sphere) from p, at distance
+ * dist and cosine cos_l to its normal there: the cone's uniform pdf, or by area. */
+inline float emitter_pdf_sphere(__global const float* tri_light_pdf, uint prim, __global const float4* sp,
+                                uint two_sided, float3 p, float dist, float cos_l) {
+  float4 s0 = sp[0];
+  if (!sphere_cone_sampled(s0.xyz, s0.w, sp[1].w, two_sided, p))
+    return cos_l > 0.0f ? tri_light_pdf[prim] * dist * dist / cos_l : 0.0f;
+  float3 d = s0.xyz - p;
+  float select = tri_light_pdf[prim] * (4.0f * PSF_ENV_PI * s0.w * s0.w); /* per area times the area */
+  return select / (2.0f * PSF_ENV_PI * sphere_cone_width(s0.w, dot(d, d)));
+}
+
 /* One light chosen by `ul` from the table and a point (ua, ub) on it, seen from p. */
 inline LightSample emitter_sample(__global const Emitter* emitters, __global const float* cdf, uint count, Environment env,
                                   __global const float* env_data, float3 p, float ul, float ua, float ub) {
@@ -277,7 +310,38 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
     return ls;
   }
   float3 lp, ln;
-  if (em.type == PSF_EMITTER_SPHERE) {
+  if (em.type == PSF_EMITTER_SPHERE && sphere_cone_sampled(em.v0.xyz, em.e1.w, em.e2.w, em.two_sided, p)) {
+    /* The cone around the direction w to the centre: 1 - cos(theta) uniform in
+     * [0, 1 - cos(theta_max)], phi = 2 pi ub, then the nearer intersection
+     * with the sphere (the precise form of raycast.cl); pdf = P(light) / (2 pi
+     * (1 - cos(theta_max))). */
+    float3 dc = em.v0.xyz - p;
+    float d2 = dot(dc, dc), r = em.e1.w;
+    float width = sphere_cone_width(r, d2);
+    float omc = ua * width, cos_t = 1.0f - omc, sin_t = sqrt(fmax(0.0f, omc * (2.0f - omc))), cos_phi;
+    float sin_phi = psf_sincos(2.0f * PSF_ENV_PI * ub, &cos_phi);
+    Frame f = frame_from_normal(dc * rsqrt(d2));
+    float3 wi = normalize(sin_t * cos_phi * f.s + sin_t * sin_phi * f.t + cos_t * f.n);
+    float b = dot(wi, dc);
+    float3 l = dc - b * wi;
+    float dist = b - sqrt(fmax(0.0f, r * r - dot(l, l)));
+    if (!(dist > 0.0f)) return ls;
+    float3 n = normalize(p + dist * wi - em.v0.xyz);
+    ls.wi = wi;
+    ls.dist = dist;
+    ls.pdf = select / (2.0f * PSF_ENV_PI * width);
+    ls.radiance = em.radiance.xyz;
+    ls.tex = em.tex_emission;
+    ls.prim = em.prim;
+    if (ls.tex != PSF_NO_TEXTURE) { /* the point's uv in the sphere's frame (surface.cl) */
+      float lx = dot(n, em.e1.xyz), ly = dot(n, em.e2.xyz), lz = dot(n, cross(em.e1.xyz, em.e2.xyz));
+      float phi = atan2(ly, lx);
+      ls.b1 = (phi < 0.0f ? phi + 2.0f * PSF_ENV_PI : phi) * (0.5f / PSF_ENV_PI);
+      ls.b2 = acos(clamp(lz, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI);
+    }
+    if (!(ls.pdf > 0.0f) || !isfinite(ls.pdf)) ls.pdf = 0.0f;
+    return ls;
+  } else if (em.type == PSF_EMITTER_SPHERE) {
     /* Uniform by area: z = 1 - 2 ua, phi = 2 pi ub in the sphere's frame, so
      * that (ub, acos(z) / pi) is the point's uv. */
     float z = 1.0f - 2.0f * ua, rho = sqrt(fmax(0.0f, 1.0f - z * z)), cos_phi;

@@ -174,7 +174,11 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   if (max3(m.emission.xyz) > 0.0f && (front || m.two_sided) && !(st.depth == 0u && (params.hide & PSF_HIDE_AREA))) {
     float w = 1.0f;
     if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR) && params.num_emitters > 0u)
-      w = power_heuristic(st.throughput.w, emitter_pdf_hit(tri_light_pdf, hit.prim, dist, fabs(dot(ng, wo))));
+      w = power_heuristic(st.throughput.w,
+                          hit.prim >= params.first_sphere
+                              ? emitter_pdf_sphere(tri_light_pdf, hit.prim, tri_pos + 3u * hit.prim, m.two_sided,
+                                                   st.prev_pos.xyz, dist, fabs(dot(ng, wo)))
+                              : emitter_pdf_hit(tri_light_pdf, hit.prim, dist, fabs(dot(ng, wo))));
     add_radiance(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
   }
 
