@@ -72,8 +72,8 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   const uint key = pixel_seed(params.seed, film_pixel);
   float u = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
   float v = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL + 1);
-  float s = ((float)fx + 0.5f + pixel_filter_offset(camera, u)) / (float)camera.width;
-  float t = ((float)fy + 0.5f + pixel_filter_offset(camera, v)) / (float)camera.height;
+  float s = ((float)fx + 0.5f + pixel_filter_offset(camera, u)) / (float)camera.width + camera.shift_s;
+  float t = ((float)fy + 0.5f + pixel_filter_offset(camera, v)) / (float)camera.height + camera.shift_t;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
   float3 org = camera.origin.xyz;
   if (camera.orthographic) { /* parallel rays from the film's point */

@@ -25,6 +25,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Camera, focus);
   out[i++] = PSF_OFFSET(Camera, orthographic);
   out[i++] = PSF_OFFSET(Camera, filter_b);
+  out[i++] = PSF_OFFSET(Camera, shift_t);
   out[i++] = sizeof(Material);
   out[i++] = PSF_OFFSET(Material, emission);
   out[i++] = PSF_OFFSET(Material, type);

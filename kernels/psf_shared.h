@@ -143,6 +143,10 @@ typedef struct {
                          centre is drawn from it (filter importance sampling; camera.cl) */
   float filter_a;     /* box: half-width (0: 0.5); tent: radius; gaussian: sqrt(2) stddev */
   float filter_b;     /* gaussian: erf(radius / (sqrt(2) stddev)), where it is cut off */
+  float shift_s;      /* Mitsuba's principal point offset: the film point (s, t) looks along (s + shift_s, */
+  float shift_t;      /* t + shift_t) (perspective only; fractions of the film's width and height) */
+  psf_uint pad0;      /* padding */
+  psf_uint pad1;
 } Camera;
 
 /* Camera.filter: Mitsuba's reconstruction filters with no negative lobes. */

@@ -26,6 +26,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Camera, focus)", offsetof(Camera, focus)},
       {"offsetof(Camera, orthographic)", offsetof(Camera, orthographic)},
       {"offsetof(Camera, filter_b)", offsetof(Camera, filter_b)},
+      {"offsetof(Camera, shift_t)", offsetof(Camera, shift_t)},
       {"sizeof(Material)", sizeof(Material)},
       {"offsetof(Material, emission)", offsetof(Material, emission)},
       {"offsetof(Material, type)", offsetof(Material, type)},

@@ -71,6 +71,8 @@ Camera make_camera(const CameraDesc& desc, int image_width, int image_height) {
   c.height = uint32_t(height);
   c.aperture = desc.orthographic ? 0.0f : std::max(desc.aperture_radius, 0.0f);
   c.focus = desc.focus_distance;
+  c.shift_s = desc.orthographic ? 0.0f : desc.principal_point.x;
+  c.shift_t = desc.orthographic ? 0.0f : desc.principal_point.y;
   c.orthographic = desc.orthographic ? 1u : 0u;
   if (desc.pixel_filter == "tent") {
     c.filter = PSF_PIXEL_FILTER_TENT;

@@ -41,6 +41,7 @@ struct CameraDesc {
   // film_width x film_height pixels from pixel (crop_x, crop_y) on, of the
   // scene's width x height; film_width 0: no crop, the film is the image.
   int film_width = 0, film_height = 0, crop_x = 0, crop_y = 0;
+  glm::vec2 principal_point{0.0f};  // Mitsuba's principal_point_offset_x/y (perspective): film fractions
   float near_clip = 0.0f;      // camera rays see what lies between these distances along the view direction
   float far_clip = INFINITY;   // (Mitsuba's near_clip and far_clip)
   // Pixel filter (Mitsuba's rfilter): "box" (half-width 0.5), "tent" (radius
