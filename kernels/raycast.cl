@@ -196,25 +196,54 @@ BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float
  * with f = org - centre and unit direction d, the squared distance of the line
  * from the centre is |f - (f.d) d|^2, which keeps the discriminant accurate far
  * from the sphere, and the two roots are c / q and q with q = b + sign(b)
- * sqrt(disc), b = -f.d, c = |f|^2 - r^2 (no cancellation). The nearer root in
- * (tmin, tmax) is taken, else the farther (a ray starting inside). Returns the
- * mask of lanes hit; *t_out their ray parameters (infinity elsewhere). */
+ * sqrt(disc), b = -f.d, c = |f|^2 - r^2. The nearer root in (tmin, tmax) is
+ * taken, else the farther (a ray starting inside). Returns the mask of lanes
+ * hit; *t_out their ray parameters (infinity elsewhere).
+ * In double precision where the device has it (cl_khr_fp64; Mitsuba 3 too
+ * intersects its spheres in double on the CPU): a ray leaving a large sphere
+ * (a ground of radius 1e5) starts a ray offset of 1e-4 off its surface, which
+ * f = org - centre holds in float only to 1/128, and c = |f|^2 - r^2 cancels to
+ * noise: such rays hit their own sphere. */
+#if defined(cl_khr_fp64) && PSF_BVH_WIDTH == 8
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double8 sphere_realw;
+#define SPHERE_REAL(x) convert_double8(x)
+#define SPHERE_FLOATW(x) convert_float8(x)
+#define SPHERE_INTW(x) convert_int8(x)
+#define SPHERE_SCALAR double
+#elif defined(cl_khr_fp64) && PSF_BVH_WIDTH == 4
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double4 sphere_realw;
+#define SPHERE_REAL(x) convert_double4(x)
+#define SPHERE_FLOATW(x) convert_float4(x)
+#define SPHERE_INTW(x) convert_int4(x)
+#define SPHERE_SCALAR double
+#else
+typedef bvh_floatw sphere_realw;
+#define SPHERE_REAL(x) (x)
+#define SPHERE_FLOATW(x) (x)
+#define SPHERE_INTW(x) (x)
+#define SPHERE_SCALAR float
+#endif
 BVH_INLINE uint sphere_pack_test(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
                                  float tmax, bvh_floatw* t_out) {
-  float inv_len = 1.0f / dir_len;
-  float3 d = dir * inv_len;
-  bvh_floatw fx = (bvh_floatw)(org.x) - BVH_VLOAD(0, p + PACK_V0);
-  bvh_floatw fy = (bvh_floatw)(org.y) - BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH);
-  bvh_floatw fz = (bvh_floatw)(org.z) - BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH);
-  bvh_floatw r = BVH_VLOAD(0, p + PACK_E1);
-  bvh_floatw b = -(fx * d.x + fy * d.y + fz * d.z);
-  bvh_floatw lx = fx + b * d.x, ly = fy + b * d.y, lz = fz + b * d.z;
-  bvh_floatw r2 = r * r;
-  bvh_floatw disc = r2 - (lx * lx + ly * ly + lz * lz);
-  bvh_floatw c = (fx * fx + fy * fy + fz * fz) - r2;
-  bvh_floatw q = b + copysign(sqrt(fmax(disc, (bvh_floatw)(0.0f))), b);
-  bvh_floatw t0 = c / q * inv_len, t1 = q * inv_len; /* q = 0: t0 NaN, which fails below */
-  bvh_intw hit = (disc >= 0.0f) & (r > 0.0f);
+  SPHERE_SCALAR len = sqrt((SPHERE_SCALAR)dir.x * dir.x + (SPHERE_SCALAR)dir.y * dir.y + (SPHERE_SCALAR)dir.z * dir.z);
+  SPHERE_SCALAR inv_len = (SPHERE_SCALAR)1 / len;
+  SPHERE_SCALAR dx = dir.x * inv_len, dy = dir.y * inv_len, dz = dir.z * inv_len;
+  sphere_realw fx = (SPHERE_SCALAR)org.x - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0));
+  sphere_realw fy = (SPHERE_SCALAR)org.y - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH));
+  sphere_realw fz = (SPHERE_SCALAR)org.z - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH));
+  bvh_floatw rf = BVH_VLOAD(0, p + PACK_E1);
+  sphere_realw r = SPHERE_REAL(rf);
+  sphere_realw b = -(fx * dx + fy * dy + fz * dz);
+  sphere_realw lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
+  sphere_realw r2 = r * r;
+  sphere_realw disc = r2 - (lx * lx + ly * ly + lz * lz);
+  sphere_realw c = (fx * fx + fy * fy + fz * fz) - r2;
+  sphere_realw q = b + copysign(sqrt(fmax(disc, (sphere_realw)(0))), b);
+  /* q = 0: t0 NaN, which fails below */
+  bvh_floatw t0 = SPHERE_FLOATW(c / q * inv_len), t1 = SPHERE_FLOATW(q * inv_len);
+  bvh_intw hit = SPHERE_INTW(disc >= (sphere_realw)(0)) & (rf > 0.0f);
   bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
   bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
   bvh_intw ok_f = hit & (tf > tmin) & (tf < tmax);

@@ -155,7 +155,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   float3 pos = ray.org.xyz + hit.t * ray.dir.xyz;
   float3 p0, p1, p2, ng;
   if (hit.prim >= params.first_sphere) { /* an analytic sphere: its point, normal, uv and dp/du, dp/dv (surface.cl) */
-    surface_sphere(tri_pos + 3u * hit.prim, &pos, &ng, &hit.u, &hit.v, &p0, &p1, &p2);
+    surface_sphere(tri_pos + 3u * hit.prim, pos, &ng, &hit.u, &hit.v, &p0, &p1, &p2);
   } else {
     p0 = tri_pos[3u * hit.prim].xyz;
     p1 = tri_pos[3u * hit.prim + 1u].xyz;

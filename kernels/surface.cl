@@ -30,8 +30,10 @@
 /* The shading point of a hit on an analytic sphere (psf_shared.h PSF_PRIM_SPHERE)
  * from its three tri_pos entries `s` (host/render.cpp: centre and radius, the
  * local x axis with the normal's sign, -1 for flip_normals, the local y axis;
- * z = x cross y): the hit point *pos moved onto the sphere along the normal, the
- * unit geometric normal *ng, Mitsuba 3's uv (phi / 2pi, theta / pi of the local
+ * z = x cross y): the unit geometric normal *ng at the hit point pos (left
+ * where the ray put it: c + r n in float is off the surface by up to ulp(|c|),
+ * 1/128 for a ground sphere of radius 1e5, where the hit point is accurate to
+ * ulp(|pos|)), Mitsuba 3's uv (phi / 2pi, theta / pi of the local
  * direction, theta from z) into *u, *v, and p0 = the point, p1 = p0 + dp/du,
  * p2 = p0 + dp/dv with Mitsuba's dp/du = 2 pi r (-y, x, 0) and dp/dv = pi r (z
  * cos phi, z sin phi, -sin theta) (local coordinates), so that
@@ -39,14 +41,13 @@
  * (0,1), which the sphere's TriAttrib holds, give these derivatives, and its
  * texture lookups at (b1, b2) = (u, v) the uv. The sphere's TriAttrib has no
  * vertex normals: the shading normal is *ng. */
-inline void surface_sphere(__global const float4* s, float3* pos, float3* ng, float* u, float* v, float3* p0,
+inline void surface_sphere(__global const float4* s, float3 pos, float3* ng, float* u, float* v, float3* p0,
                            float3* p1, float3* p2) {
   float4 s0 = s[0], s1 = s[1], s2 = s[2];
   float3 x = s1.xyz, y = s2.xyz, z = cross(x, y);
-  float3 d = *pos - s0.xyz;
+  float3 d = pos - s0.xyz;
   float len = length(d);
   float3 n = len > 0.0f ? d / len : z;
-  *pos = s0.xyz + s0.w * n;
   *ng = n * s1.w;
   float lx = dot(n, x), ly = dot(n, y), lz = clamp(dot(n, z), -1.0f, 1.0f);
   float phi = atan2(ly, lx);
@@ -57,9 +58,9 @@ inline void surface_sphere(__global const float4* s, float3* pos, float3* ng, fl
   float cos_phi = rho > 0.0f ? lx / rho : 1.0f, sin_phi = rho > 0.0f ? ly / rho : 0.0f;
   float3 dpdu = (2.0f * PSF_PI * s0.w) * (ly * -x + lx * y);
   float3 dpdv = (PSF_PI * s0.w) * (lz * cos_phi * x + lz * sin_phi * y - rho * z);
-  *p0 = *pos;
-  *p1 = *pos + dpdu;
-  *p2 = *pos + dpdv;
+  *p0 = pos;
+  *p1 = pos + dpdu;
+  *p2 = pos + dpdv;
 }
 
 /* The surface uv at barycentrics (b1, b2) of a triangle's attributes. */

@@ -822,14 +822,19 @@ TEST_CASE("Raycast: rays leaving a sphere's surface miss it outwards and cross i
   // is behind; inwards the ray crosses to the far side, at the chord's length.
   std::mt19937 rng(17);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
-  for (float radius : {0.01f, 1.0f, 300.0f}) {
+  // The last: a ground sphere of radius 1e5 below the origin, left from points
+  // near its top (|p| of a few units, so the offset is 1e-4: a float f = org -
+  // centre holds it only to 1/128; raycast.cl tests spheres in double).
+  for (float radius : {0.01f, 1.0f, 300.0f, 1e5f}) {
     INFO("radius " << radius);
-    psf::BvhSphere s{vec3(3.0f, -2.0f, 7.0f) * radius, radius};
+    const bool ground = radius == 1e5f;
+    psf::BvhSphere s{ground ? vec3(0.0f, -radius, 0.0f) : vec3(3.0f, -2.0f, 7.0f) * radius, radius};
     psf::Bvh bvh = psf::build_bvh({}, {}, {s});
     std::vector<Ray> rays;
     std::vector<double> chords;  // expected t of the inward rays' hits
     for (int i = 0, n_rays = psf::test::pick(2000, 200); i < n_rays; ++i) {
       vec3 n = uniform_sphere(rng);
+      if (ground) n = glm::normalize(vec3(5.0f * n.x, radius, 5.0f * n.z));  // within 5 of the top
       vec3 w = uniform_sphere(rng);
       bool inward = i % 2 == 1;
       if ((glm::dot(w, n) > 0.0f) == inward) w = -w;
