@@ -273,6 +273,29 @@ LightTable build_light_table(const Scene& scene) {
     }
   }
 
+  // The lights at infinity (environment, directional) take their power from
+  // the disk of the scene's bounding radius, which a large ground (a sphere of
+  // radius 1e5, a huge floor) makes far larger than the part the camera sees:
+  // there they took all but 1e-5 of the light samples, and the lamps' rare
+  // samples came back as fireflies. Their share of the samples, where there are
+  // lights of both kinds, is held within [kMinShare, 1 - kMinShare] (a bound on
+  // the variance; any selection keeps the estimate unbiased).
+  constexpr double kMinShare = 0.1;
+  double infinite = 0.0, finite = 0.0;
+  for (size_t i = 0; i < power.size(); ++i) {
+    const uint32_t type = t.emitters[i].type;
+    (type == PSF_EMITTER_ENVIRONMENT || type == PSF_EMITTER_DIRECTIONAL ? infinite : finite) += power[i];
+  }
+  if (infinite > 0.0 && finite > 0.0) {
+    const double share = infinite / (infinite + finite);
+    const double held = std::clamp(share, kMinShare, 1.0 - kMinShare);
+    for (size_t i = 0; i < power.size(); ++i) {
+      const uint32_t type = t.emitters[i].type;
+      power[i] *= type == PSF_EMITTER_ENVIRONMENT || type == PSF_EMITTER_DIRECTIONAL ? held / share
+                                                                                     : (1.0 - held) / (1.0 - share);
+    }
+  }
+
   // Selection by power: probabilities, cdf, and the per-triangle pdf for MIS.
   double total = 0.0;
   for (double p : power) total += p;

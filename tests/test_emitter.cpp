@@ -540,6 +540,31 @@ TEST_CASE("Emitter: lights are chosen in proportion to their power", "[emitter]"
   CHECK(t.cdf[2] == 1.0f);
   CHECK(t.tri_light_pdf[0] == Approx(kPi * area / total / area));
   CHECK(t.env.present == 0);
+
+  // A ground sphere of radius 1e5 makes the sun's power (pi R^2 E) 1e10 times
+  // the lamp's: the lights at infinity keep at most 0.9 of the samples, and
+  // the triangle and the point light share the rest in proportion.
+  psf::Scene g = s;
+  psf::SphereShape ground;
+  ground.center = {0, -1e5f, 0};
+  ground.radius = 1e5f;
+  g.materials.push_back(Material{});  // not emissive
+  ground.material = 1;
+  g.spheres = {ground};
+  psf::LightTable u = psf::build_light_table(g);
+  REQUIRE(u.emitters.size() == 3);
+  CHECK(u.emitters[2].type == PSF_EMITTER_DIRECTIONAL);
+  CHECK(u.emitters[2].radiance.s[3] == Approx(0.9));
+  CHECK(u.emitters[0].radiance.s[3] == Approx(0.1 * area / (area + 4)));
+  CHECK(u.emitters[1].radiance.s[3] == Approx(0.1 * 4 / (area + 4)));
+  CHECK(u.tri_light_pdf[0] == Approx(0.1 * area / (area + 4) / area));
+  // Lights at infinity alone keep their proportions (no bound applies).
+  g.triangles.clear();
+  g.tri_material.clear();
+  g.lights = {sun};
+  psf::LightTable v = psf::build_light_table(g);
+  REQUIRE(v.emitters.size() == 1);
+  CHECK(v.emitters[0].radiance.s[3] == 1.0f);
 }
 
 TEST_CASE("Emitter: Mitsuba 0.5 and 3 emitter parameters", "[emitter]") {
