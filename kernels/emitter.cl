@@ -249,19 +249,6 @@ inline float sphere_cone_width(float r, float d2) {
   return s / (1.0f + sqrt(1.0f - s));
 }
 
-/* Solid-angle pdf with which emitter_sample reaches a point of the sphere light
- * `prim` (its tri_pos entries `sp`, surface.cl surface_sphere) from p, at distance
- * dist and cosine cos_l to its normal there: the cone's uniform pdf, or by area. */
-inline float emitter_pdf_sphere(__global const float* tri_light_pdf, uint prim, __global const float4* sp,
-                                uint two_sided, float3 p, float dist, float cos_l) {
-  float4 s0 = sp[0];
-  if (!sphere_cone_sampled(s0.xyz, s0.w, sp[1].w, two_sided, p))
-    return cos_l > 0.0f ? tri_light_pdf[prim] * dist * dist / cos_l : 0.0f;
-  float3 d = s0.xyz - p;
-  float select = tri_light_pdf[prim] * (4.0f * PSF_ENV_PI * s0.w * s0.w); /* per area times the area */
-  return select / (2.0f * PSF_ENV_PI * sphere_cone_width(s0.w, dot(d, d)));
-}
-
 /* One light chosen by `ul` from the table and a point (ua, ub) on it, seen from p. */
 inline LightSample emitter_sample(__global const Emitter* emitters, __global const float* cdf, uint count, Environment env,
                                   __global const float* env_data, float3 p, float ul, float ua, float ub) {
@@ -334,10 +321,9 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
     ls.tex = em.tex_emission;
     ls.prim = em.prim;
     if (ls.tex != PSF_NO_TEXTURE) { /* the point's uv in the sphere's frame (surface.cl) */
-      float lx = dot(n, em.e1.xyz), ly = dot(n, em.e2.xyz), lz = dot(n, cross(em.e1.xyz, em.e2.xyz));
-      float phi = atan2(ly, lx);
-      ls.b1 = (phi < 0.0f ? phi + 2.0f * PSF_ENV_PI : phi) * (0.5f / PSF_ENV_PI);
-      ls.b2 = acos(clamp(lz, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI);
+      float2 uv = sphere_uv(n, em.e1.xyz, em.e2.xyz, cross(em.e1.xyz, em.e2.xyz));
+      ls.b1 = uv.x;
+      ls.b2 = uv.y;
     }
     if (!(ls.pdf > 0.0f) || !isfinite(ls.pdf)) ls.pdf = 0.0f;
     return ls;
@@ -374,10 +360,22 @@ inline LightSample emitter_sample(__global const Emitter* emitters, __global con
 }
 
 /* Solid-angle pdf with which emitter_sample would have chosen the point hit at
- * distance `dist` on triangle or sphere `prim` with cosine `cos_l` to its normal
- * (both sampled uniformly by area: the pdf per area is tri_light_pdf[prim]). */
+ * distance `dist` on triangle `prim` with cosine `cos_l` to its normal (sampled
+ * uniformly by area: the pdf per area is tri_light_pdf[prim]). */
 inline float emitter_pdf_hit(__global const float* tri_light_pdf, uint prim, float dist, float cos_l) {
   return cos_l > 0.0f ? tri_light_pdf[prim] * dist * dist / cos_l : 0.0f;
+}
+
+/* The same for the sphere light `prim` (its tri_pos entries `sp`, surface.cl
+ * surface_sphere) seen from p: the cone's uniform pdf, or emitter_pdf_hit's
+ * where it is sampled by area (sphere_cone_sampled). */
+inline float emitter_pdf_sphere(__global const float* tri_light_pdf, uint prim, __global const float4* sp,
+                                uint two_sided, float3 p, float dist, float cos_l) {
+  float4 s0 = sp[0];
+  if (!sphere_cone_sampled(s0.xyz, s0.w, sp[1].w, two_sided, p)) return emitter_pdf_hit(tri_light_pdf, prim, dist, cos_l);
+  float3 d = s0.xyz - p;
+  float select = tri_light_pdf[prim] * (4.0f * PSF_ENV_PI * s0.w * s0.w); /* per area times the area */
+  return select / (2.0f * PSF_ENV_PI * sphere_cone_width(s0.w, dot(d, d)));
 }
 
 /* --- test hooks ------------------------------------------------------------------- */

@@ -41,6 +41,15 @@
  * (0,1), which the sphere's TriAttrib holds, give these derivatives, and its
  * texture lookups at (b1, b2) = (u, v) the uv. The sphere's TriAttrib has no
  * vertex normals: the shading normal is *ng. */
+/* Mitsuba 3's uv of the unit direction n from a sphere's centre in its frame
+ * (x, y, z = x cross y): (phi / 2pi, theta / pi), theta from z (surface_sphere,
+ * and emitter.cl's sphere light samples). */
+inline float2 sphere_uv(float3 n, float3 x, float3 y, float3 z) {
+  float phi = atan2(dot(n, y), dot(n, x));
+  if (phi < 0.0f) phi += 2.0f * PSF_PI;
+  return (float2)(phi * (0.5f / PSF_PI), acos(clamp(dot(n, z), -1.0f, 1.0f)) * (1.0f / PSF_PI));
+}
+
 inline void surface_sphere(__global const float4* s, float3 pos, float3* ng, float* u, float* v, float3* p0,
                            float3* p1, float3* p2) {
   float4 s0 = s[0], s1 = s[1], s2 = s[2];
@@ -50,10 +59,9 @@ inline void surface_sphere(__global const float4* s, float3 pos, float3* ng, flo
   float3 n = len > 0.0f ? d / len : z;
   *ng = n * s1.w;
   float lx = dot(n, x), ly = dot(n, y), lz = clamp(dot(n, z), -1.0f, 1.0f);
-  float phi = atan2(ly, lx);
-  if (phi < 0.0f) phi += 2.0f * PSF_PI;
-  *u = phi * (0.5f / PSF_PI);
-  *v = acos(lz) * (1.0f / PSF_PI);
+  float2 uv = sphere_uv(n, x, y, z);
+  *u = uv.x;
+  *v = uv.y;
   float rho = sqrt(lx * lx + ly * ly); /* sin theta */
   float cos_phi = rho > 0.0f ? lx / rho : 1.0f, sin_phi = rho > 0.0f ? ly / rho : 0.0f;
   float3 dpdu = (2.0f * PSF_PI * s0.w) * (ly * -x + lx * y);
