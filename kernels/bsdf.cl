@@ -67,7 +67,20 @@
  *   picks diffuse, clearcoat or the main specular lobe by the sampling rates
  *   (diffuse weighted by (1 - M)(1 - T), clearcoat by clearcoat / 4), then for
  *   the specular a GGX visible normal and reflection with probability
- *   1 - T (1 - M)(1 - F) (from inside: F); the pdf is the mixture's. */
+ *   1 - T (1 - M)(1 - F) (from inside: F); the pdf is the mixture's.
+ * - principledthin: Mitsuba 3's thin principled BSDF (Burley 2015, Sec. 4):
+ *   a sheet with one medium on both sides, the same seen from either (o and i
+ *   turned together so that o lies in front). With T spec_trans and D
+ *   diff_trans / 2: GGX reflection T F_thin D G / (4 cos_o cos_i), F_thin the
+ *   dielectric Fresnel F(o.h) blended towards the tinted Schlick term by
+ *   spec_tint; specular transmission, the reflection's mirror image through the
+ *   sheet (no bending), T base (1 - F) D' G' / (4 |cos_o cos_i|) with GGX
+ *   alphas from the roughness scaled by 0.65 eta - 0.35 (Burley 2015, Fig. 15);
+ *   principled's diffuse (retro-reflection, flatness) and sheen times
+ *   (1 - T)(1 - D); Lambertian transmission (1 - T) D base / pi. Sampling picks
+ *   specular reflection, specular transmission, cosine reflection or cosine
+ *   transmission in proportion to rate T / 2, rate T / 2, rate (1 - T)(1 - D)
+ *   and rate (1 - T) D; the pdf is the mixture's. */
 
 #define PSF_PI 3.14159265358979323846f
 #define PSF_INV_PI 0.31830988618379067154f
@@ -265,13 +278,15 @@ inline float mf_pdf(float3 v, float3 m, float au, float av, bool beckmann) {
 inline bool bsdf_transmits(Material m) {
   return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
          m.type == PSF_MATERIAL_THIN_DIELECTRIC ||
-         (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.y > 0.0f); /* by spec_trans, whatever metallic's texel */
+         (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.y > 0.0f) || /* by spec_trans, whatever metallic's texel */
+         (m.type == PSF_MATERIAL_PRINCIPLED_THIN && (m.specular.y > 0.0f || m.specular.x > 0.0f));
 }
 
 /* Whether bsdf_sample reads uc (a choice between lobes). */
 inline bool bsdf_chooses_lobe(Material m) {
   return m.type == PSF_MATERIAL_PLASTIC || m.type == PSF_MATERIAL_ROUGH_PLASTIC ||
-         m.type == PSF_MATERIAL_PPLASTIC || m.type == PSF_MATERIAL_PRINCIPLED || bsdf_transmits(m);
+         m.type == PSF_MATERIAL_PPLASTIC || m.type == PSF_MATERIAL_PRINCIPLED ||
+         m.type == PSF_MATERIAL_PRINCIPLED_THIN || bsdf_transmits(m);
 }
 
 inline bool bsdf_is_plastic(Material m) {
@@ -286,6 +301,7 @@ inline bool bsdf_scatters(Material m) {
   if (m.type == PSF_MATERIAL_DIFFUSE) return d > 0.0f;
   if (bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC) return fmax(d, s) > 0.0f;
   if (m.type == PSF_MATERIAL_PRINCIPLED) return true; /* its dielectric Fresnel reflects at any base colour */
+  if (m.type == PSF_MATERIAL_PRINCIPLED_THIN) return m.specular.y > 0.0f || d > 0.0f;
   return s > 0.0f;
 }
 
@@ -294,7 +310,7 @@ inline bool bsdf_scatters(Material m) {
  * normal incidence, a dielectric's specular transmittance. */
 inline float3 bsdf_albedo(Material m) {
   if (m.type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC ||
-      m.type == PSF_MATERIAL_PRINCIPLED)
+      m.type == PSF_MATERIAL_PRINCIPLED || m.type == PSF_MATERIAL_PRINCIPLED_THIN)
     return m.albedo.xyz;
   if (m.type == PSF_MATERIAL_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_CONDUCTOR)
     return m.specular.xyz * fresnel_conductor(1.0f, m.eta.xyz, m.k.xyz);
@@ -310,13 +326,15 @@ inline float3 bsdf_albedo(Material m) {
  * weighted by (1 - M)(1 - T) against the specular lobes' reflectance under
  * uniform illumination in Schlick's approximation (the hemispherical mean of
  * R0 + (1 - R0)(1 - cos)^5 is R0 + (1 - R0) / 21: M base, (1 - M) times the
- * dielectric's R0, clearcoat / 4 times 0.04's); smooth conductors and
- * dielectrics, thin dielectrics: never. */
+ * dielectric's R0, clearcoat / 4 times 0.04's); principledthin likewise, its
+ * diffuse lobes weighted by (1 - T) against T times the specular reflection's
+ * Schlick mean plus the specular transmission's base (1 - R0); smooth conductors
+ * and dielectrics, thin dielectrics: never. */
 inline bool bsdf_is_diffuse(Material m) {
   if (m.type == PSF_MATERIAL_DIFFUSE) return true;
   bool rough = m.type == PSF_MATERIAL_ROUGH_CONDUCTOR || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
                m.type == PSF_MATERIAL_ROUGH_PLASTIC || m.type == PSF_MATERIAL_PPLASTIC ||
-               m.type == PSF_MATERIAL_PRINCIPLED;
+               m.type == PSF_MATERIAL_PRINCIPLED || m.type == PSF_MATERIAL_PRINCIPLED_THIN;
   if (rough && m.alpha_u * m.alpha_v > PSF_DIFFUSE_ALPHA * PSF_DIFFUSE_ALPHA) return true;
   if (bsdf_is_plastic(m) || m.type == PSF_MATERIAL_PPLASTIC)
     return bsdf_mean3(m.albedo.xyz) * (1.0f - m.eta.w) >=
@@ -327,6 +345,11 @@ inline bool bsdf_is_diffuse(Material m) {
     float spec = metallic * (base + (1.0f - base) * mean) + (1.0f - metallic) * (r0 + (1.0f - r0) * mean) +
                  0.25f * m.transmittance.z * (0.04f + 0.96f * mean);
     return (1.0f - metallic) * (1.0f - m.specular.y) * base >= PSF_PLASTIC_DIFFUSE_RATIO * spec;
+  }
+  if (m.type == PSF_MATERIAL_PRINCIPLED_THIN) {
+    float base = bsdf_mean3(m.albedo.xyz), r = (m.eta.x - 1.0f) / (m.eta.x + 1.0f), r0 = r * r;
+    float spec = m.specular.y * (r0 + (1.0f - r0) / 21.0f + (1.0f - r0) * base);
+    return (1.0f - m.specular.y) * base >= PSF_PLASTIC_DIFFUSE_RATIO * spec;
   }
   return false;
 }
@@ -422,6 +445,22 @@ inline float3 principled_lobes(Material m, bool front) {
   return t > 0.0f ? p / t : (float3)(0.0f, 0.0f, 1.0f);
 }
 
+/* The diffuse term of principled and principledthin without base / pi, for
+ * cosines co, ci > 0 and cos_d = <h, i>: Burley's (1 - F_o / 2)(1 - F_i / 2)
+ * plus retro-reflection R_r (F_o + F_i + F_o F_i (R_r - 1)), R_r = 2 roughness
+ * cos_d^2, blended towards the Hanrahan-Krueger-like flatness term. */
+inline float principled_diffuse(Material m, float co, float ci, float cos_d) {
+  float fo = principled_schlick_weight(ci), fi = principled_schlick_weight(co), rr = 2.0f * m.eta.z * cos_d * cos_d;
+  float diffuse = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
+  float flatness = m.transmittance.y;
+  if (flatness > 0.0f) {
+    float fss = mix(1.0f, 0.5f * rr, fo) * mix(1.0f, 0.5f * rr, fi);
+    float ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
+    diffuse = mix(diffuse, ss, flatness);
+  }
+  return diffuse;
+}
+
 /* f and pdf of principled in the local frame (o = wo, i = wi). */
 inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
   *pdf = 0.0f;
@@ -480,15 +519,7 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
     *pdf += lobes.y * dcc * h.z / (4.0f * fabs(ih));
   }
   if (front && reflect && brdf > 0.0f) { /* diffuse, retro-reflection, flatness, sheen */
-    float fo = principled_schlick_weight(ci), fi = principled_schlick_weight(co);
-    float cos_d = dot(h, i), rr = 2.0f * m.eta.z * cos_d * cos_d;
-    float diffuse = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
-    float flatness = m.transmittance.y;
-    if (flatness > 0.0f) {
-      float fss = mix(1.0f, 0.5f * rr, fo) * mix(1.0f, 0.5f * rr, fi);
-      float ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
-      diffuse = mix(diffuse, ss, flatness);
-    }
+    float cos_d = dot(h, i), diffuse = principled_diffuse(m, co, ci, cos_d);
     f += base * (brdf * PSF_INV_PI * diffuse);
     float sheen = m.specular.w;
     if (sheen > 0.0f)
@@ -496,6 +527,77 @@ inline float3 principled_eval(Material m, float3 o, float3 i, float* pdf) {
            (sheen * (1.0f - metallic) * principled_schlick_weight(cos_d));
     *pdf += lobes.x * ci * PSF_INV_PI;
   }
+  return f;
+}
+
+/* --- principledthin (Mitsuba 3) ------------------------------------------- */
+
+/* The lobe probabilities of principledthin: specular reflection, specular
+ * transmission, cosine reflection, cosine transmission (sampling rates k). */
+inline float4 thin_lobes(Material m) {
+  float t = m.specular.y, d = m.specular.x;
+  float4 p = (float4)(0.5f * t * m.k.x, 0.5f * t * m.k.y, (1.0f - t) * (1.0f - d) * m.k.z, (1.0f - t) * d * m.k.w);
+  float sum = p.x + p.y + p.z + p.w;
+  return sum > 0.0f ? p / sum : (float4)(0.0f, 0.0f, 1.0f, 0.0f);
+}
+
+/* f and pdf of principledthin in the local frame (o = wo, i = wi): both turned
+ * so that o lies in front (the sheet is the same from either side); h is the
+ * half-vector of o and i mirrored into o's hemisphere, for reflection and
+ * transmission alike (transmission is reflection carried through the sheet). */
+inline float3 thin_eval(Material m, float3 o, float3 i, float* pdf) {
+  *pdf = 0.0f;
+  if (o.z == 0.0f || i.z == 0.0f) return (float3)(0.0f);
+  if (o.z < 0.0f) {
+    o = -o;
+    i = -i;
+  }
+  float co = o.z, ci = fabs(i.z), spec_trans = m.specular.y, diff_trans = m.specular.x;
+  bool reflect = i.z > 0.0f;
+  float3 ir = (float3)(i.x, i.y, ci);
+  float3 h = normalize(o + ir);
+  float oh = dot(o, h), ih = dot(i, h);
+  /* Mitsuba's macro-micro compatibility: o in front of the microfacet, and i
+   * in front of it (reflection) or behind it (transmission). */
+  bool micro = oh > 0.0f && (reflect ? ih > 0.0f : ih < 0.0f);
+  float3 base = m.albedo.xyz;
+  float4 lobes = thin_lobes(m);
+  float3 f = (float3)(0.0f);
+  if (spec_trans > 0.0f && micro) {
+    float cos_t, eta_ti;
+    float fd = principled_fresnel(oh, m.eta.x, &cos_t, &eta_ti);
+    float jacobian = 1.0f / (4.0f * fabs(dot(ir, h))); /* dh / di */
+    if (reflect) {
+      float d = mf_D(h, m.alpha_u, m.alpha_v, false);
+      float g = mf_G1(o, h, m.alpha_u, m.alpha_v, false) * mf_G1(i, h, m.alpha_u, m.alpha_v, false);
+      float3 F = (float3)(fd);
+      float spec_tint = m.specular.z;
+      if (spec_tint > 0.0f) {
+        float r = (m.eta.x - 1.0f) / (m.eta.x + 1.0f);
+        float3 r0 = principled_tint(base) * (r * r);
+        F = mix(F, r0 + (1.0f - r0) * principled_schlick(oh, m.eta.x), spec_tint);
+      }
+      f += F * (spec_trans * d * g / (4.0f * co * ci));
+      *pdf += lobes.x * mf_pdf(o, h, m.alpha_u, m.alpha_v, false) * jacobian;
+    } else {
+      float atu = m.transmittance.z, atv = m.transmittance.w;
+      float d = mf_D(h, atu, atv, false);
+      float g = mf_G1(o, h, atu, atv, false) * mf_G1(i, h, atu, atv, false);
+      f += base * (spec_trans * (1.0f - fd) * d * g / (4.0f * co * ci));
+      *pdf += lobes.y * mf_pdf(o, h, atu, atv, false) * jacobian;
+    }
+  }
+  if (reflect && spec_trans < 1.0f && diff_trans < 1.0f) { /* diffuse, retro-reflection, flatness, sheen */
+    float cos_d = dot(h, i), diffuse = principled_diffuse(m, co, ci, cos_d);
+    float w = (1.0f - spec_trans) * (1.0f - diff_trans);
+    f += base * (w * PSF_INV_PI * diffuse);
+    float sheen = m.specular.w;
+    if (sheen > 0.0f)
+      f += mix((float3)(1.0f), principled_tint(base), m.transmittance.x) *
+           (sheen * w * principled_schlick_weight(fabs(cos_d)));
+  }
+  if (!reflect && spec_trans < 1.0f && diff_trans > 0.0f) f += base * ((1.0f - spec_trans) * diff_trans * PSF_INV_PI);
+  *pdf += (reflect ? lobes.z : lobes.w) * ci * PSF_INV_PI;
   return f;
 }
 
@@ -581,6 +683,7 @@ inline float3 bsdf_eval_local(Material m, __global const half* table, float3 o, 
     return m.transmittance.xyz * fabs((1.0f - fr) * d * g * oh * ih / (co * ci * denom * denom));
   }
   if (type == PSF_MATERIAL_PRINCIPLED) return principled_eval(m, o, i, pdf);
+  if (type == PSF_MATERIAL_PRINCIPLED_THIN) return thin_eval(m, o, i, pdf);
   return (float3)(0.0f); /* delta types */
 }
 
@@ -674,6 +777,31 @@ inline BsdfSample principled_sample(Material m, __global const half* table, Fram
   return bsdf_finish(m, table, f, o, i);
 }
 
+/* A direction from principledthin's mixture (thin_lobes), uc choosing the lobe,
+ * sampled for o turned to the front and turned back with it. */
+inline BsdfSample thin_sample(Material m, __global const half* table, Frame f, float3 wo, float3 o, float u1,
+                              float u2, float uc) {
+  if (o.z == 0.0f) return bsdf_fail(wo);
+  float side = o.z > 0.0f ? 1.0f : -1.0f;
+  float3 of = o * side, i;
+  float4 lobes = thin_lobes(m);
+  if (uc < lobes.x + lobes.y) { /* specular: a GGX visible normal, reflected, for transmission through the sheet */
+    bool reflect = uc < lobes.x;
+    float3 h = reflect ? mf_sample(of, m.alpha_u, m.alpha_v, false, u1, u2)
+                       : mf_sample(of, m.transmittance.z, m.transmittance.w, false, u1, u2);
+    float oh = dot(of, h);
+    i = 2.0f * oh * h - of;
+    if (!reflect) i.z = -i.z;
+    /* Through the sheet the mirror image must lie behind the microfacet (thin_eval). */
+    if (oh <= 0.0f || (reflect ? i.z <= 0.0f || dot(i, h) <= 0.0f : i.z >= 0.0f || dot(i, h) >= 0.0f))
+      return bsdf_fail(wo);
+  } else {
+    i = square_to_cosine_hemisphere(u1, u2);
+    if (uc >= lobes.x + lobes.y + lobes.z) i.z = -i.z;
+  }
+  return bsdf_finish(m, table, f, o, i * side);
+}
+
 /* bsdf_sample of the types other than diffuse. */
 inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Frame f, float3 wo, float u1, float u2,
                                       float uc) {
@@ -730,6 +858,7 @@ inline BsdfSample bsdf_sample_general(Material m, __global const half* table, Fr
     return bsdf_delta(f, -o, m.transmittance.xyz, BSDF_TRANSMISSION);
   }
   if (type == PSF_MATERIAL_PRINCIPLED) return principled_sample(m, table, f, wo, o, u1, u2, uc);
+  if (type == PSF_MATERIAL_PRINCIPLED_THIN) return thin_sample(m, table, f, wo, o, u1, u2, uc);
   if (type == PSF_MATERIAL_ROUGH_DIELECTRIC) {
     if (o.z == 0.0f) return bsdf_fail(wo);
     float3 of = o.z > 0.0f ? o : -o;

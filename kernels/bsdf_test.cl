@@ -77,7 +77,7 @@ __kernel void surface_test_frame(__global const Material* materials, __global co
   float3 ng = normalize(cross(p1.xyz - p0.xyz, p2.xyz - p0.xyz));
   Frame f = surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, wo[k].xyz, textures, texels);
   n_out[k] = (float4)(f.n, m.alpha_v);
-  s_out[k] = (float4)(f.s, 0.0f);
+  s_out[k] = (float4)(f.s, m.transmittance.z); /* w: principledthin's transmission alpha_u */
   albedo_out[k] = m.albedo;
   specular_out[k] = m.specular;
   colour_out[k] = (float4)(bsdf_albedo(m), m.alpha_u);

@@ -180,6 +180,17 @@ typedef struct {
  * Fresnel reflectance under uniform illumination F_dr(eta), for the
  * filtering-vertex rule); alpha_u, alpha_v. */
 #define PSF_MATERIAL_PPLASTIC 9u
+/* principledthin: Mitsuba 3's thin principled BSDF (Burley 2015's thin-surface
+ * model), a sheet with the same medium on both sides that scatters alike from
+ * either: albedo.xyz base_color (tex_color); alpha_u, alpha_v the GGX roughness
+ * of its specular reflection (from roughness and anisotropic, as principled's);
+ * eta = (eta, 1 / eta^2, roughness, anisotropic); specular = (diff_trans / 2,
+ * spec_trans, spec_tint, sheen); transmittance = (sheen_tint, flatness, and the
+ * specular transmission's GGX alphas, from the roughness scaled by
+ * 0.65 eta - 0.35); k = the sampling rates (specular reflection, specular
+ * transmission, diffuse reflection, diffuse transmission); tex_alpha: a
+ * roughness texture (x). */
+#define PSF_MATERIAL_PRINCIPLED_THIN 10u
 
 /* Material.flags */
 #define PSF_MATFLAG_BECKMANN 1u  /* microfacet distribution Beckmann (else GGX) */

@@ -155,12 +155,24 @@ inline float3 vertex_color_unpack(uint c) {
 
 /* Mitsuba 3's principled GGX roughness from roughness r and anisotropic k:
  * alpha = r^2 stretched by sqrt(1 - 0.9 k) along the tangent's two axes, at
- * least 0.001 (Burley 2012; host/scene/mitsuba.cpp computes the untextured). */
+ * least 0.001 (Burley 2012; host/scene/mitsuba.cpp computes the untextured);
+ * principledthin's specular transmission likewise from r (0.65 eta - 0.35). */
 inline void principled_alphas(Material* m, float roughness) {
   float a = roughness * roughness, aspect = sqrt(1.0f - 0.9f * m->eta.w);
   m->eta.z = roughness;
   m->alpha_u = fmax(0.001f, a / aspect);
   m->alpha_v = fmax(0.001f, a * aspect);
+  if (m->type == PSF_MATERIAL_PRINCIPLED_THIN) {
+    float rt = (0.65f * m->eta.x - 0.35f) * roughness, at = rt * rt;
+    m->transmittance.z = fmax(0.001f, at / aspect);
+    m->transmittance.w = fmax(0.001f, at * aspect);
+  }
+}
+
+/* The types whose colour term (texture, vertex colours) is albedo. */
+inline bool surface_colours_albedo(const Material* m) {
+  return m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PPLASTIC ||
+         m->type == PSF_MATERIAL_PRINCIPLED || m->type == PSF_MATERIAL_PRINCIPLED_THIN;
 }
 
 /* A principled material with a metallic texture (tex_table), which other types use for their tables. */
@@ -187,13 +199,12 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     float2 uv = b0 * uv0 + b1 * uv1 + b2 * uv2;
     if (m->tex_color != PSF_NO_TEXTURE) {
       float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
-      if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PPLASTIC ||
-          m->type == PSF_MATERIAL_PRINCIPLED)
-        m->albedo.xyz = c;
+      if (surface_colours_albedo(m)) m->albedo.xyz = c;
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
       else m->specular.xyz = c;
     }
-    if (m->tex_alpha != PSF_NO_TEXTURE && m->type == PSF_MATERIAL_PRINCIPLED) {
+    const bool principled = m->type == PSF_MATERIAL_PRINCIPLED || m->type == PSF_MATERIAL_PRINCIPLED_THIN;
+    if (m->tex_alpha != PSF_NO_TEXTURE && principled) {
       principled_alphas(m, clamp(texture_eval(textures, texels, m->tex_alpha, uv).x, 0.0f, 1.0f));
     } else if (m->tex_alpha != PSF_NO_TEXTURE) { /* textured roughness, at Mitsuba's lower bound */
       float2 t = texture_eval(textures, texels, m->tex_alpha, uv).xy;
@@ -256,9 +267,7 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   if ((m->flags & PSF_MATFLAG_VERTEX_COLOR) && (a->flags & PSF_TRI_COLORS)) {
     float3 c = b0 * vertex_color_unpack(a->color0) + b1 * vertex_color_unpack(a->color1) +
                b2 * vertex_color_unpack(a->color2);
-    if (m->type == PSF_MATERIAL_DIFFUSE || bsdf_is_plastic(*m) || m->type == PSF_MATERIAL_PPLASTIC ||
-        m->type == PSF_MATERIAL_PRINCIPLED)
-      m->albedo.xyz *= c;
+    if (surface_colours_albedo(m)) m->albedo.xyz *= c;
     else if (m->type == PSF_MATERIAL_CONDUCTOR || m->type == PSF_MATERIAL_ROUGH_CONDUCTOR) m->specular.xyz *= c;
   }
   if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) f.n = -f.n;

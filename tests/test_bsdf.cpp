@@ -37,6 +37,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <complex>
 #include <filesystem>
@@ -79,11 +80,19 @@ struct Params {
   double roughness = 0.5, anisotropic = 0, metallic = 0, spec_trans = 0, spec_tint = 0, sheen = 0, sheen_tint = 0,
          flatness = 0, clearcoat = 0, clearcoat_gloss = 0;
   double main_rate = 1, clearcoat_rate = 1, diffuse_rate = 1;  // sampling rates
+  // principledthin: diff_trans in Mitsuba's range [0, 2] and the sampling rates of its
+  // specular reflection, specular transmission, diffuse reflection and transmission
+  // (with roughness, anisotropic, spec_trans, spec_tint, sheen, sheen_tint, flatness above).
+  double diff_trans = 0;
+  std::array<double, 4> thin_rates{1, 1, 1, 1};
 };
 
+// Whether the material scatters light arriving from below its normal too (the
+// dielectrics, principled's transmission, and principledthin, which is the
+// same seen from either side): the tests then look from both sides.
 bool transmissive(const Params& p) {
   return p.type == PSF_MATERIAL_DIELECTRIC || p.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-         p.type == PSF_MATERIAL_THIN_DIELECTRIC ||
+         p.type == PSF_MATERIAL_THIN_DIELECTRIC || p.type == PSF_MATERIAL_PRINCIPLED_THIN ||
          (p.type == PSF_MATERIAL_PRINCIPLED && (1 - p.metallic) * p.spec_trans > 0);
 }
 
@@ -114,6 +123,17 @@ Material to_material(const Params& p, psf::detail::TextureStore& store) {
     m.specular = {{float(p.metallic), float(p.spec_trans), float(p.spec_tint), float(p.sheen)}};
     m.transmittance = {{float(p.sheen_tint), float(p.flatness), float(p.clearcoat), float(p.clearcoat_gloss)}};
     m.k = {{float(p.main_rate), float(p.clearcoat_rate), float(p.diffuse_rate), 0}};
+  }
+  if (p.type == PSF_MATERIAL_PRINCIPLED_THIN) {  // psf_shared.h's layout
+    double aspect = std::sqrt(1 - 0.9 * p.anisotropic), a = p.roughness * p.roughness;
+    double t = std::pow((0.65 * p.eta.x - 0.35) * p.roughness, 2.0);
+    m.alpha_u = float(std::max(0.001, a / aspect));
+    m.alpha_v = float(std::max(0.001, a * aspect));
+    m.eta = {{float(p.eta.x), float(1 / (p.eta.x * p.eta.x)), float(p.roughness), float(p.anisotropic)}};
+    m.specular = {{float(p.diff_trans / 2), float(p.spec_trans), float(p.spec_tint), float(p.sheen)}};
+    m.transmittance = {{float(p.sheen_tint), float(p.flatness), float(std::max(0.001, t / aspect)),
+                        float(std::max(0.001, t * aspect))}};
+    m.k = {{float(p.thin_rates[0]), float(p.thin_rates[1]), float(p.thin_rates[2]), float(p.thin_rates[3])}};
   }
   return m;
 }
@@ -308,6 +328,55 @@ dvec3 ref_principled(const Params& p, const dvec3& o, const dvec3& i) {
   return f;
 }
 
+// Mitsuba 3's principledthin (src/bsdfs/principledthin.cpp, as 3.6 evaluates
+// it): the sheet is the same from both sides, so o and i are turned together
+// until o lies in front; transmission is reflection about the microfacet
+// carried through the sheet, its half-vector that of o and i's mirror image.
+dvec3 ref_principled_thin(const Params& p, dvec3 o, dvec3 i) {
+  if (o.z == 0 || i.z == 0) return dvec3(0);
+  if (o.z < 0) {
+    o = -o;
+    i = -i;
+  }
+  const double T = p.spec_trans, Dt = p.diff_trans / 2, eta = p.eta.x, r = p.roughness;
+  const double aspect = std::sqrt(1 - 0.9 * p.anisotropic);
+  const double ax = std::max(0.001, r * r / aspect), ay = std::max(0.001, r * r * aspect);
+  const double rt = (0.65 * eta - 0.35) * r;  // Burley 2015, Fig. 15
+  const double tx = std::max(0.001, rt * rt / aspect), ty = std::max(0.001, rt * rt * aspect);
+  const dvec3 base = p.albedo;
+  const bool reflect = i.z > 0;
+  const dvec3 mirror(i.x, i.y, std::abs(i.z));
+  const dvec3 h = glm::normalize(o + mirror);
+  const double co = o.z, ci = std::abs(i.z), oh = glm::dot(o, h), ih = glm::dot(i, h);
+  const double lum = 0.212671 * base.x + 0.715160 * base.y + 0.072169 * base.z;
+  const dvec3 tint = lum > 0 ? base / lum : dvec3(1);
+  dvec3 f(0);
+  if (T > 0 && oh > 0) {
+    const double F = eta == 1 ? 0.0 : ref_fresnel(oh, eta);
+    if (reflect && ih > 0) {
+      const dvec3 r0 = tint * std::pow((eta - 1) / (eta + 1), 2.0), schlick = r0 + (1.0 - r0) * ref_schlick_w(oh, eta);
+      const dvec3 Fthin = (1 - p.spec_tint) * F + p.spec_tint * schlick;
+      f += T * Fthin * ref_D(h, ax, ay, false) * ref_G1(o, h, ax, ay, false) * ref_G1(i, h, ax, ay, false) /
+           (4 * co * ci);
+    }
+    if (!reflect && ih < 0)
+      f += T * base * (1 - F) * ref_D(h, tx, ty, false) * ref_G1(o, h, tx, ty, false) *
+           ref_G1(i, h, tx, ty, false) / (4 * co * ci);
+  }
+  if (reflect && T < 1 && Dt < 1) {
+    const double Fo = ref_schlick_weight(ci), Fi = ref_schlick_weight(co);
+    const double cd = glm::dot(h, i), Rr = 2 * r * cd * cd;
+    const double diffuse = (1 - 0.5 * Fi) * (1 - 0.5 * Fo) + Rr * (Fo + Fi + Fo * Fi * (Rr - 1));
+    const double Fss = (1 + (Rr / 2 - 1) * Fo) * (1 + (Rr / 2 - 1) * Fi);
+    const double ss = 1.25 * (Fss * (1 / (ci + co) - 0.5) + 0.5);
+    f += (1 - T) * (1 - Dt) * base / kPi * ((1 - p.flatness) * diffuse + p.flatness * ss);
+    f += p.sheen * (1 - T) * (1 - Dt) * ref_schlick_weight(std::abs(cd)) *
+         ((1 - p.sheen_tint) * dvec3(1) + p.sheen_tint * tint);
+  }
+  if (!reflect && T < 1 && Dt > 0) f += (1 - T) * Dt * base / kPi;
+  return f;
+}
+
 dvec3 ref_eval(const Params& p, const dvec3& o, const dvec3& i) {
   switch (p.type) {
     case PSF_MATERIAL_DIFFUSE:
@@ -368,6 +437,8 @@ dvec3 ref_eval(const Params& p, const dvec3& o, const dvec3& i) {
     }
     case PSF_MATERIAL_PRINCIPLED:
       return ref_principled(p, o, i);
+    case PSF_MATERIAL_PRINCIPLED_THIN:
+      return ref_principled_thin(p, o, i);
     default:
       return dvec3(0);
   }
@@ -637,6 +708,40 @@ std::vector<Params> test_materials() {
   p.spec_tint = 0.3;
   p.anisotropic = 0.3;
   p.flatness = 0.4;
+  add(p);
+  // principledthin: a diffuse sheet with sheen and flatness (reflecting from
+  // either side), a glossy sheet that transmits both ways, and one with
+  // sampling rates of its own.
+  p = {};
+  p.type = PSF_MATERIAL_PRINCIPLED_THIN;
+  p.label = "principledthin flatness 0.5, sheen 0.6 (tint 0.4), roughness 0.5";
+  p.albedo = {0.3, 0.6, 0.4};
+  p.eta = dvec3(1.5);
+  p.roughness = 0.5;
+  p.flatness = 0.5;
+  p.sheen = 0.6;
+  p.sheen_tint = 0.4;
+  add(p);
+  p = {};
+  p.type = PSF_MATERIAL_PRINCIPLED_THIN;
+  p.label = "principledthin spec_trans 0.8, diff_trans 0.6, eta 1.33, spec_tint 0.3, anisotropic 0.5, roughness 0.4";
+  p.albedo = {0.7, 0.3, 0.2};
+  p.eta = dvec3(1.33);
+  p.roughness = 0.4;
+  p.spec_trans = 0.8;
+  p.diff_trans = 0.6;
+  p.spec_tint = 0.3;
+  p.anisotropic = 0.5;
+  add(p);
+  p = {};
+  p.type = PSF_MATERIAL_PRINCIPLED_THIN;
+  p.label = "principledthin spec_trans 0.5, diff_trans 1.2, roughness 0.3, rates 1/0.5/2/1";
+  p.albedo = {0.5, 0.5, 0.8};
+  p.eta = dvec3(1.5);
+  p.roughness = 0.3;
+  p.spec_trans = 0.5;
+  p.diff_trans = 1.2;
+  p.thin_rates = {1, 0.5, 2, 1};
   add(p);
   return v;
 }
@@ -1054,7 +1159,7 @@ TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
     // weights' mean is the reference's directional albedo, whatever it is, the
     // transmission's radiance scaling undone as for the dielectrics.
     for (const Params& pp : test_materials()) {
-      if (pp.type != PSF_MATERIAL_PRINCIPLED) continue;
+      if (pp.type != PSF_MATERIAL_PRINCIPLED && pp.type != PSF_MATERIAL_PRINCIPLED_THIN) continue;
       uint32_t m = rig.add(pp);
       // Not grazing: there the anisotropic metal's lobe is too sharp for the
       // reference's 800 x 400 grid (0.676 against 0.698; Mitsuba 3.6's own
@@ -1072,7 +1177,9 @@ TEST_CASE("BSDF: white furnace and energy conservation", "[bsdf]") {
           for (int b = 0; b < np; ++b) {
             double ph = 2 * kPi * (b + 0.5) / np;
             dvec3 i(std::sin(t) * std::cos(ph), std::sin(t) * std::sin(ph), std::cos(t));
-            double eta_p = wo.z > 0 ? pp.eta.x : 1 / pp.eta.x, unscale = wo.z * i.z < 0 ? eta_p * eta_p : 1.0;
+            // principledthin does not scale radiance: one medium on both sides.
+            double eta_p = wo.z > 0 ? pp.eta.x : 1 / pp.eta.x;
+            double unscale = wo.z * i.z < 0 && pp.type == PSF_MATERIAL_PRINCIPLED ? eta_p * eta_p : 1.0;
             want += ref_eval(pp, wo, i).y * std::abs(i.z) * std::sin(t) * unscale;
           }
         }
@@ -1132,6 +1239,61 @@ TEST_CASE("BSDF: pplastic gives Mitsuba 3's values", "[bsdf]") {
   }
 }
 
+TEST_CASE("BSDF: principledthin gives Mitsuba 3's values", "[bsdf]") {
+  // Mitsuba 3.6.4 scalar_rgb, principledthin with the parameters of the three
+  // test_materials() sets (the same order): bsdf.eval(si, wo) / |wo.z| and
+  // bsdf.pdf, si.wi = o, for directions reflected and transmitted from the
+  // front and from the back.
+  struct Case {
+    int set;
+    dvec3 o, i, f;
+    double pdf;
+  };
+  const dvec3 o1(0.3, 0.1, 0.8), o2(0.7, 0.2, 0.3), o3(-0.2, 0.3, -0.6), o4(0, 0, 1);
+  const dvec3 i1(-0.2, 0.4, 0.7), i2(-0.2, 0.1, -0.7), i3(-0.6, -0.1, -0.4), i4(0.1, -0.2, -0.9), i5(0.4, 0.1, 0.5),
+      i6(0.5, 0, 0.6);
+  const std::vector<Case> cases = {
+      {1, o1, i1, {0.032387489, 0.01426186, 0.0097304519}, 0.05743254},
+      {1, o1, i2, {0.086835741, 0.037215315, 0.024810213}, 0.069213778},
+      {1, o2, i3, {0.35076979, 0.15032993, 0.10021995}, 0.15286478},
+      {1, o3, i4, {0.048069177, 0.026010828, 0.020496239}, 0.36576667},
+      {1, o3, i5, {0.015809663, 0.0067755699, 0.0045170467}, 0.016109278},
+      {1, o4, i6, {0.038339954, 0.018714951, 0.013808699}, 0.14346407},
+      {0, o1, i1, {0.081416786, 0.16283322, 0.10855559}, 0.26824003},
+      {0, o1, i2, {0, 0, 0}, 0},
+      {0, o3, i4, {0.080404504, 0.16080812, 0.1072057}, 0.30891815},
+      {0, o3, i5, {0, 0, 0}, 0},
+      {0, o4, i6, {0.081510857, 0.16302144, 0.10868105}, 0.24453241},
+      {2, o1, i1, {0.033142586, 0.033142586, 0.052241224}, 0.11257878},
+      {2, o1, i2, {0.1114149, 0.1114149, 0.17826385}, 0.11400888},
+      {2, o2, i3, {0.27876334, 0.27876334, 0.4460213}, 0.11443435},
+      {2, o3, i4, {0.048720471, 0.048720471, 0.067819076}, 0.30352557},
+      {2, o3, i5, {0.049418488, 0.049418488, 0.079069576}, 0.06916023},
+      {2, o4, i6, {0.03294558, 0.03294558, 0.052044564}, 0.10088888},
+  };
+  std::vector<Params> thin;
+  for (const Params& p : test_materials())
+    if (p.type == PSF_MATERIAL_PRINCIPLED_THIN) thin.push_back(p);
+  REQUIRE(thin.size() == 3);
+  Rig rig;
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> wo, wi;
+  for (const Case& c : cases) {
+    mat.push_back(rig.add(thin[c.set]));
+    wo.push_back(glm::normalize(c.o));
+    wi.push_back(glm::normalize(c.i));
+  }
+  auto got = rig.eval(mat, wo, wi);
+  for (size_t k = 0; k < cases.size(); ++k) {
+    INFO("case " << k << ": " << thin[cases[k].set].label);
+    for (int c = 0; c < 3; ++c) CHECK(got[k][c] == Approx(cases[k].f[c]).epsilon(2e-4).margin(1e-7));  // float
+    CHECK(got[k].w == Approx(cases[k].pdf).epsilon(2e-4).margin(1e-7));
+    // The reference agrees with Mitsuba in double precision.
+    dvec3 ref = ref_eval(thin[cases[k].set], wo[k], wi[k]);
+    for (int c = 0; c < 3; ++c) CHECK(ref[c] == Approx(cases[k].f[c]).epsilon(1e-5).margin(1e-9));
+  }
+}
+
 TEST_CASE("BSDF: reciprocity", "[bsdf]") {
   Rig rig;
   std::vector<Params> ps = test_materials();
@@ -1146,11 +1308,12 @@ TEST_CASE("BSDF: reciprocity", "[bsdf]") {
       b.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
     }
   auto fab = rig.eval(mat, a, b), fba = rig.eval(mat, b, a);
-  std::vector<int> bad(ps.size(), 0);
+  std::vector<int> bad(ps.size(), 0), thin_through(ps.size(), 0);
   for (size_t q = 0; q < mat.size(); ++q) {
     const Params& p = ps[mat[q]];
     double scale = 1.0;
-    if (a[q].z * b[q].z < 0) {  // transmission: f(b, a) = (eta_b / eta_a)^2 f(a, b)
+    // Transmission: f(b, a) = (eta_b / eta_a)^2 f(a, b); principledthin has one medium on both sides.
+    if (a[q].z * b[q].z < 0 && p.type != PSF_MATERIAL_PRINCIPLED_THIN) {
       double eta_a = a[q].z > 0 ? 1 : p.eta.x, eta_b = b[q].z > 0 ? 1 : p.eta.x;
       scale = (eta_b / eta_a) * (eta_b / eta_a);
       // Pairs that graze their microfacet (a direction nearly perpendicular to the
@@ -1160,6 +1323,18 @@ TEST_CASE("BSDF: reciprocity", "[bsdf]") {
       // margin above keeps away from grazing the surface itself).
       dvec3 h = glm::normalize(eta_a * a[q] + eta_b * b[q]);
       if (std::min(std::abs(glm::dot(a[q], h)), std::abs(glm::dot(b[q], h))) < 0.01) continue;
+    } else if (a[q].z * b[q].z < 0) {
+      // principledthin's specular transmission needs o in front of the microfacet
+      // and i behind it (Mitsuba's macro-micro compatibility, as if refracted),
+      // which does not hold alike both ways: reciprocal where it holds both
+      // ways or neither, and Mitsuba's model is not elsewhere.
+      auto through = [](dvec3 o, dvec3 i) {
+        if (o.z < 0) o = -o, i = -i;
+        dvec3 h = glm::normalize(o + dvec3(i.x, i.y, -i.z));
+        return glm::dot(o, h) > 0 && glm::dot(i, h) < 0;
+      };
+      if (through(a[q], b[q]) != through(b[q], a[q])) continue;
+      ++thin_through[mat[q]];
     }
     dvec3 x = dvec3(fab[q]) * scale, y(fba[q]);
     if (max3(glm::abs(x - y)) > 1e-3 * std::max(max3(x), max3(y)) + 1e-6) ++bad[mat[q]];
@@ -1167,6 +1342,7 @@ TEST_CASE("BSDF: reciprocity", "[bsdf]") {
   for (size_t m = 0; m < ps.size(); ++m) {
     INFO(ps[m].label);
     CHECK(bad[m] == 0);
+    if (ps[m].type == PSF_MATERIAL_PRINCIPLED_THIN) CHECK(thin_through[m] > 500);  // transmission pairs compared
   }
 }
 
@@ -1358,6 +1534,20 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   p.au = p.av = 0.5;
   wants.push_back({p, true});  // rough
   const size_t first_pplastic = wants.size() - 3;
+  // principledthin: its diffuse lobes (1 - T) mean(base) against 4 T times the
+  // specular reflection's Schlick mean and the transmission's base (1 - R0), or rough.
+  p = {};
+  p.type = PSF_MATERIAL_PRINCIPLED_THIN;
+  p.eta = dvec3(1.5);
+  p.roughness = 0.5;
+  wants.push_back({p, true});  // no specular lobes: T = 0
+  p.spec_trans = 0.1;
+  wants.push_back({p, true});  // 0.9 * 0.5 >= 4 * 0.1 * (0.04 + 0.96 / 21 + 0.96 * 0.5) = 0.226
+  p.spec_trans = 0.3;
+  wants.push_back({p, false});  // 0.35 < 0.678
+  p.roughness = 0.6;            // alpha 0.36
+  wants.push_back({p, true});
+  const size_t first_thin = wants.size() - 4;
   for (const Want& w : wants) r2.add(w.p);
   auto props = r2.props();
   for (size_t i = 0; i < wants.size(); ++i) {
@@ -1370,6 +1560,7 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   CHECK(dvec3(props[7]).x == Approx(0.8));
   CHECK(dvec3(props[first_principled + 1]).x == Approx(0.2));  // principled: the base colour
   CHECK(dvec3(props[first_pplastic]).x == Approx(0.8));        // pplastic: the diffuse reflectance
+  CHECK(dvec3(props[first_thin]).x == Approx(0.5));            // principledthin: the base colour
 }
 
 TEST_CASE("Textures: lookups match a scalar bilinear reference", "[bsdf]") {
@@ -1492,7 +1683,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   uint32_t roughness = store.pixels(ramp, 1, 1, {0.3f, 0.3f, 0.3f, 1});
   uint32_t roughness_uv = store.pixels(ramp, 1, 1, {0.3f, 0.05f, 0.0f, 1});  // alpha_u, alpha_v
   uint32_t metallic = store.pixels(ramp, 2, 1, {0.2f, 0.2f, 0.2f, 1, 0.6f, 0.6f, 0.6f, 1});  // 0.2 to 0.6 in u
-  std::vector<Material> mats(12);
+  std::vector<Material> mats(13);
   mats[0].type = PSF_MATERIAL_DIFFUSE;  // flat, one-sided
   mats[1] = mats[0];
   mats[1].two_sided = 1;
@@ -1535,6 +1726,13 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   mats[11].tex_color = colour;
   mats[11].tex_alpha = roughness;
   mats[11].tex_table = metallic;
+  // principledthin: base colour and roughness from textures; the transmission's alphas from the roughness too.
+  mats[12].type = PSF_MATERIAL_PRINCIPLED_THIN;
+  mats[12].eta = {{1.5f, 1 / 2.25f, 0.8f, 0.5f}};
+  mats[12].alpha_u = mats[12].alpha_v = 0.64f;
+  mats[12].transmittance = {{0, 0, 0.4f, 0.4f}};
+  mats[12].tex_color = colour;
+  mats[12].tex_alpha = roughness;
   TriAttrib a{};
   glm::vec3 n0 = glm::normalize(glm::vec3(0.3f, 0, 1)), n1 = glm::normalize(glm::vec3(0, 0.3f, 1)), n2(0, 0, 1);
   a.n0 = {{n0.x, n0.y, n0.z, 0}};
@@ -1557,7 +1755,7 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
                           {2, {0.5f, 0.2f}, up}, {3, {0.5f, 0.2f}, up},    {4, {0.25f, 0.5f}, up},
                           {5, {0.25f, 0.5f}, up},  {6, {0.5f, 0.2f}, up},  {7, {0.3f, 0.3f}, up},
                           {8, {0.3f, 0.3f}, up},   {9, {0.3f, 0.3f}, up},   {10, {0.3f, 0.3f}, up},
-                          {11, {0.3f, 0.3f}, up}};
+                          {11, {0.3f, 0.3f}, up},  {12, {0.3f, 0.3f}, up}};
   uint32_t n = uint32_t(q.size());
   std::vector<uint32_t> mi;
   std::vector<cl_float2> bary;
@@ -1612,6 +1810,11 @@ TEST_CASE("Shading frame: vertex normals, bump map, textures, anisotropy, twosid
   CHECK(N[12].s[3] == Approx(0.09 * aspect).epsilon(3e-3));
   CHECK(SP[12].s[0] == Approx(0.24f).margin(2e-3));
   CHECK(near(v3(A[12]), {0.2f, 0.4f, 0.6f}));
+  // principledthin: the same alphas, and the transmission's from 0.3 (0.65 * 1.5 - 0.35) (S's w).
+  CHECK(C[13].s[3] == Approx(0.09 / aspect).epsilon(3e-3));
+  CHECK(N[13].s[3] == Approx(0.09 * aspect).epsilon(3e-3));
+  CHECK(S[13].s[3] == Approx(std::pow(0.3 * 0.625, 2.0) / aspect).epsilon(3e-3));
+  CHECK(near(v3(A[13]), {0.2f, 0.4f, 0.6f}));
 }
 
 TEST_CASE("Shading frame: vertex tangents orient the normal map (glTF TANGENT)", "[bsdf]") {
@@ -2050,13 +2253,20 @@ TEST_CASE("Materials: textures for alpha_u and alpha_v share one texture, x and 
   expect_scene_error(negative, 3, "the roughness must not be negative");
 }
 
+namespace {
+// A 2 x 2 texture of sRGB grey 128 (linear 0.2158) as grey.png in dir, for bitmap(name).
+bool write_grey_png(TempDir& dir) {
+  std::vector<uint8_t> px(2 * 2 * 3, 128);
+  return stbi_write_png(dir.path("grey.png").c_str(), 2, 2, 3, px.data(), 2 * 3) != 0;
+}
+std::string bitmap(const char* name) {
+  return std::string("<texture type=\"bitmap\" name=\"") + name + "\"><string name=\"filename\" value=\"grey.png\"/></texture>";
+}
+}  // namespace
+
 TEST_CASE("Materials: Mitsuba's principled loads with its parameters as Mitsuba 3 reads them", "[bsdf]") {
   TempDir dir;
-  std::vector<uint8_t> px(2 * 2 * 3, 128);
-  REQUIRE(stbi_write_png(dir.path("grey.png").c_str(), 2, 2, 3, px.data(), 2 * 3));
-  auto bitmap = [](const char* name) {
-    return std::string("<texture type=\"bitmap\" name=\"") + name + "\"><string name=\"filename\" value=\"grey.png\"/></texture>";
-  };
+  REQUIRE(write_grey_png(dir));
   std::string xml = dir.write(
       "principled.xml",
       "<scene version=\"3.0.0\">\n"
@@ -2136,6 +2346,85 @@ TEST_CASE("Materials: Mitsuba's principled loads with its parameters as Mitsuba 
                                "<float name=\"eta\" value=\"1.4\"/>\n<float name=\"specular\" value=\"0.3\"/>\n"
                                "</bsdf></shape>\n</scene>\n");
   expect_scene_error(both, 4, "'eta' or 'specular', not both");
+}
+
+TEST_CASE("Materials: Mitsuba's principledthin loads with its parameters as Mitsuba 3 reads them", "[bsdf]") {
+  TempDir dir;
+  REQUIRE(write_grey_png(dir));
+  std::string xml = dir.write(
+      "thin.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principledthin\"><rgb name=\"base_color\" value=\"0.7, 0.1, 0.1\"/>"
+      "<float name=\"roughness\" value=\"0.4\"/><float name=\"anisotropic\" value=\"0.5\"/>"
+      "<float name=\"spec_trans\" value=\"0.8\"/><float name=\"diff_trans\" value=\"0.3\"/>"
+      "<float name=\"eta\" value=\"1.33\"/><float name=\"spec_tint\" value=\"0.1\"/>"
+      "<float name=\"sheen\" value=\"0.5\"/><float name=\"sheen_tint\" value=\"0.4\"/>"
+      "<float name=\"flatness\" value=\"0.2\"/>"
+      "<float name=\"specular_transmittance_sampling_rate\" value=\"0.5\"/>"
+      "<float name=\"diffuse_transmittance_sampling_rate\" value=\"2\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principledthin\"/></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principledthin\">" +
+          bitmap("base_color") + bitmap("roughness") + bitmap("diff_trans") +
+          "</bsdf></shape>\n"
+          "</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  CHECK(count_warnings(s, "principledthin") == 1);  // only the diff_trans texture's, below
+  const Material& a = s.materials.at(s.tri_material.at(0));
+  CHECK(a.type == PSF_MATERIAL_PRINCIPLED_THIN);
+  CHECK(a.albedo.s[0] == Approx(0.7f));
+  CHECK(a.albedo.s[1] == Approx(0.1f));
+  // GGX alpha = 0.4^2 stretched by sqrt(1 - 0.9 * 0.5); the transmission's from 0.4 (0.65 * 1.33 - 0.35).
+  CHECK(a.alpha_u == Approx(0.16 / std::sqrt(0.55)).epsilon(1e-5));
+  CHECK(a.alpha_v == Approx(0.16 * std::sqrt(0.55)).epsilon(1e-5));
+  const double rt = 0.4 * (0.65 * 1.33 - 0.35);
+  CHECK(a.transmittance.s[2] == Approx(rt * rt / std::sqrt(0.55)).epsilon(1e-5));
+  CHECK(a.transmittance.s[3] == Approx(rt * rt * std::sqrt(0.55)).epsilon(1e-5));
+  CHECK(a.eta.s[0] == Approx(1.33f));
+  CHECK(a.eta.s[2] == Approx(0.4f));  // roughness
+  CHECK(a.eta.s[3] == Approx(0.5f));  // anisotropic
+  CHECK(a.specular.s[0] == Approx(0.15f));  // diff_trans / 2
+  CHECK(a.specular.s[1] == Approx(0.8f));   // spec_trans
+  CHECK(a.specular.s[2] == Approx(0.1f));
+  CHECK(a.specular.s[3] == Approx(0.5f));
+  CHECK(a.transmittance.s[0] == Approx(0.4f));
+  CHECK(a.transmittance.s[1] == Approx(0.2f));
+  CHECK(a.k.s[0] == 1.0f);  // specular reflection, specular transmission, diffuse reflection and transmission rates
+  CHECK(a.k.s[1] == 0.5f);
+  CHECK(a.k.s[2] == 1.0f);
+  CHECK(a.k.s[3] == 2.0f);
+  // Mitsuba's defaults: base colour 0.5, roughness 0.5, eta 1.5, nothing transmitted.
+  const Material& d = s.materials.at(s.tri_material.at(2));
+  CHECK(d.albedo.s[0] == Approx(0.5f));
+  CHECK(d.alpha_u == Approx(0.25f));
+  CHECK(d.transmittance.s[2] == Approx(std::pow(0.5 * (0.65 * 1.5 - 0.35), 2.0)).epsilon(1e-5));
+  CHECK(d.eta.s[0] == Approx(1.5f));
+  CHECK(d.specular.s[0] == 0.0f);
+  CHECK(d.specular.s[1] == 0.0f);
+  // Textures: base_color and roughness are read per hit; diff_trans's is its mean, with a warning.
+  const Material& t = s.materials.at(s.tri_material.at(4));
+  CHECK(t.tex_color != PSF_NO_TEXTURE);
+  CHECK(t.tex_alpha != PSF_NO_TEXTURE);
+  CHECK(t.specular.s[0] == Approx(0.2158f / 2).margin(2e-3));  // sRGB 128 is linear 0.2158, halved
+  CHECK(count_warnings(s, "a texture for 'diff_trans' of bsdf 'principledthin' is not supported; using its mean") ==
+        1);
+  // diff_trans lies in [0, 2], the others in [0, 1]: clamped with a warning; eta must be positive.
+  std::string range = dir.write(
+      "range.xml",
+      "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"principledthin\">"
+      "<float name=\"diff_trans\" value=\"2.5\"/><float name=\"spec_trans\" value=\"1.2\"/></bsdf></shape>\n"
+      "<shape type=\"rectangle\"><bsdf type=\"principledthin\"><float name=\"diff_trans\" value=\"1.5\"/>"
+      "</bsdf></shape>\n</scene>\n");
+  psf::Scene r = psf::load_scene(range);
+  CHECK(r.materials.at(r.tri_material.at(0)).specular.s[0] == 1.0f);
+  CHECK(r.materials.at(r.tri_material.at(0)).specular.s[1] == 1.0f);
+  CHECK(r.materials.at(r.tri_material.at(2)).specular.s[0] == 0.75f);
+  CHECK(count_warnings(r, ":2: 'diff_trans' of bsdf 'principledthin' is 2.5, outside [0, 2]; clamped") == 1);
+  CHECK(count_warnings(r, ":2: 'spec_trans' of bsdf 'principledthin' is 1.2, outside [0, 1]; clamped") == 1);
+  CHECK(count_warnings(r, "principledthin") == 2);
+  std::string bad = dir.write("eta.xml",
+                              "<scene version=\"3.0.0\">\n<shape type=\"rectangle\"><bsdf type=\"principledthin\">\n"
+                              "<float name=\"eta\" value=\"0\"/>\n</bsdf></shape>\n</scene>\n");
+  expect_scene_error(bad, 3, "'eta' of bsdf 'principledthin' must be positive");
 }
 
 TEST_CASE("Materials: Mitsuba's blendbsdf is a material with a blend partner", "[bsdf]") {

@@ -1324,7 +1324,8 @@ class MitsubaLoader {
         {"twosided", &MitsubaLoader::bsdf_twosided},        {"bumpmap", &MitsubaLoader::bsdf_bumpmap},
         {"mask", &MitsubaLoader::bsdf_mask},                {"normalmap", &MitsubaLoader::bsdf_normalmap},
         {"blendbsdf", &MitsubaLoader::bsdf_blend},          {"principled", &MitsubaLoader::bsdf_principled},
-        {"null", &MitsubaLoader::bsdf_null},                {"pplastic", &MitsubaLoader::bsdf_pplastic}};
+        {"null", &MitsubaLoader::bsdf_null},                {"pplastic", &MitsubaLoader::bsdf_pplastic},
+        {"principledthin", &MitsubaLoader::bsdf_principledthin}};
     return plugins;
   }
 
@@ -1667,7 +1668,8 @@ class MitsubaLoader {
     Bsdf b = bsdf(nested_bsdf(e));
     auto transmissive = [](const Material& m) {
       return m.type == PSF_MATERIAL_DIELECTRIC || m.type == PSF_MATERIAL_ROUGH_DIELECTRIC ||
-             m.type == PSF_MATERIAL_THIN_DIELECTRIC || (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.s[1] > 0.0f);
+             m.type == PSF_MATERIAL_THIN_DIELECTRIC || (m.type == PSF_MATERIAL_PRINCIPLED && m.specular.s[1] > 0.0f) ||
+             (m.type == PSF_MATERIAL_PRINCIPLED_THIN && (m.specular.s[1] > 0.0f || m.specular.s[0] > 0.0f));
     };
     if (transmissive(b.m))
       warn(e.node, "bsdf:twosided-transmission", "twosided around a transmissive BSDF has no effect");
@@ -1747,6 +1749,43 @@ class MitsubaLoader {
   // 0 becomes 0.001 (Mitsuba: "not plausible for transmission"). base_color,
   // roughness and metallic may be textures; the others' textures are replaced
   // by their mean, one warning each.
+  // The base colour of the principled BSDFs (a colour or a texture).
+  void principled_base(const Element& e, Material& m) {
+    ColorParam base = color_param(e, "base_color", glm::vec3(0.5f));
+    const glm::vec3 color = glm::max(base.value, glm::vec3(0.0f));
+    m.albedo = {{color.x, color.y, color.z, 0}};
+    m.tex_color = base.texture;
+  }
+
+  // A parameter of the principled BSDFs: a float in [0, hi] (Mitsuba's stated
+  // range: others are clamped into it, with a warning), or a texture: into *tex
+  // where the kernels read one, else its mean with a warning.
+  float principled_scalar(const Element& e, const char* name, float fallback, uint32_t* tex, float hi = 1.0f) {
+    const Property* p = find(e, name);
+    const std::string key = "bsdf:" + e.type + ":" + name, of = std::string("'") + name + "' of bsdf '" + e.type + "'";
+    if (!p || p->kind != Property::Kind::Object) {
+      const float v = float(get_float(e, name, fallback));
+      if (v < 0.0f || v > hi)
+        warn(p->node, key + ":range", of + " is " + fmt(v) + ", outside [0, " + fmt(hi) + "]; clamped");
+      return std::clamp(v, 0.0f, hi);
+    }
+    uint32_t t = texture(p->object, TextureUse::Height, "using " + fmt(glm::vec3(fallback)) + " for '" + name + "'");
+    if (t == PSF_NO_TEXTURE) return fallback;
+    if (tex) {
+      *tex = t;
+      return std::clamp(store_.mean(t).x, 0.0f, hi);  // the filtering-vertex rule's value; hits read the texture
+    }
+    warn(p->node, key + ":texture", "a texture for " + of + " is not supported; using its mean");
+    return std::clamp(store_.mean(t).x, 0.0f, hi);
+  }
+
+  // A sampling rate of the principled BSDFs (default 1, at least 0).
+  float principled_rate(const Element& e, const char* name) {
+    float r = float(get_float(e, name, 1.0));
+    if (!(r >= 0.0f)) fail(find(e, name)->node, std::string("'") + name + "' must be at least 0");
+    return r;
+  }
+
   Bsdf bsdf_principled(const Element& e) {
     check_properties(e, {"base_color", "roughness", "anisotropic", "metallic", "spec_trans", "eta", "specular",
                          "spec_tint", "sheen", "sheen_tint", "flatness", "clearcoat", "clearcoat_gloss",
@@ -1757,30 +1796,9 @@ class MitsubaLoader {
     Bsdf b;
     b.m = Material{};
     b.m.type = PSF_MATERIAL_PRINCIPLED;
-    ColorParam base = color_param(e, "base_color", glm::vec3(0.5f));
-    const glm::vec3 color = glm::max(base.value, glm::vec3(0.0f));
-    b.m.albedo = {{color.x, color.y, color.z, 0}};
-    b.m.tex_color = base.texture;
-    // A float in [0, 1] (Mitsuba's stated range: others are clamped into it, with a
-    // warning), or a texture: into *tex where the kernels read one, else its mean.
+    principled_base(e, b.m);
     auto scalar = [&](const char* name, float fallback, uint32_t* tex) {
-      const Property* p = find(e, name);
-      if (!p || p->kind != Property::Kind::Object) {
-        const float v = float(get_float(e, name, fallback));
-        if (v < 0.0f || v > 1.0f)
-          warn(p->node, "bsdf:principled:" + std::string(name) + ":range",
-               std::string("'") + name + "' of bsdf 'principled' is " + fmt(v) + ", outside [0, 1]; clamped");
-        return std::clamp(v, 0.0f, 1.0f);
-      }
-      uint32_t t = texture(p->object, TextureUse::Height, "using " + fmt(glm::vec3(fallback)) + " for '" + name + "'");
-      if (t == PSF_NO_TEXTURE) return fallback;
-      if (tex) {
-        *tex = t;
-        return std::clamp(store_.mean(t).x, 0.0f, 1.0f);  // the filtering-vertex rule's value; hits read the texture
-      }
-      warn(p->node, "bsdf:principled:" + std::string(name) + ":texture",
-           std::string("a texture for '") + name + "' of bsdf 'principled' is not supported; using its mean");
-      return std::clamp(store_.mean(t).x, 0.0f, 1.0f);
+      return principled_scalar(e, name, fallback, tex);
     };
     const float roughness = scalar("roughness", 0.5f, &b.m.tex_alpha);
     const float anisotropic = scalar("anisotropic", 0.0f, nullptr);
@@ -1806,13 +1824,9 @@ class MitsubaLoader {
       if (has_spec_trans && specular == 0.0f) specular = 1e-3f;
       eta = 2.0f / (1.0f - std::sqrt(0.08f * specular)) - 1.0f;
     }
-    auto rate = [&](const char* name) {
-      float r = float(get_float(e, name, 1.0));
-      if (!(r >= 0.0f)) fail(find(e, name)->node, std::string("'") + name + "' must be at least 0");
-      return r;
-    };
-    const float main_rate = rate("main_specular_sampling_rate"), clearcoat_rate = rate("clearcoat_sampling_rate"),
-                diffuse_rate = rate("diffuse_reflectance_sampling_rate");
+    const float main_rate = principled_rate(e, "main_specular_sampling_rate"),
+                clearcoat_rate = principled_rate(e, "clearcoat_sampling_rate"),
+                diffuse_rate = principled_rate(e, "diffuse_reflectance_sampling_rate");
     // GGX alpha = roughness^2 stretched by sqrt(1 - 0.9 anisotropic), at least 0.001
     // (surface.cl principled_alphas does the same with a roughness texture).
     const float alpha = roughness * roughness, aspect = std::sqrt(1.0f - 0.9f * anisotropic);
@@ -1822,6 +1836,57 @@ class MitsubaLoader {
     b.m.specular = {{metallic, spec_trans, spec_tint, sheen}};
     b.m.transmittance = {{sheen_tint, flatness, clearcoat, clearcoat_gloss}};
     b.m.k = {{main_rate, clearcoat_rate, diffuse_rate, 0}};
+    return b;
+  }
+
+  // principledthin: Mitsuba 3's thin principled BSDF (kernels/bsdf.cl), with its
+  // parameters as Mitsuba 3.6 reads them: `eta` (default 1.5) the sheet's relative
+  // IOR, which shapes its Fresnel term and widens the specular transmission
+  // (roughness times 0.65 eta - 0.35); `diff_trans` in [0, 2] (2: all diffuse
+  // light transmitted). base_color and roughness may be textures; the others'
+  // textures are replaced by their mean, one warning each.
+  Bsdf bsdf_principledthin(const Element& e) {
+    check_properties(e, {"base_color", "roughness", "anisotropic", "spec_trans", "eta", "spec_tint", "sheen",
+                         "sheen_tint", "flatness", "diff_trans", "diffuse_reflectance_sampling_rate",
+                         "specular_reflectance_sampling_rate", "specular_transmittance_sampling_rate",
+                         "diffuse_transmittance_sampling_rate"});
+    Bsdf b;
+    b.m = Material{};
+    b.m.type = PSF_MATERIAL_PRINCIPLED_THIN;
+    principled_base(e, b.m);
+    const float roughness = principled_scalar(e, "roughness", 0.5f, &b.m.tex_alpha);
+    const float anisotropic = principled_scalar(e, "anisotropic", 0.0f, nullptr);
+    const float spec_trans = principled_scalar(e, "spec_trans", 0.0f, nullptr);
+    const float spec_tint = principled_scalar(e, "spec_tint", 0.0f, nullptr);
+    const float sheen = principled_scalar(e, "sheen", 0.0f, nullptr);
+    const float sheen_tint = principled_scalar(e, "sheen_tint", 0.0f, nullptr);
+    const float flatness = principled_scalar(e, "flatness", 0.0f, nullptr);
+    const float diff_trans = principled_scalar(e, "diff_trans", 0.0f, nullptr, 2.0f);
+    const Property* ep = find(e, "eta");
+    float eta = 1.5f;
+    if (ep && ep->kind == Property::Kind::Object) {
+      uint32_t t = texture(ep->object, TextureUse::Height, "using 1.5 for 'eta'");
+      if (t != PSF_NO_TEXTURE) {
+        warn(ep->node, "bsdf:principledthin:eta:texture",
+             "a texture for 'eta' of bsdf 'principledthin' is not supported; using its mean");
+        eta = store_.mean(t).x;
+      }
+    } else {
+      eta = float(get_float(e, "eta", 1.5));
+    }
+    if (!(eta > 0.0f)) fail(ep->node, "'eta' of bsdf 'principledthin' must be positive (" + fmt(eta) + ")");
+    // GGX alphas as principled's (surface.cl principled_alphas, also with a roughness texture).
+    const float aspect = std::sqrt(1.0f - 0.9f * anisotropic), a = roughness * roughness;
+    const float rt = (0.65f * eta - 0.35f) * roughness, at = rt * rt;
+    b.m.alpha_u = std::max(0.001f, a / aspect);
+    b.m.alpha_v = std::max(0.001f, a * aspect);
+    b.m.eta = {{eta, 1.0f / (eta * eta), roughness, anisotropic}};
+    b.m.specular = {{0.5f * diff_trans, spec_trans, spec_tint, sheen}};
+    b.m.transmittance = {{sheen_tint, flatness, std::max(0.001f, at / aspect), std::max(0.001f, at * aspect)}};
+    b.m.k = {{principled_rate(e, "specular_reflectance_sampling_rate"),
+              principled_rate(e, "specular_transmittance_sampling_rate"),
+              principled_rate(e, "diffuse_reflectance_sampling_rate"),
+              principled_rate(e, "diffuse_transmittance_sampling_rate")}};
     return b;
   }
 
@@ -1934,7 +1999,7 @@ class MitsubaLoader {
         const Material& im = inner.m;
         bool coloured = im.type == PSF_MATERIAL_DIFFUSE || im.type == PSF_MATERIAL_PLASTIC ||
                         im.type == PSF_MATERIAL_ROUGH_PLASTIC || im.type == PSF_MATERIAL_PPLASTIC ||
-                        im.type == PSF_MATERIAL_PRINCIPLED;
+                        im.type == PSF_MATERIAL_PRINCIPLED || im.type == PSF_MATERIAL_PRINCIPLED_THIN;
         const psf_float4& c = coloured ? im.albedo : im.specular;
         albedo += glm::vec3(c.s[0], c.s[1], c.s[2]) / float(nested.size());
         b.two_sided = b.two_sided || inner.two_sided;
