@@ -661,6 +661,51 @@ TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") 
                     "p0 and p1 must differ");
 }
 
+TEST_CASE("Shapes: a disk is Mitsuba's unit disk with its uv (r, phi / 2pi)", "[scene]") {
+  // Rotated by 90 degrees about z and scaled by 2: the object-space point (x, y)
+  // lies at (-2y, 2x). Mitsuba 3.6's ray_intersect gives uv (0.5, 0.25) at
+  // object (0, 0.5), (0.424264, 0.875) at (0.3, -0.3), (0.707107, 0.0225836)
+  // at (0.7, 0.1); here, every point against (|p|, atan2(y, x) / 2pi): u within
+  // the fan's 0.12 % (cos of half a sector), v within half a sector near the centre.
+  psf::Scene s = load_text(
+      "<shape type=\"disk\"><transform name=\"to_world\"><scale value=\"2\"/><rotate z=\"1\" angle=\"90\"/>"
+      "</transform></shape>\n");
+  REQUIRE(s.uvs.size() == s.positions.size());
+  REQUIRE(s.triangles.size() == 64);
+  double area = 0;
+  for (const glm::uvec3& t : s.triangles) {
+    glm::vec3 a = s.positions[t.x], b = s.positions[t.y], c = s.positions[t.z];
+    CHECK(glm::cross(b - a, c - a).z > 0.0f);  // facing +z
+    area += glm::length(glm::cross(b - a, c - a)) / 2.0;
+  }
+  CHECK(area == Approx(4 * 3.14159265).epsilon(0.002));
+  auto object = [](const glm::vec3& p) { return glm::vec2(p.y, -p.x) / 2.0f; };
+  auto want = [](glm::vec2 q) {
+    double v = std::atan2(q.y, q.x) / (2 * 3.14159265358979);
+    return glm::dvec2(glm::length(q), v < 0 ? v + 1 : v);
+  };
+  const std::vector<glm::vec2> probes = {{0, 0.5f}, {0.3f, -0.3f}, {0.7f, 0.1f}, {-0.9f, 0.01f}, {0.2f, -0.01f}};
+  const std::vector<glm::dvec2> mitsuba = {{0.5, 0.25}, {0.424264, 0.875}, {0.707107, 0.0225836}};
+  for (size_t k = 0; k < probes.size(); ++k) {
+    const glm::vec2 q = probes[k];
+    if (k < mitsuba.size()) CHECK(glm::length(want(q) - mitsuba[k]) < 1e-5);  // the convention is Mitsuba's
+    int found = 0;
+    for (const glm::uvec3& t : s.triangles) {
+      glm::vec2 a = object(s.positions[t.x]), b = object(s.positions[t.y]), c = object(s.positions[t.z]);
+      auto cross2 = [](glm::vec2 u, glm::vec2 v) { return u.x * v.y - u.y * v.x; };
+      float d = cross2(b - a, c - a), w1 = cross2(q - a, c - a) / d, w2 = cross2(b - a, q - a) / d;
+      if (w1 < 0 || w2 < 0 || w1 + w2 > 1) continue;
+      ++found;
+      glm::dvec2 uv = glm::dvec2(s.uvs[t.x]) * double(1 - w1 - w2) + glm::dvec2(s.uvs[t.y]) * double(w1) +
+                      glm::dvec2(s.uvs[t.z]) * double(w2);
+      INFO("probe " << q.x << ", " << q.y << ": uv " << uv.x << ", " << uv.y);
+      CHECK(uv.x == Approx(want(q).x).epsilon(1.3e-3));
+      CHECK(uv.y == Approx(want(q).y).margin(0.5 / 64));
+    }
+    CHECK(found == 1);
+  }
+}
+
 TEST_CASE("Shapes: merge draws its shapes; Mitsuba's curves and SDF grids are ignored with a warning", "[scene]") {
   psf::Scene s = load_text(
       "<shape type=\"merge\">\n"

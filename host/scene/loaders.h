@@ -36,7 +36,7 @@ void compute_crease_normals(TriMesh& mesh, float max_angle_degrees);
 TriMesh make_rectangle();
 // Mitsuba's cube: [-1,1]^3 with outward faces, 4 vertices per face (12 triangles).
 TriMesh make_cube();
-// Mitsuba's disk: the unit disk in the plane z = 0, facing +z, as a fan of `segments` triangles.
+// Mitsuba's disk: the unit disk in the plane z = 0, facing +z, as a fan of `segments` triangles; uv (r, phi / 2pi).
 TriMesh make_disk(int segments = 64);
 // Mitsuba's sphere: a latitude-longitude tessellation with outward faces whose
 // vertices lie on the sphere; `rings` >= 2 bands from pole to pole, `segments` >= 3 around.

@@ -42,14 +42,19 @@ TriMesh make_cube() {
 
 TriMesh make_disk(int segments) {
   TriMesh m;
-  m.positions.push_back({0, 0, 0});
-  for (int i = 0; i < segments; ++i) {
-    float phi = 2 * glm::pi<float>() * float(i) / float(segments);
+  // Mitsuba's uv: (r, phi / 2pi). Rim vertex i at phi_i = 2pi i / segments, the
+  // seam's twice (v = 0 and 1); each triangle its own centre vertex, at the v of
+  // the middle of its sector, so that v does not sweep across the fan there.
+  for (int i = 0; i <= segments; ++i) {
+    float phi = 2 * glm::pi<float>() * float(i % segments) / float(segments);
     m.positions.push_back({std::cos(phi), std::sin(phi), 0});
+    m.uvs.push_back({1.0f, float(i) / float(segments)});
   }
   for (int i = 0; i < segments; ++i) {
-    uint32_t a = 1 + uint32_t(i), b = 1 + uint32_t((i + 1) % segments);
-    m.triangles.push_back({0, a, b});
+    uint32_t centre = uint32_t(m.positions.size());
+    m.positions.push_back({0, 0, 0});
+    m.uvs.push_back({0.0f, (float(i) + 0.5f) / float(segments)});
+    m.triangles.push_back({centre, uint32_t(i), uint32_t(i + 1)});
   }
   return m;
 }
