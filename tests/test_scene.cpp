@@ -423,6 +423,19 @@ TEST_CASE("Integrator: max_depth, rr_depth and hide_emitters, in both versions' 
   CHECK(count_warnings(o, "integrator") == 0);
   psf::Scene b = load_text("<integrator type=\"bdpt\"/>\n");
   CHECK(count_warnings(b, "integrator 'bdpt' is not supported yet; using path tracing") == 1);
+  // A wrapper renders the integrator nested in it, with its depths (Mitsuba 3's aov, 0.5's adaptive), one warning.
+  psf::Scene aov = load_text(
+      "<integrator type=\"aov\">\n<string name=\"aovs\" value=\"nn:sh_normal\"/>\n"
+      "<integrator type=\"path\" name=\"image\"><integer name=\"max_depth\" value=\"6\"/>"
+      "<integer name=\"rr_depth\" value=\"3\"/></integrator></integrator>\n");
+  CHECK(aov.max_depth == 6);
+  CHECK(aov.rr_depth == 3);
+  CHECK(count_warnings(aov, ":2: integrator 'aov' is not supported; rendering the 'path' nested in it") == 1);
+  CHECK(count_warnings(aov, "integrator") == 1);
+  psf::Scene adaptive = load_text(
+      "<integrator type=\"adaptive\"><integrator type=\"direct\"/></integrator>\n", {}, "0.5.0");
+  CHECK(adaptive.max_depth == 2);
+  CHECK(count_warnings(adaptive, "integrator 'adaptive' is not supported; rendering the 'direct'") == 1);
   psf::Scene plain = load_text("<integrator type=\"direct\"/>\n" + shape);
   CHECK(plain.max_depth == 2);
   CHECK(plain.rr_depth == 5);

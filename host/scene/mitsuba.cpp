@@ -846,6 +846,18 @@ class MitsubaLoader {
     // expectation, and they take the same max_depth and rr_depth.
     static const std::set<std::string> like_path = {"path", "volpath", "volpathmis", "volpath_simple",
                                                     "prbvolpath", "prb", "prb_basic"};
+    // An integrator that wraps another (Mitsuba 3's aov, moment and stokes,
+    // Mitsuba 0.5's adaptive, irrcache, multichannel...) renders the image of
+    // the one nested in it (the first), with its max depth; what the wrapper
+    // adds (AOV channels, moments, adaptive sample counts) is not rendered.
+    std::vector<pugi::xml_node> nested = objects(e, "integrator");
+    if (!like_path.count(e.type) && !direct && !nested.empty()) {
+      warn(node, "integrator:" + e.type,
+           "integrator '" + e.type + "' is not supported; rendering the '" + attr(nested[0], "type").value_or("") +
+               "' nested in it, without what '" + e.type + "' adds");
+      load_integrator(nested[0]);
+      return;
+    }
     if (!like_path.count(e.type) && !direct)
       warn(node, "integrator:" + e.type, "integrator '" + e.type + "' is not supported yet; using path tracing");
     // direct: emitters seen directly plus one bounce of direct light.
