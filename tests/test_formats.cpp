@@ -686,6 +686,29 @@ TEST_CASE("glTF: vertex tangents are read, transformed and mirrored with their n
   }
 }
 
+TEST_CASE("glTF: a normal-mapped primitive without TANGENT gets tangents of its own", "[formats]") {
+  // The quad (u along +x, v down the image: y = 1 at v = 0) with a normal map:
+  // tangents along +x (scaled by the node, normalised), right-handed, at every
+  // vertex; without the normal map none are made.
+  TempDir dir;
+  const unsigned char px[3] = {128, 128, 255};
+  const std::string image = png_bytes(1, 1, 3, px);
+  const std::string buffer = R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" +
+                             base64(gltf_buffer()) + "\"}";
+  std::string json = with_image(gltf_json(buffer), image);
+  json = replaced(json, R"("metallicFactor": 0}, "doubleSided": true})",
+                  R"("metallicFactor": 0}, "doubleSided": true, "normalTexture": {"index": 0}})");
+  psf::Scene s = psf::load_scene(dir.write("normal.gltf", json));
+  REQUIRE(s.tangents.size() == s.positions.size());
+  for (int corner = 0; corner < 3; ++corner) {
+    CHECK(glm::length(glm::vec3(s.tangents.at(s.triangles.at(0)[corner])) - glm::vec3(1, 0, 0)) < 1e-6f);
+    CHECK(s.tangents.at(s.triangles.at(0)[corner]).w == 1.0f);
+  }
+  CHECK(s.tangents.at(s.triangles.at(2)[0]) == glm::vec4(0.0f));  // the other mesh has no normal map
+  psf::Scene plain = psf::load_scene(dir.write("plain.gltf", gltf_json(buffer)));
+  CHECK(plain.tangents.empty());
+}
+
 TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
   TempDir dir;
   std::string bin = gltf_buffer();

@@ -791,6 +791,51 @@ TEST_CASE("Shapes: maxSmoothAngle rebuilds a mesh's normals with creases (Mitsub
   CHECK(flat.normals.empty());
 }
 
+TEST_CASE("Shapes: vertex tangents for normal maps follow dp/du smoothly, with the uv's handedness", "[scene]") {
+  // A quarter of a unit cylinder about y in 8 strips: (sin phi, y, cos phi) for y
+  // in {0, 1}, outward normals, u = phi / (pi / 2) (or 1 - that: mirrored), v = 1 - y
+  // (glTF's v runs down the image). Each tangent must be the circle's direction
+  // (cos phi, 0, -sin phi) times the sign of du/dphi, orthogonal to the normal; the
+  // handedness w = +1 for the unmirrored mapping (n x t = +y, up the image) and -1 mirrored.
+  for (bool mirrored : {false, true}) {
+    psf::detail::TriMesh m;
+    const int n = 8;
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; j < 2; ++j) {
+        float phi = 0.5f * 3.14159265f * float(i) / float(n);
+        m.positions.push_back({std::sin(phi), float(j), std::cos(phi)});
+        m.normals.push_back({std::sin(phi), 0.0f, std::cos(phi)});
+        float u = float(i) / float(n);
+        m.uvs.push_back({mirrored ? 1.0f - u : u, 1.0f - float(j)});
+      }
+    for (uint32_t i = 0; i < uint32_t(n); ++i) {  // counter-clockwise seen from outside
+      uint32_t a = 2 * i, b = 2 * i + 1, c = 2 * i + 2, d = 2 * i + 3;
+      m.triangles.push_back({a, c, d});
+      m.triangles.push_back({a, d, b});
+    }
+    psf::detail::compute_vertex_tangents(m);
+    REQUIRE(m.tangents.size() == m.positions.size());
+    for (size_t v = 0; v < m.positions.size(); ++v) {
+      float phi = std::atan2(m.positions[v].x, m.positions[v].z);
+      glm::vec3 want = glm::vec3(std::cos(phi), 0.0f, -std::sin(phi)) * (mirrored ? -1.0f : 1.0f);
+      INFO("mirrored " << mirrored << ", vertex " << v);
+      CHECK(glm::length(glm::vec3(m.tangents[v]) - want) < 1e-5f);
+      CHECK(m.tangents[v].w == (mirrored ? -1.0f : 1.0f));
+    }
+  }
+  // Without uvs nothing is made; a vertex only on uv-degenerate triangles has none.
+  psf::detail::TriMesh flat;
+  flat.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  flat.normals.assign(3, glm::vec3(0, 0, 1));
+  flat.triangles = {{0, 1, 2}};
+  psf::detail::compute_vertex_tangents(flat);
+  CHECK(flat.tangents.empty());
+  flat.uvs.assign(3, glm::vec2(0.5f));
+  psf::detail::compute_vertex_tangents(flat);
+  REQUIRE(flat.tangents.size() == 3);
+  CHECK(flat.tangents[0] == glm::vec4(0.0f));
+}
+
 TEST_CASE("Shapes: a PLY's vertex colours reach a BSDF through mesh_attribute 'vertex_color' only", "[scene]") {
   TempDir dir;
   dir.write("c.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"

@@ -290,6 +290,12 @@ class GltfLoader {
           tm.tangents[i] = ok ? glm::vec4(v, t[4 * i + 3] < 0.0 ? -1.0f : 1.0f) : glm::vec4(0.0f);
         }
       }
+      // Without TANGENT, a normal-mapped primitive gets MikkTSpace-like tangents
+      // (the specification's choice), continuous across its triangles.
+      const bool normal_mapped = prim.material >= 0 && size_t(prim.material) < model_.materials.size() &&
+                                 model_.materials[size_t(prim.material)].normalTexture.index >= 0;
+      if (tangent_attr == prim.attributes.end() && !tm.normals.empty() && !tm.uvs.empty() && normal_mapped)
+        compute_vertex_tangents(tm);
       // Vertex colours (VEC3 or VEC4, float or normalized integers; alpha not used)
       // multiply the base colour.
       auto color_attr = prim.attributes.find("COLOR_0");

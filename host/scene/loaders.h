@@ -26,6 +26,15 @@ struct TriMesh {
 // them for meshes without normals.
 void compute_vertex_normals(TriMesh& mesh);
 
+// Vertex tangents for a normal map where a glTF primitive has none, as the
+// specification asks (MikkTSpace, Mikkelsen 2008, without its vertex splitting):
+// each triangle's dp/du and dp/dv made orthogonal to the vertex normal, summed
+// around the vertex weighted by the triangles' angles at it; the handedness
+// w = sign(<n x t, dp/dv>) with v upwards in the image (so that an unmirrored
+// mapping is right-handed, as Blender writes it). Needs normals and uvs; a vertex
+// whose triangles give no tangent keeps (0, 0, 0, 0) (the kernel then follows dp/du).
+void compute_vertex_tangents(TriMesh& mesh);
+
 // Mitsuba 0.5's maxSmoothAngle: the mesh's normals rebuilt so that faces meeting
 // at a vertex (by position) share a normal only where their normals differ by
 // less than `max_angle_degrees`; each face corner's normal is the angle-weighted

@@ -142,6 +142,42 @@ void compute_vertex_normals(TriMesh& mesh) {
   }
 }
 
+void compute_vertex_tangents(TriMesh& mesh) {
+  const size_t nv = mesh.positions.size();
+  if (mesh.normals.size() != nv || mesh.uvs.size() != nv) return;
+  std::vector<glm::dvec3> tsum(nv, glm::dvec3(0.0)), bsum(nv, glm::dvec3(0.0));
+  for (const glm::uvec3& t : mesh.triangles) {
+    glm::dvec3 p[3] = {mesh.positions[t.x], mesh.positions[t.y], mesh.positions[t.z]};
+    glm::dvec2 uv[3] = {mesh.uvs[t.x], mesh.uvs[t.y], mesh.uvs[t.z]};
+    glm::dvec3 e1 = p[1] - p[0], e2 = p[2] - p[0];
+    glm::dvec2 d1 = uv[1] - uv[0], d2 = uv[2] - uv[0];
+    double det = d1.x * d2.y - d2.x * d1.y;
+    if (!(std::abs(det) > 0.0) || !std::isfinite(det)) continue;
+    // dp/du, and dp/dv with v upwards in the image (glTF's v runs downwards;
+    // MikkTSpace as Blender runs it sees 1 - v).
+    glm::dvec3 dpdu = (e1 * d2.y - e2 * d1.y) / det, dpdv_up = -(e2 * d1.x - e1 * d2.x) / det;
+    for (int k = 0; k < 3; ++k) {
+      glm::dvec3 a = p[(k + 1) % 3] - p[k], b = p[(k + 2) % 3] - p[k];
+      double la = glm::length(a), lb = glm::length(b);
+      if (!(la > 0.0 && lb > 0.0)) continue;
+      double angle = std::acos(std::clamp(glm::dot(a, b) / (la * lb), -1.0, 1.0));
+      glm::dvec3 n = glm::dvec3(mesh.normals[t[k]]);
+      glm::dvec3 tk = dpdu - n * glm::dot(n, dpdu), bk = dpdv_up - n * glm::dot(n, dpdv_up);
+      double lt = glm::length(tk), lbk = glm::length(bk);
+      if (lt > 0.0) tsum[t[k]] += tk * (angle / lt);
+      if (lbk > 0.0) bsum[t[k]] += bk * (angle / lbk);
+    }
+  }
+  mesh.tangents.assign(nv, glm::vec4(0.0f));
+  for (size_t i = 0; i < nv; ++i) {
+    glm::dvec3 n = glm::dvec3(mesh.normals[i]), tv = tsum[i] - n * glm::dot(n, tsum[i]);
+    double len = glm::length(tv);
+    if (!(len > 1e-12) || !std::isfinite(len)) continue;  // none: the kernel falls back to dp/du
+    tv /= len;
+    mesh.tangents[i] = glm::vec4(glm::vec3(tv), glm::dot(glm::cross(n, tv), bsum[i]) < 0.0 ? -1.0f : 1.0f);
+  }
+}
+
 void compute_crease_normals(TriMesh& mesh, float max_angle_degrees) {
   const size_t nt = mesh.triangles.size();
   // Unit face normals and each corner's angle.
