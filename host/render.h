@@ -145,6 +145,8 @@ class Renderer {
   float visibility_ray(float option) const;
 
  private:
+  float footprint(const RenderOptions& o) const;  // sqrt(dOmega / pi) of the footprint's solid angle
+
   struct Impl;
   struct Batch;
   std::unique_ptr<Impl> impl_;

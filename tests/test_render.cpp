@@ -101,6 +101,12 @@ TEST_CASE("Render: the image is a function of the seed alone, not of the batch s
   auto f2 = r.render(o);
   CHECK(f1.image.rgb == f2.image.rgb);
   CHECK(f1.unfiltered.rgb == a.image.rgb);
+  // A render keeps the buffers of the one before it (Renderer::prepare): a fresh
+  // renderer gives the same images.
+  psf::Renderer fresh(rt, s);
+  CHECK(fresh.render(o).image.rgb == f2.image.rgb);
+  o.filter.enabled = false;
+  CHECK(fresh.render(o).image.rgb == a.image.rgb);
 }
 
 TEST_CASE("Render: the accumulator's threads add each pixel's paths in path order", "[render]") {
