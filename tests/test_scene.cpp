@@ -674,6 +674,33 @@ TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") 
                     "p0 and p1 must differ");
 }
 
+TEST_CASE("Shapes: a cube has Mitsuba 3's uv on each face", "[scene]") {
+  // Points on the six faces and the uv Mitsuba 3.6's ray_intersect gives there.
+  psf::Scene s = load_text("<shape type=\"cube\"/>\n");
+  REQUIRE(s.uvs.size() == s.positions.size());
+  REQUIRE(s.triangles.size() == 12);
+  const std::vector<std::pair<glm::vec3, glm::vec2>> probes = {
+      {{0.5f, 0.25f, 1}, {0.625f, 0.75f}}, {{0.3f, 1, -0.6f}, {0.35f, 0.8f}},  {{1, -0.2f, 0.7f}, {0.4f, 0.15f}},
+      {{-1, 0.4f, 0.1f}, {0.7f, 0.55f}},   {{0.1f, -1, 0.5f}, {0.75f, 0.55f}}, {{-0.7f, 0.2f, -1}, {0.4f, 0.15f}}};
+  for (const auto& [q, want] : probes) {
+    int found = 0;
+    for (const glm::uvec3& t : s.triangles) {
+      glm::vec3 a = s.positions[t.x], b = s.positions[t.y], c = s.positions[t.z];
+      glm::vec3 n = glm::cross(b - a, c - a);
+      if (std::abs(glm::dot(glm::normalize(n), q - a)) > 1e-6f) continue;  // not this face's plane
+      float d = glm::dot(n, n);
+      float w1 = glm::dot(glm::cross(q - a, c - a), n) / d, w2 = glm::dot(glm::cross(b - a, q - a), n) / d;
+      if (w1 < 0 || w2 < 0 || w1 + w2 > 1) continue;
+      ++found;
+      CHECK(glm::dot(n, q) > 0.0f);  // facing outwards
+      glm::vec2 uv = s.uvs[t.x] * (1 - w1 - w2) + s.uvs[t.y] * w1 + s.uvs[t.z] * w2;
+      INFO("at " << q.x << ", " << q.y << ", " << q.z << ": uv " << uv.x << ", " << uv.y);
+      CHECK(glm::length(uv - want) < 1e-5f);
+    }
+    CHECK(found == 1);
+  }
+}
+
 TEST_CASE("Shapes: a disk is Mitsuba's unit disk with its uv (r, phi / 2pi)", "[scene]") {
   // Rotated by 90 degrees about z and scaled by 2: the object-space point (x, y)
   // lies at (-2y, 2x). Mitsuba 3.6's ray_intersect gives uv (0.5, 0.25) at

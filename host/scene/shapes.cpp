@@ -21,21 +21,22 @@ TriMesh make_rectangle() {
 }
 
 TriMesh make_cube() {
+  // Mitsuba 3's cube, vertex for vertex (src/shapes/cube.cpp as 3.6 builds it):
+  // four vertices per face, in the order -y, +y, +x, +z, -x, -z, each face's
+  // uv (0, 1), (1, 1), (1, 0), (0, 0) at its corners in that order, and the
+  // triangles (a, b, c), (d, a, c), counter-clockwise seen from outside.
   TriMesh m;
-  // Each face: outward normal n and two tangents u, v with cross(u, v) = n, so
-  // that the corners c + (+-u) + (+-v) in this order wind counter-clockwise.
-  const glm::vec3 normals[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-  for (const glm::vec3& n : normals) {
-    glm::vec3 u = std::abs(n.x) > 0 ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0);
-    glm::vec3 v = glm::cross(n, u);
-    uint32_t base = uint32_t(m.positions.size());
-    m.positions.push_back(n - u - v);
-    m.positions.push_back(n + u - v);
-    m.positions.push_back(n + u + v);
-    m.positions.push_back(n - u + v);
-    m.triangles.push_back({base, base + 1, base + 2});
-    m.triangles.push_back({base, base + 2, base + 3});
-    m.uvs.insert(m.uvs.end(), {{0, 0}, {1, 0}, {1, 1}, {0, 1}});  // each face spans the texture
+  m.positions = {{1, -1, -1}, {1, -1, 1},   {-1, -1, 1}, {-1, -1, -1},  // -y
+                 {1, 1, -1},  {-1, 1, -1},  {-1, 1, 1},  {1, 1, 1},     // +y
+                 {1, -1, -1}, {1, 1, -1},   {1, 1, 1},   {1, -1, 1},    // +x
+                 {1, -1, 1},  {1, 1, 1},    {-1, 1, 1},  {-1, -1, 1},   // +z
+                 {-1, -1, 1}, {-1, 1, 1},   {-1, 1, -1}, {-1, -1, -1},  // -x
+                 {1, 1, -1},  {1, -1, -1},  {-1, -1, -1}, {-1, 1, -1}};  // -z
+  for (uint32_t f = 0; f < 6; ++f) {
+    const uint32_t a = 4 * f;
+    m.uvs.insert(m.uvs.end(), {{0, 1}, {1, 1}, {1, 0}, {0, 0}});
+    m.triangles.push_back({a, a + 1, a + 2});
+    m.triangles.push_back({a + 3, a, a + 2});
   }
   return m;
 }
