@@ -75,7 +75,9 @@ __kernel void surface_test_frame(__global const Material* materials, __global co
   if (k >= count) return;
   Material m = materials[mat[k]];
   float3 ng = normalize(cross(p1.xyz - p0.xyz, p2.xyz - p0.xyz));
-  Frame f = surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, wo[k].xyz, textures, texels);
+  float3 n0;
+  Frame f = surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, wo[k].xyz, textures, texels,
+                          &n0);
   n_out[k] = (float4)(f.n, m.alpha_v);
   s_out[k] = (float4)(f.s, m.transmittance.z); /* w: principledthin's transmission alpha_u */
   albedo_out[k] = m.albedo;
@@ -96,6 +98,7 @@ __kernel void surface_test_coat(__global const Material* materials, __global con
   if (k >= count) return;
   Material m = materials[mat[k]];
   float3 ng = normalize(cross(p1.xyz - p0.xyz, p2.xyz - p0.xyz));
-  surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, ng, textures, texels);
+  float3 n0;
+  surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, ng, textures, texels, &n0);
   out[k] = (float4)(rough_transmittance(m, surface_table(m, textures, texels), cos_t[k]), m.eta.z, m.eta.w, m.alpha_u);
 }

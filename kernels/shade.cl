@@ -189,7 +189,9 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   if (m.blend != 0u)
     m = surface_blend(m, materials, tri_attribs + hit.prim, hit.u, hit.v, textures, texels,
                       bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)), front);
-  Frame frame = surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels);
+  float3 n_unperturbed;
+  Frame frame =
+      surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels, &n_unperturbed);
   float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
   __global const half* table = surface_table(m, textures, texels);
   uint segments = st.depth + 1u; /* segments of the path up to this vertex */
@@ -230,7 +232,9 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
         ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
     }
     float bsdf_pdf;
-    float3 f = ls.pdf > 0.0f ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf) : (float3)(0.0f);
+    float3 f = ls.pdf > 0.0f && surface_side_agrees(&m, frame, n_unperturbed, ls.wi)
+                   ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf)
+                   : (float3)(0.0f);
     float cos_s = fabs(dot(frame.n, ls.wi)); /* the BSDF decides which side scatters */
     if (ls.pdf > 0.0f && cos_s > 0.0f && max3(f) > 0.0f) {
       float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf); /* delta lights: no MIS */
@@ -251,6 +255,7 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
     BsdfSample bs = bsdf_sample(m, table, frame, wo, bounce_sample(samples, PSF_DIM_BSDF_UV),
                                 bounce_sample(samples, PSF_DIM_BSDF_UV + 1u),
                                 bsdf_chooses_lobe(m) ? bounce_sample(samples, PSF_DIM_BSDF_LOBE) : 0.5f);
+    if (!surface_side_agrees(&m, frame, n_unperturbed, bs.wi)) bs.weight = (float3)(0.0f);
     beta *= bs.weight;
     if (segments >= params.rr_depth) {
       /* Survival by the throughput since the filtering vertex: any probability

@@ -6,7 +6,8 @@
  * types, or with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), its
  * roughness from tex_alpha (principled: roughness, which gives alpha_u and
  * alpha_v with its anisotropy), and a principled's metallic from tex_table.
- *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels) -> the shading Frame
+ *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels, &n0) -> the shading Frame,
+ *     and in n0 the shading normal before a bump or normal map (surface_side_agrees)
  * The shading normal is the barycentric interpolation of the vertex normals
  * (Phong 1975), else the face normal ng; the geometric normal stays with the
  * caller for side tests and ray offsets. Bump mapping perturbs it as Mitsuba's
@@ -182,7 +183,7 @@ inline bool surface_metallic_map(const Material* m) {
 
 inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0,
                                    float3 p1, float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
-                                   __global const half* texels) {
+                                   __global const half* texels, float3* unperturbed) {
   float b0 = 1.0f - b1 - b2;
   float3 ns = ng;
   if ((m->flags & PSF_MATFLAG_NORMALS) && (a->flags & PSF_TRI_NORMALS)) {
@@ -190,6 +191,7 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     float len = length(n);
     if (len > 0.0f) ns = n / len;
   }
+  float3 ns0 = ns; /* before the bump or normal map */
   bool bump = m->tex_bump != PSF_NO_TEXTURE;
   Frame f;
   if (m->tex_color != PSF_NO_TEXTURE || bump || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE ||
@@ -270,18 +272,31 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
     if (surface_colours_albedo(m)) m->albedo.xyz *= c;
     else if (m->type == PSF_MATERIAL_CONDUCTOR || m->type == PSF_MATERIAL_ROUGH_CONDUCTOR) m->specular.xyz *= c;
   }
-  if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) f.n = -f.n;
+  if (m->two_sided && !bsdf_transmits(*m) && dot(f.n, wo) < 0.0f) {
+    f.n = -f.n;
+    ns0 = -ns0;
+  }
+  *unperturbed = ns0;
   return f;
 }
 
 /* The flat, untextured, isotropic case inline (no call), the rest in surface_frame_general. */
 inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0, float3 p1,
                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
-                           __global const half* texels) {
+                           __global const half* texels, float3* unperturbed) {
   if ((m->flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR)) || m->tex_color != PSF_NO_TEXTURE ||
       m->tex_bump != PSF_NO_TEXTURE || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE ||
       surface_metallic_map(m))
-    return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels);
+    return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels, unperturbed);
   float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
+  *unperturbed = n;
   return frame_from_normal(n);
+}
+
+/* Whether direction w may scatter at a bump- or normal-mapped point: only on
+ * the same side of the shading normal before the perturbation (`unperturbed`)
+ * as after it, as Mitsuba 3's bumpmap and normalmap decide, so that no light
+ * leaks through the surface. True where nothing perturbs the normal. */
+inline bool surface_side_agrees(const Material* m, Frame f, float3 unperturbed, float3 w) {
+  return m->tex_bump == PSF_NO_TEXTURE || dot(w, unperturbed) * dot(w, f.n) > 0.0f;
 }

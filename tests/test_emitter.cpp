@@ -771,6 +771,30 @@ static psf::Scene quad_under_sky(const std::vector<Material>& materials, float c
   return s;
 }
 
+TEST_CASE("Render: a normal map lets no light through the surface (Mitsuba 3's side rule)", "[emitter]") {
+  // A diffuse quad of albedo 0.8 whose normal map tilts the normal by 60 degrees
+  // towards dp/du, under a sky of 1 that reaches both sides, seen from above.
+  // Only directions above both the quad and the tilted normal scatter (Mitsuba
+  // 3's normalmap): the radiance is 0.8 / pi times the tilted cosine integrated
+  // over the two hemispheres' intersection, (pi / 2)(1 + cos 60), so 0.6; letting
+  // directions through the quad, as before, gave the whole hemisphere's 0.8.
+  Material m{};
+  m.type = PSF_MATERIAL_DIFFUSE;
+  m.albedo = {{0.8f, 0.8f, 0.8f, 0}};
+  psf::Scene s = quad_under_sky({m}, 2.0f);
+  psf::detail::TextureStore store(s);
+  psf::detail::TextureDesc flat;
+  const float t = std::sin(3.14159265f / 3), c = std::cos(3.14159265f / 3);
+  s.materials[0].tex_bump = store.pixels(flat, 1, 1, {0.5f * t + 0.5f, 0.5f, 0.5f * c + 0.5f, 1});
+  s.materials[0].bump_scale = 1.0f;
+  s.materials[0].flags |= PSF_MATFLAG_NORMALMAP;
+  psf::RenderResult r = render(s, 256);
+  double sum = 0;
+  for (int y = 4; y < 12; ++y)
+    for (int x = 4; x < 12; ++x) sum += pixel(r.image, x, y).y;
+  CHECK(sum / 64 == Approx(0.8 * 0.75).epsilon(0.01));  // 64 pixels x 256 paths
+}
+
 TEST_CASE("Render: vertex colours multiply a diffuse quad's albedo, interpolated across each triangle", "[emitter]") {
   // Under a constant sky of 1 an unoccluded diffuse surface shows its albedo:
   // here white times the colour interpolated (barycentrically, in each of the
