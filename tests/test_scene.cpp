@@ -577,6 +577,14 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
   CHECK(s.materials[1].two_sided == 0);
   CHECK(near(emission(s.materials[2]), {1, 2, 3}));
   CHECK(s.materials[2].two_sided == 0);  // area emitters emit from the front only
+  // An emitter's shape without a BSDF reflects nothing (Mitsuba 3's and 0.5's
+  // default for emitters: a black diffuse; other shapes get 0.5 grey).
+  CHECK(near(albedo(s.materials[2]), glm::vec3(0.0f)));
+  CHECK(s.materials[2].type == PSF_MATERIAL_DIFFUSE);
+  psf::Scene lit = load_text(
+      "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.3\"/></bsdf>"
+      "<emitter type=\"area\"/></shape>\n");
+  CHECK(near(albedo(lit.materials.at(0)), glm::vec3(0.3f)));  // a BSDF given: kept
 
   // The sphere is analytic (an identity to_world).
   REQUIRE(s.spheres.size() == 1);

@@ -1288,6 +1288,9 @@ class MitsubaLoader {
     Bsdf b;
     b.name = "default";
     if (bsdf_node) b = bsdf(bsdf_node);
+    // Without a BSDF Mitsuba (3 and 0.5) gives a shape a diffuse one of
+    // reflectance 0.5, but an emitter's shape a black one: a light reflects nothing.
+    else if (emitter_node) b.m = diffuse_material(glm::vec3(0.0f));
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
