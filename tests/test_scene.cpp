@@ -221,6 +221,19 @@ TEST_CASE("Sensor to_world: lookat and the equivalent matrix give the same camer
   CHECK(near(m.camera.up, a.camera.up));
 }
 
+TEST_CASE("Sensor: a sheared to_world warns", "[scene]") {
+  // A non-uniform scale after the lookat scales world axes, which skews a camera
+  // that looks along neither; before it (camera space) it is the film's extent.
+  const std::string look = "<lookat origin=\"0, 2, 5\" target=\"0, 0.3, 0\" up=\"0, 1, 0\"/>";
+  auto sensor = [](const std::string& t) {
+    return "<sensor type=\"orthographic\">\n<transform name=\"to_world\">" + t + "</transform></sensor>\n";
+  };
+  psf::Scene sheared = load_text(sensor(look + "<scale x=\"2\" y=\"1.5\"/>"));
+  CHECK(count_warnings(sheared, ":3: the sensor's to_world shears its axes") == 1);
+  psf::Scene fine = load_text(sensor("<scale x=\"2\" y=\"1.5\"/>" + look));
+  CHECK(count_warnings(fine, "shears") == 0);
+}
+
 TEST_CASE("Sensor defaults and field of view", "[scene]") {
   psf::Scene s = load_text("<sensor type=\"perspective\"/>\n");
   CHECK(s.width == 768);  // Mitsuba's default film

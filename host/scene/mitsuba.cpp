@@ -953,6 +953,17 @@ class MitsubaLoader {
     // A reflection (negative determinant) turns the image's left into its right,
     // which origin, target and up cannot express.
     cam.mirrored = glm::determinant(glm::mat3(m)) < 0.0f;
+    // Nor can they express a shear: axes that are no longer perpendicular (a
+    // non-uniform scale applied after a lookat or rotation, in world space).
+    for (int i = 0; i < 3; ++i) {
+      const glm::vec3 a = axes[i], b = axes[(i + 1) % 3];
+      if (std::abs(glm::dot(a, b)) > 1e-4f * glm::length(a) * glm::length(b)) {
+        warn(find(e, "to_world") ? find(e, "to_world")->node : node, "sensor:shear",
+             "the sensor's to_world shears its axes (a non-uniform scale after lookat or rotate?), which is not "
+             "supported; the camera keeps its origin, direction, up and axis lengths");
+        break;
+      }
+    }
 
     // Clip planes: Mitsuba's defaults (0.01 and 10^4), world-space distances
     // along the view direction as Mitsuba 3 casts them; only an orthographic
