@@ -34,8 +34,9 @@
  *   F(cos_o) s / ((F s) + (1 - F)(1 - s)), s = specular sampling weight.
  * - roughplastic: the same with a microfacet coating: the specular lobe is
  *   roughconductor's with dielectric Fresnel; the base term uses the coating's
- *   tabulated external transmittance T(cos) = 1 - (directional albedo of the
- *   microfacet reflection) and its internal reflectance (Mitsuba 3's
+ *   tabulated external transmittance T(cos) (the microfacet refraction's
+ *   directional albedo, Mitsuba 3's eval_transmittance: less than 1 - R, the
+ *   rest lost to single scattering) and its internal reflectance (Mitsuba 3's
  *   roughplastic; the host computes them, host/scene/materials.cpp).
  * - pplastic: Mitsuba 3's polarized plastic in its RGB variants, roughconductor's
  *   lobe with dielectric Fresnel F(wo.h) added to albedo (1 - F(cos_o))

@@ -228,6 +228,33 @@ double ref_rough_albedo(double mu, double alpha, double eta, bool beckmann) {
   return 2 * sum * (0.5 * kPi / nt) * (kPi / np);
 }
 
+// The fraction of light from incidence cosine mu that the rough interface
+// refracts (Mitsuba 3's eval_transmittance): Walter et al. 2007, Eq. 21 (eta_o
+// = 1 on o's side, eta inside) with its radiance scaling eta^2 undone, by
+// quadrature over the hemisphere below. Single scattering loses the rest of
+// 1 - ref_rough_albedo.
+double ref_rough_transmittance(double mu, double alpha, double eta, bool beckmann) {
+  dvec3 o(std::sqrt(std::max(0.0, 1 - mu * mu)), 0, mu);
+  const int nt = 360, np = 180;
+  double sum = 0;
+  for (int a = 0; a < nt; ++a) {
+    double t = 0.5 * kPi + 0.5 * kPi * (a + 0.5) / nt;
+    for (int b = 0; b < np; ++b) {  // phi in [0, pi], doubled by symmetry
+      double p = kPi * (b + 0.5) / np;
+      dvec3 i(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+      dvec3 h = -glm::normalize(o + eta * i);  // Walter et al. Eq. 16
+      if (h.z < 0) h = -h;
+      double oh = glm::dot(o, h), ih = glm::dot(i, h);
+      if (oh <= 0 || ih >= 0) continue;
+      double denom = oh + eta * ih;
+      double f = std::abs(oh * ih) / std::abs(o.z * i.z) * (1 - ref_fresnel(oh, eta)) * ref_D(h, alpha, alpha, beckmann) *
+                 ref_G1(o, h, alpha, alpha, beckmann) * ref_G1(i, h, alpha, alpha, beckmann) / (denom * denom);
+      sum += eta * eta * f * std::abs(i.z) * std::sin(t);
+    }
+  }
+  return 2 * sum * (0.5 * kPi / nt) * (kPi / np);
+}
+
 // Roughplastic's tables as Mitsuba 3 defines them (64 nodes, lerp).
 struct RefRoughTables {
   std::vector<double> t;  // external transmittance at mu_i = i / 63
@@ -249,7 +276,7 @@ const RefRoughTables& ref_rough_tables(double alpha, double eta, bool beckmann) 
   double internal = 0;
   for (int i = 0; i < 64; ++i) {
     double mu = std::max(1e-6, i / 63.0);
-    r.t.push_back(1 - ref_rough_albedo(mu, alpha, eta, beckmann));
+    r.t.push_back(ref_rough_transmittance(mu, alpha, eta, beckmann));
     internal += ref_rough_albedo(mu, alpha, 1 / eta, beckmann) * mu;
   }
   r.internal = 2 * internal / 64;

@@ -256,32 +256,56 @@ double smith_g1(const glm::dvec3& v, const glm::dvec3& m, double alpha, bool bec
   return 2.0 / (1.0 + std::sqrt(1.0 + t2));
 }
 
-}  // namespace
-
-double rough_reflectance(double mu, double alpha, double eta, bool beckmann) {
-  // R(wo) = int f(wo, wi) cos_i dwi = E[F(wo.m) G1(wo) G1(wi) (wo.m) / (cos_o cos_m)]
-  // for m drawn from D(m) cos(theta_m) (dwi = 4 (wo.m) dwm), on a midpoint grid
-  // of the inversion method's unit square.
+// R (transmit false) or T (true) of rough_reflectance and rough_transmittance:
+// int f(wo, wi) |cos_i| dwi = E[w(wo.m) G1(wo) G1(wi) (wo.m) / (cos_o cos_m)] for
+// m drawn from D(m) cos(theta_m) (dwi = 4 (wo.m) dwm for reflection; the
+// refraction's Jacobian cancels likewise against the BTDF), w = F or 1 - F, wi
+// the reflected or refracted direction, on a midpoint grid of the inversion
+// method's unit square (u, phi) with u = 1 - s^2 (du = 2 s ds): the integrand
+// grows like 1 / cos_m ~ (1 - u)^(-1/2) towards grazing normals, which the
+// midpoint rule in u resolved badly (transmittance 1 % low at mu = 0.25).
+double rough_scattering(double mu, double alpha, double eta, bool beckmann, bool transmit) {
   const glm::dvec3 wo(std::sqrt(std::max(0.0, 1.0 - mu * mu)), 0.0, mu);
   const int n_theta = 192, n_phi = 96;
   const double pi = 3.14159265358979323846;
   double sum = 0.0;
   for (int i = 0; i < n_theta; ++i) {
-    double u = (i + 0.5) / n_theta;
-    double tan2 = beckmann ? -alpha * alpha * std::log(1.0 - u) : alpha * alpha * u / (1.0 - u);
+    double s = (i + 0.5) / n_theta, u = 1.0 - s * s, du = 2.0 * s;
+    double tan2 = beckmann ? -alpha * alpha * std::log(s * s) : alpha * alpha * u / (s * s);
     double ct = 1.0 / std::sqrt(1.0 + tan2), st = std::sqrt(std::max(0.0, 1.0 - ct * ct));
     for (int j = 0; j < n_phi; ++j) {
       double phi = 2.0 * pi * (j + 0.5) / n_phi;
       glm::dvec3 m(st * std::cos(phi), st * std::sin(phi), ct);
       double om = glm::dot(wo, m);
       if (om <= 0.0) continue;
-      glm::dvec3 wi = 2.0 * om * m - wo;
-      if (wi.z <= 0.0) continue;
+      double f = fresnel_dielectric(om, eta), w;
+      glm::dvec3 wi;
+      if (transmit) {  // Snell's law about m; none past the critical angle
+        double sin2_t = (1.0 - om * om) / (eta * eta);
+        if (sin2_t >= 1.0) continue;
+        wi = -wo / eta + (om / eta - std::sqrt(1.0 - sin2_t)) * m;
+        if (wi.z >= 0.0) continue;
+        w = 1.0 - f;
+      } else {
+        wi = 2.0 * om * m - wo;
+        if (wi.z <= 0.0) continue;
+        w = f;
+      }
       double g = smith_g1(wo, m, alpha, beckmann) * smith_g1(wi, m, alpha, beckmann);
-      sum += fresnel_dielectric(om, eta) * g * om / (mu * ct);
+      sum += du * w * g * om / (mu * ct);
     }
   }
   return sum / (double(n_theta) * n_phi);
+}
+
+}  // namespace
+
+double rough_reflectance(double mu, double alpha, double eta, bool beckmann) {
+  return rough_scattering(mu, alpha, eta, beckmann, false);
+}
+
+double rough_transmittance(double mu, double alpha, double eta, bool beckmann) {
+  return rough_scattering(mu, alpha, eta, beckmann, true);
 }
 
 void finish_plastic(Material& m, float diffuse_mean, float specular_mean, TextureStore& store) {
@@ -293,8 +317,9 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
     m.eta.s[3] = float(fresnel_diffuse_reflectance(eta));
     return;
   }
-  // roughplastic (Mitsuba 3): T(mu_i) = 1 - R(mu_i, eta) at mu_i = i / (N - 1)
-  // (at least 1e-6), internal reflectance 2 mean_i(R(mu_i, 1 / eta) mu_i). One
+  // roughplastic (Mitsuba 3): the external transmittance T(mu_i) (rough_transmittance,
+  // Mitsuba 3's eval_transmittance) at mu_i = i / (N - 1) (at least 1e-6),
+  // internal reflectance 2 mean_i(R(mu_i, 1 / eta) mu_i). One
   // row for the material's alpha; with a roughness texture (tex_alpha) a row per
   // roughness r / (ROWS - 1), each followed by its internal and external
   // reflectance, that the kernel interpolates per hit (PSF_MATFLAG_ROUGH_TABLE2D).
@@ -303,11 +328,12 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
   // thousands of microfacet integrand evaluations; 64 of them took about 60 ms
   // a material on one core), summed in column order whatever the thread count.
   auto row = [&](double alpha, double& internal, double& external, unsigned threads) {
-    std::vector<double> outside(PSF_ROUGH_TABLE_RES), inside(PSF_ROUGH_TABLE_RES);
+    std::vector<double> outside(PSF_ROUGH_TABLE_RES), inside(PSF_ROUGH_TABLE_RES), through(PSF_ROUGH_TABLE_RES);
     auto column = [&](int i) {
       double mu = std::max(1e-6, double(i) / (PSF_ROUGH_TABLE_RES - 1));
       outside[size_t(i)] = rough_reflectance(mu, alpha, eta, beckmann);
       inside[size_t(i)] = rough_reflectance(mu, alpha, 1.0 / eta, beckmann);
+      through[size_t(i)] = rough_transmittance(mu, alpha, eta, beckmann);
     };
     if (threads <= 1) {
       for (int i = 0; i < PSF_ROUGH_TABLE_RES; ++i) column(i);
@@ -323,7 +349,7 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
     internal = external = 0.0;
     for (int i = 0; i < PSF_ROUGH_TABLE_RES; ++i) {
       double mu = std::max(1e-6, double(i) / (PSF_ROUGH_TABLE_RES - 1));
-      t[size_t(i)] = float(1.0 - outside[size_t(i)]);
+      t[size_t(i)] = float(through[size_t(i)]);
       internal += inside[size_t(i)] * mu;
       external += outside[size_t(i)] * mu;
     }

@@ -119,6 +119,13 @@ double fresnel_diffuse_reflectance(double eta);
 // from D(m) cos(theta_m). GGX (beckmann false) or Beckmann, isotropic alpha.
 double rough_reflectance(double mu, double alpha, double eta, bool beckmann);
 
+// The fraction of light from incidence cosine mu that the microfacets refract
+// through the interface (relative IOR eta), single scattering: Mitsuba 3's
+// eval_transmittance, E[(1 - F(wo.m)) G1(wi_t, m)] over visible normals, by the
+// same quadrature. Less than 1 - rough_reflectance: the rest is the energy
+// single-scattering microfacet models lose.
+double rough_transmittance(double mu, double alpha, double eta, bool beckmann);
+
 // Fills the derived constants of a plastic, roughplastic or pplastic material
 // from its type, albedo, specular, eta.x, alpha and flags: eta.y = 1 / eta^2,
 // eta.z the internal (pplastic: 0) and eta.w the external diffuse reflectance of
