@@ -224,6 +224,9 @@ typedef struct {
  * (set by the loaders: glTF's COLOR_0, PLY and OBJ colours, Mitsuba's
  * mesh_attribute 'vertex_color'). */
 #define PSF_MATFLAG_VERTEX_COLOR 512u
+/* Dielectrics: tex_color is the specular transmittance (Mitsuba's textured
+ * specular_transmittance) instead of the specular reflectance. */
+#define PSF_MATFLAG_TEX_TRANSMITTANCE 1024u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 

@@ -3,7 +3,8 @@
  * Reads: the hit triangle's TriAttrib (shading normals, uv), the texture table
  * and texels (texture.cl). Writes into the Material: its colour term from its
  * texture (albedo for diffuse, plastics and principled, specular for the other
- * types, or with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), its
+ * types, a dielectric's transmittance with PSF_MATFLAG_TEX_TRANSMITTANCE, or
+ * with PSF_MATFLAG_REFLECTANCE a conductor's complex IOR), its
  * roughness from tex_alpha (principled: roughness, which gives alpha_u and
  * alpha_v with its anisotropy), and a principled's metallic from tex_table.
  *   surface_frame(&m, attrib, b1, b2, p0, p1, p2, ng, wo, textures, texels, &n0) -> the shading Frame,
@@ -203,6 +204,7 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
       float3 c = texture_eval(textures, texels, m->tex_color, uv).xyz;
       if (surface_colours_albedo(m)) m->albedo.xyz = c;
       else if (m->flags & PSF_MATFLAG_REFLECTANCE) conductor_from_reflectance(m, c);
+      else if (m->flags & PSF_MATFLAG_TEX_TRANSMITTANCE) m->transmittance.xyz = c;
       else m->specular.xyz = c;
     }
     const bool principled = m->type == PSF_MATERIAL_PRINCIPLED || m->type == PSF_MATERIAL_PRINCIPLED_THIN;

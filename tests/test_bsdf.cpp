@@ -2375,6 +2375,33 @@ TEST_CASE("Materials: Mitsuba's principled loads with its parameters as Mitsuba 
   expect_scene_error(both, 4, "'eta' or 'specular', not both");
 }
 
+TEST_CASE("Materials: a Mitsuba dielectric's specular_transmittance or specular_reflectance may be a texture", "[bsdf]") {
+  TempDir dir;
+  REQUIRE(write_grey_png(dir));
+  std::string xml = dir.write(
+      "glass.xml",
+      "<scene version=\"3.0.0\">\n"
+      "<shape type=\"rectangle\"><bsdf type=\"thindielectric\">" + bitmap("specular_transmittance") +
+          "</bsdf></shape>\n"
+          "<shape type=\"rectangle\"><bsdf type=\"roughdielectric\">" + bitmap("specular_reflectance") +
+          "</bsdf></shape>\n"
+          "<shape type=\"rectangle\"><bsdf type=\"dielectric\">" + bitmap("specular_transmittance") +
+          bitmap("specular_reflectance") + "</bsdf></shape>\n</scene>\n");
+  psf::Scene s = psf::load_scene(xml);
+  const Material& t = s.materials.at(s.tri_material.at(0));
+  CHECK(t.tex_color != PSF_NO_TEXTURE);
+  CHECK((t.flags & PSF_MATFLAG_TEX_TRANSMITTANCE) != 0);
+  CHECK(t.transmittance.s[0] == Approx(0.2158f).margin(2e-3));  // its mean: the filtering-vertex rule's colour
+  const Material& r = s.materials.at(s.tri_material.at(2));
+  CHECK(r.tex_color != PSF_NO_TEXTURE);
+  CHECK((r.flags & PSF_MATFLAG_TEX_TRANSMITTANCE) == 0);  // the texture is the reflectance
+  const Material& both = s.materials.at(s.tri_material.at(4));
+  CHECK((both.flags & PSF_MATFLAG_TEX_TRANSMITTANCE) != 0);
+  CHECK(both.specular.s[0] == Approx(0.2158f).margin(2e-3));
+  CHECK(count_warnings(s, ":4: a texture for 'specular_reflectance' of bsdf 'dielectric' is not supported") == 1);
+  CHECK(s.warnings.size() == 2);  // that one and the missing sensor
+}
+
 TEST_CASE("Materials: Mitsuba's principledthin loads with its parameters as Mitsuba 3 reads them", "[bsdf]") {
   TempDir dir;
   REQUIRE(write_grey_png(dir));

@@ -771,6 +771,28 @@ static psf::Scene quad_under_sky(const std::vector<Material>& materials, float c
   return s;
 }
 
+TEST_CASE("Render: a dielectric's textured transmittance tints what passes, not what it reflects", "[emitter]") {
+  // A thin glass quad (eta 1.5) whose specular_transmittance is a texture of
+  // (0.2, 0.5, 0.8), under a sky of 1 on both sides, seen head-on: it reflects
+  // R = F + (1 - F)^2 F / (1 - F^2) of the sky (F = 0.04: R = 0.0769) and
+  // transmits (1 - R) t, so each channel reads R + (1 - R) t.
+  Material m{};
+  m.type = PSF_MATERIAL_THIN_DIELECTRIC;
+  m.eta = {{1.5f, 1 / 2.25f, 0, 0}};
+  m.specular = m.transmittance = {{1, 1, 1, 0}};
+  psf::Scene s = quad_under_sky({m}, 2.0f);
+  psf::detail::TextureStore store(s);
+  psf::detail::TextureDesc flat;
+  s.materials[0].tex_color = store.pixels(flat, 1, 1, {0.2f, 0.5f, 0.8f, 1});
+  s.materials[0].flags |= PSF_MATFLAG_TEX_TRANSMITTANCE;
+  psf::RenderResult r = render(s, 256);
+  glm::dvec3 sum(0.0);
+  for (int y = 4; y < 12; ++y)
+    for (int x = 4; x < 12; ++x) sum += pixel(r.image, x, y);
+  const double F = 0.04, R = F + (1 - F) * (1 - F) * F / (1 - F * F);
+  for (int c = 0; c < 3; ++c) CHECK(sum[c] / 64 == Approx(R + (1 - R) * glm::dvec3(0.2, 0.5, 0.8)[c]).epsilon(0.01));
+}
+
 TEST_CASE("Render: a normal map lets no light through the surface (Mitsuba 3's side rule)", "[emitter]") {
   // A diffuse quad of albedo 0.8 whose normal map tilts the normal by 60 degrees
   // towards dp/du, under a sky of 1 that reaches both sides, seen from above.

@@ -1660,7 +1660,9 @@ class MitsubaLoader {
   }
 
   // dielectric, roughdielectric, thindielectric: int_ior (bk7) / ext_ior (air),
-  // specular_reflectance and specular_transmittance (1).
+  // specular_reflectance and specular_transmittance (1), either of them a
+  // texture read per hit (Material.tex_color; both: the reflectance's mean, with
+  // a warning).
   Bsdf bsdf_dielectric(const Element& e) {
     bool rough = e.type == "roughdielectric";
     if (rough)
@@ -1676,8 +1678,18 @@ class MitsubaLoader {
     float eta = get_ior(e, "int_ior", 1.5046f) / get_ior(e, "ext_ior", 1.000277f);
     // As Mitsuba: equal indices are an error (a rough one's half-vector would be 0, and the surface nothing).
     if (eta == 1.0f) fail(e.node, "the interior and exterior indices of refraction must differ");
-    glm::vec3 r = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
-    glm::vec3 t = constant_color(e, "specular_transmittance", glm::vec3(1.0f));
+    ColorParam rp = color_param(e, "specular_reflectance", glm::vec3(1.0f), false);
+    ColorParam tp = color_param(e, "specular_transmittance", glm::vec3(1.0f), false);
+    glm::vec3 r = rp.value, t = tp.value;
+    if (tp.texture != PSF_NO_TEXTURE) {
+      m.tex_color = tp.texture;
+      m.flags |= PSF_MATFLAG_TEX_TRANSMITTANCE;
+      t = store_.mean(tp.texture);  // the filtering-vertex rule's colour; hits read the texture
+      if (rp.texture != PSF_NO_TEXTURE) r = constant_color(e, "specular_reflectance", glm::vec3(1.0f));
+    } else if (rp.texture != PSF_NO_TEXTURE) {
+      m.tex_color = rp.texture;
+      r = store_.mean(rp.texture);
+    }
     m.eta = {{eta, 1.0f / (eta * eta), 0, 0}};
     m.specular = {{r.x, r.y, r.z, 0}};
     m.transmittance = {{t.x, t.y, t.z, 0}};
