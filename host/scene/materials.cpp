@@ -324,9 +324,10 @@ void finish_plastic(Material& m, float diffuse_mean, float specular_mean, Textur
   // roughness r / (ROWS - 1), each followed by its internal and external
   // reflectance, that the kernel interpolates per hit (PSF_MATFLAG_ROUGH_TABLE2D).
   const bool beckmann = (m.flags & PSF_MATFLAG_BECKMANN) != 0;
-  // A row's integrals over `threads` threads (each column is a few tens of
-  // thousands of microfacet integrand evaluations; 64 of them took about 60 ms
-  // a material on one core), summed in column order whatever the thread count.
+  // A row's integrals over `threads` threads (each column is three integrals of
+  // 192 x 96 microfacet integrand evaluations; 64 columns of the two before the
+  // transmittance's took about 60 ms a material on one core), summed in column
+  // order whatever the thread count.
   auto row = [&](double alpha, double& internal, double& external, unsigned threads) {
     std::vector<double> outside(PSF_ROUGH_TABLE_RES), inside(PSF_ROUGH_TABLE_RES), through(PSF_ROUGH_TABLE_RES);
     auto column = [&](int i) {
