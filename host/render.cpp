@@ -305,7 +305,7 @@ struct Renderer::Batch {
   uint32_t size = 0;     // paths per batch
   cl::Buffer states, vertices, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
   cl::Buffer rays[2], queue[2];  // the live paths' rays and path indices, this bounce and the next
-  cl::Buffer env_samples;        // environment light samples drawn ahead of shade (2 float4 per path)
+  cl::Buffer env_samples;        // environment light samples drawn ahead of shade (PSF_ENV_RECORD float4 per path)
   cl::Buffer contrib, contrib_unfiltered, alive;
   std::unique_ptr<PathSpaceFilter> filter;
   float footprint = 0;   // sqrt(dOmega / pi) of the footprint
@@ -338,7 +338,7 @@ std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs) {
   std::vector<BufferNeed> needs = {
       {"path states", sizeof(PathState)}, {"filtering vertices", sizeof(PathVertex)},
       {"rays (two queues)", 2 * sizeof(Ray)}, {"hits", sizeof(Hit)},
-      {"path queues", 2 * sizeof(uint32_t)},      {"environment samples", 2 * sizeof(cl_float4)},
+      {"path queues", 2 * sizeof(uint32_t)},      {"environment samples", PSF_ENV_RECORD * sizeof(cl_float4)},
       {"shadow rays", sizeof(Ray)},       {"shadow hits", sizeof(Hit)},
       {"values c", sizeof(cl_float4)},    {"counts", 2 * sizeof(uint32_t)},
       {"contributions", 2 * sizeof(cl_float4)},
@@ -388,7 +388,7 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   b->hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->shadow_rays = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Ray));
   const bool env_map = env_map_sampled(impl_->env);
-  b->env_samples = rt.buffer(CL_MEM_READ_WRITE, (env_map ? n : 1) * 2 * sizeof(cl_float4));
+  b->env_samples = rt.buffer(CL_MEM_READ_WRITE, (env_map ? n : 1) * PSF_ENV_RECORD * sizeof(cl_float4));
   b->shadow_hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
   b->values = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->filtered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
@@ -478,6 +478,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
       if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
         rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
                   b.queue[in], states, b.env_samples);
+        rt.launch("shade_env_cells", n_live, L, s.env, s.env_data, n_live, b.env_samples);
         rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
       }
       rt.launch("shade", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters, s.emitter_cdf,

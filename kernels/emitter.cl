@@ -66,6 +66,23 @@ inline uint sample_cdf_guided(__global const float* cdf, uint n, __global const 
 
 /* --- the environment -------------------------------------------------------- */
 
+/* A hint to fetch the cache line at global address p, for a work-item further
+ * on: the wavefront's environment kernels (shade.cl) read the map's tables and
+ * texels at random, one line per path, and a work-item's own read waits on
+ * memory, where a prefetch issued PSF_PREFETCH_AHEAD paths earlier overlaps
+ * that wait with the paths in between. PSF_PREFETCH (set by the host for CPU
+ * devices): Clang's __builtin_prefetch, since OpenCL's prefetch() is empty on
+ * PoCL; elsewhere nothing. */
+#ifndef PSF_PREFETCH
+#define PSF_PREFETCH 0
+#endif
+#define PSF_PREFETCH_AHEAD 16u
+#if PSF_PREFETCH
+#define psf_prefetch(p) __builtin_prefetch((p), 0, 3)
+#else
+#define psf_prefetch(p) ((void)0)
+#endif
+
 /* World direction to the map's frame. */
 inline float3 env_to_map(Environment env, float3 d) {
   return (float3)(dot(env.to_map0.xyz, d), dot(env.to_map1.xyz, d), dot(env.to_map2.xyz, d));
@@ -97,10 +114,11 @@ inline float3 env_texel_value(Environment env, __global const float* data, uint2
   return (float3)(data[i], data[i + 1u], data[i + 2u]);
 }
 
-/* The map's radiance at (u, v), bilinear between texels as Mitsuba 3 reads its
- * envmap: column x's centre at u = (x + 1/2) / W, periodic in u; row y at
- * v = y / (H - 1), so the first and last rows lie on the poles. */
-inline float3 env_lookup(Environment env, __global const float* data, float2 uv) {
+/* The texels the map's radiance at (u, v) blends, bilinear as Mitsuba 3 reads
+ * its envmap: column x's centre at u = (x + 1/2) / W, periodic in u; row y at
+ * v = y / (H - 1), so the first and last rows lie on the poles. Returns (x0, x1,
+ * y0, y1); *t the weights of x1 and y1. */
+inline uint4 env_bilinear(Environment env, float2 uv, float2* t) {
   float fx = uv.x * (float)env.width - 0.5f, fy = uv.y * (float)(env.height - 1u);
   float x0f = floor(fx);
   float tx = clamp(fx - x0f, 0.0f, 1.0f);
@@ -109,10 +127,17 @@ inline float3 env_lookup(Environment env, __global const float* data, float2 uv)
   uint x1 = x0 + 1u < env.width ? x0 + 1u : 0u;
   uint y0 = min((uint)fmax(fy, 0.0f), env.height > 1u ? env.height - 2u : 0u);
   uint y1 = min(y0 + 1u, env.height - 1u);
-  float ty = clamp(fy - (float)y0, 0.0f, 1.0f);
-  float3 top = mix(env_texel_value(env, data, (uint2)(x0, y0)), env_texel_value(env, data, (uint2)(x1, y0)), tx);
-  float3 bottom = mix(env_texel_value(env, data, (uint2)(x0, y1)), env_texel_value(env, data, (uint2)(x1, y1)), tx);
-  return mix(top, bottom, ty);
+  *t = (float2)(tx, clamp(fy - (float)y0, 0.0f, 1.0f));
+  return (uint4)(x0, x1, y0, y1);
+}
+
+/* The map's radiance at (u, v) (env_bilinear). */
+inline float3 env_lookup(Environment env, __global const float* data, float2 uv) {
+  float2 t;
+  uint4 c = env_bilinear(env, uv, &t);
+  float3 top = mix(env_texel_value(env, data, c.s02), env_texel_value(env, data, c.s12), t.x);
+  float3 bottom = mix(env_texel_value(env, data, c.s03), env_texel_value(env, data, c.s13), t.x);
+  return mix(top, bottom, t.y);
 }
 
 /* Offsets in the data buffer (psf_shared.h Environment): the marginal cdf, row
@@ -162,11 +187,16 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
 }
 
-/* A world direction from a map's distribution (env.width > 0); *pdf its
- * solid-angle pdf, *uv its map coordinates (the radiance, not read here). */
-inline float3 env_sample_texel(Environment env, __global const float* data, float u1, float u2, float* pdf,
-                               float2* uv) {
-  *uv = (float2)(0.0f);
+/* Sampling a map's distribution (env.width > 0) by the inversion method in two
+ * halves, so that a wavefront can run each over all paths before the next
+ * (shade.cl): the processor then overlaps the cache misses of many paths, where
+ * one path's chain of them (the row's block cdf, then the block's texel cdf)
+ * waits on each in turn.
+ * env_sample_block: the row, from the marginal cdf by u2, and the block of the
+ * row, from its block cdf by u1. Returns (ub, fv, row_p, block_p): u1's remainder
+ * inside the block, u2's inside the row, and the two probabilities; *yb the row
+ * and the block. */
+inline float4 env_sample_block(Environment env, __global const float* data, float u1, float u2, uint2* yb) {
   __global const float* marginal = data + env_marginal_offset(env);
   uint y = sample_cdf_guided(marginal + 1, env.height, data + env_guide_offset(env), u2);
   float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
@@ -176,7 +206,19 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
   __global const float* blocks = data + env_block_cdf_offset(env, y);
   uint b = sample_cdf_guided(blocks + 1, nb, data + env_block_guide_offset(env, y), u1);
   float block_lo = blocks[b], block_p = blocks[b + 1u] - block_lo;
-  float ub = clamp((u1 - block_lo) / block_p, 0.0f, 1.0f);
+  *yb = (uint2)(y, b);
+  return (float4)(clamp((u1 - block_lo) / block_p, 0.0f, 1.0f), clamp((u2 - row_lo) / row_p, 0.0f, 1.0f), row_p,
+                  block_p);
+}
+
+/* env_sample_cell: the texel of block yb by the remainder ub (env_sample_block's
+ * record r), a uniform point inside it, and its direction; *pdf its solid-angle
+ * pdf, *uv its map coordinates (the radiance, not read here). */
+inline float3 env_sample_cell(Environment env, __global const float* data, float4 r, uint2 yb, float* pdf,
+                              float2* uv) {
+  *uv = (float2)(0.0f);
+  uint y = yb.x, b = yb.y;
+  float ub = r.x, fv = r.y, row_p = r.z, block_p = r.w;
   __global const float* fine = data + env_texel_cdf_offset(env, y, b);
   uint last = min(env.width - b * PSF_ENV_BLOCK, (uint)PSF_ENV_BLOCK) - 1u;
   uint k = 0u; /* the first of the block's texels whose cdf exceeds ub: count those at or below */
@@ -189,7 +231,6 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
     return (float3)(0.0f, 1.0f, 0.0f);
   }
   /* A uniform point inside the texel, by the remainder of the uniform numbers. */
-  float fv = clamp((u2 - row_lo) / row_p, 0.0f, 1.0f);
   float fu = clamp((ub - texel_lo) / texel_p, 0.0f, 1.0f);
   float v = ((float)y + fv) / (float)env.height;
   float u = ((float)x + fu) / (float)env.width;
@@ -198,9 +239,18 @@ inline float3 env_sample_texel(Environment env, __global const float* data, floa
   float sin_phi = psf_sincos(u * 2.0f * PSF_ENV_PI, &cos_phi);
   float3 m = (float3)(sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta);
   *uv = (float2)(u, v);
-  *pdf = sin_theta > 0.0f ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
-                          : 0.0f;
+  *pdf = sin_theta > 0.0f
+             ? row_p * (float)env.height * col_p * (float)env.width / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta)
+             : 0.0f;
   return env_to_world(env, m);
+}
+
+/* A world direction from a map's distribution (env.width > 0): both halves. */
+inline float3 env_sample_texel(Environment env, __global const float* data, float u1, float u2, float* pdf,
+                               float2* uv) {
+  uint2 yb;
+  float4 r = env_sample_block(env, data, u1, u2, &yb);
+  return env_sample_cell(env, data, r, yb, pdf, uv);
 }
 
 /* A world direction from the environment's distribution; *pdf its solid-angle

@@ -360,6 +360,9 @@ typedef struct {
  * one line of the conditional where a search over the whole row would wait on
  * several. */
 #define PSF_ENV_BLOCK 16
+/* float4s per path of the environment light samples drawn ahead of shade
+ * (shade.cl env_block_slot). */
+#define PSF_ENV_RECORD 3
 typedef struct {
   psf_float4 to_map0;   /* rows of the world-to-map rotation (the inverse of to_world) */
   psf_float4 to_map1;

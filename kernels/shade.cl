@@ -16,20 +16,23 @@
  * pixel gets radiance + alpha * c; samples a light (shadow ray + pending
  * contribution) and the BSDF (next ray). Depth follows Mitsuba's max_depth: the
  * number of path segments, so max_depth 1 shows emitters only and 2 adds direct light.
- * shade_env_samples and shade_env_texels (before shade, for scenes lit by an
- * environment map): draw each live path's light choice and, where it is the
- * environment, its direction and pdf, then read the map's radiance there (four
- * texels, bilinear). This is the part of next-event estimation that does not
- * depend on the shading point, and the one that waits on memory: a line of the
- * map's cdf, then texels, both at random. In short kernels of their own, one wait each, the
- * processor overlaps those misses across paths, which the long shade kernel
- * cannot.
+ * shade_env_samples, shade_env_cells and shade_env_texels (before shade, for
+ * scenes lit by an environment map): draw each live path's light choice and,
+ * where it is the environment, the row and block of the map, then the texel,
+ * direction and pdf, then read the map's radiance there (four texels,
+ * bilinear). This is the part of next-event estimation that does not depend on
+ * the shading point, and the one that waits on memory: a line of the map's
+ * block cdfs, one of a block's texel cdf, then texels, all at random. In short
+ * kernels of their own the last two are prefetched for the path 16 slots on (on
+ * CPUs; emitter.cl psf_prefetch), so that the waits of many paths overlap, which
+ * the long shade kernel cannot do (PoCL, living room at 2 spp: the three kernels
+ * 0.80-0.85 s of device time where the two without prefetches took 1.16-1.26 s).
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility (visibility.cl may
  * replace it by a hemisphere ray's).
  * trace_paths (CPU devices, and the wavefront's tail on GPUs): all of the above
  * for one path per work-item, bounce after bounce, from the same inline functions
- * (env_sample_slot, env_texel_slot, shade_path, shadow_slot). */
+ * (env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
 
@@ -53,31 +56,67 @@ inline float bounce_sample(float8 u, uint offset) {
   return a[offset];
 }
 
-/* The record for slot k: env_samples[2k] = (wi, pdf), [2k + 1] = (radiance, 1 if
- * the environment was chosen, else 0); shade_env_samples leaves the sample's
- * map coordinates (u, v) in place of the radiance for shade_env_texels. */
-inline void env_sample_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
-                            __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
-                            __global const float* env_data, __global const PathState* states,
-                            __global float4* env_samples) {
+/* The record for slot k, PSF_ENV_RECORD float4s from env_samples[3k]: [3k] =
+ * (wi, pdf), [3k + 1] = (radiance, 1 if the environment was chosen, else 0),
+ * drawn in three steps (emitter.cl): env_block_slot chooses the light and, where
+ * it is the environment, the row and the block of the map, and leaves
+ * env_sample_block's record, [3k] = (ub, fv, row_p, block_p) and [3k + 1] = (y,
+ * b, selection probability, 1); env_cell_slot turns it into the direction and
+ * pdf, with the sample's map coordinates (u, v) in place of the radiance;
+ * env_texel_slot reads the radiance there. [3k + 2] holds what the next step
+ * reads, for the kernels' prefetches: x the block's texel cdf (its offset in the
+ * map's data), written by env_block_slot, y the first texel env_lookup reads,
+ * by env_cell_slot; each kernel reads the word of slots further on that the
+ * kernel before wrote, and writes another. */
+inline void env_block_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
+                           __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
+                           __global const float* env_data, __global const PathState* states,
+                           __global float4* env_samples) {
   uint pixel = states[j].pixel, sample = states[j].sample;
   uint dim = params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
+  uint fine = 0u;
   if (params.num_emitters > 0u) {
     const uint key = pixel_seed(params.seed, pixel);
     float ul = sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_SELECT);
     Emitter em = emitters[sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
-      float pdf;
-      float2 uv;
-      float3 wi = env_sample_texel(env, env_data, sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV),
-                                   sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &pdf, &uv);
-      a = (float4)(wi, pdf > 0.0f ? em.radiance.w * pdf : 0.0f);
-      b = (float4)(uv, 0.0f, 1.0f);
+      uint2 yb;
+      a = env_sample_block(env, env_data, sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV),
+                           sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &yb);
+      b = (float4)(as_float(yb.x), as_float(yb.y), em.radiance.w, 1.0f);
+      fine = (uint)env_texel_cdf_offset(env, yb.x, yb.y);
     }
   }
-  env_samples[2u * k] = a;
-  env_samples[2u * k + 1u] = b;
+  env_samples[PSF_ENV_RECORD * k] = a;
+  env_samples[PSF_ENV_RECORD * k + 1u] = b;
+  env_samples[PSF_ENV_RECORD * k + 2u] = (float4)(as_float(fine), 0.0f, 0.0f, 0.0f);
+}
+
+/* The words of slot k's record [3k + 2] (env_block_slot). */
+inline __global uint* env_ahead(__global float4* env_samples, uint k) {
+  return (__global uint*)(env_samples + PSF_ENV_RECORD * k + 2u);
+}
+
+inline void env_cell_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
+  float4 b = env_samples[PSF_ENV_RECORD * k + 1u];
+  if (b.w == 0.0f) return;
+  float pdf;
+  float2 uv;
+  float3 wi = env_sample_cell(env, env_data, env_samples[PSF_ENV_RECORD * k], (uint2)(as_uint(b.x), as_uint(b.y)),
+                              &pdf, &uv);
+  env_samples[PSF_ENV_RECORD * k] = (float4)(wi, pdf > 0.0f ? b.z * pdf : 0.0f);
+  env_samples[PSF_ENV_RECORD * k + 1u] = (float4)(uv, 0.0f, 1.0f);
+  float2 t;
+  uint4 c = env_bilinear(env, uv, &t);
+  env_ahead(env_samples, k)[1] = 3u * (c.z * env.width + c.x);
+}
+
+inline void env_texel_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
+  float4 b = env_samples[PSF_ENV_RECORD * k + 1u];
+  if (b.w == 0.0f) return;
+  float3 radiance = env_lookup(env, env_data, b.xy) * env.scale.xyz;
+  env_samples[PSF_ENV_RECORD * k + 1u] = (float4)(radiance, 1.0f);
 }
 
 __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
@@ -86,20 +125,27 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
                                 __global float4* env_samples) {
   uint k = get_global_id(0);
   if (k >= count) return;
-  env_sample_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+  env_block_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
 }
 
-inline void env_texel_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
-  float4 b = env_samples[2u * k + 1u];
-  if (b.w == 0.0f) return;
-  float3 radiance = env_lookup(env, env_data, b.xy) * env.scale.xyz;
-  env_samples[2u * k + 1u] = (float4)(radiance, 1.0f);
+__kernel void shade_env_cells(Environment env, __global const float* env_data, uint count,
+                              __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  if (PSF_PREFETCH && k + PSF_PREFETCH_AHEAD < count)
+    psf_prefetch(env_data + env_ahead(env_samples, k + PSF_PREFETCH_AHEAD)[0]);
+  env_cell_slot(k, env, env_data, env_samples);
 }
 
 __kernel void shade_env_texels(Environment env, __global const float* env_data, uint count,
                                __global float4* env_samples) {
   uint k = get_global_id(0);
   if (k >= count) return;
+  if (PSF_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
+    __global const float* texel = env_data + env_ahead(env_samples, k + PSF_PREFETCH_AHEAD)[1];
+    psf_prefetch(texel);
+    psf_prefetch(texel + 3u * env.width); /* the next row */
+  }
   env_texel_slot(k, env, env_data, env_samples);
 }
 
@@ -215,9 +261,9 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
   /* Next-event estimation: one point on one emitter, chosen by power. */
   if (scatter && params.num_emitters > 0u) {
     LightSample ls;
-    if (env_presampled && env_samples[2u * k + 1u].w != 0.0f) {
+    if (env_presampled && env_samples[PSF_ENV_RECORD * k + 1u].w != 0.0f) {
       /* The environment, drawn by shade_env_samples with the same numbers. */
-      float4 a = env_samples[2u * k], b = env_samples[2u * k + 1u];
+      float4 a = env_samples[PSF_ENV_RECORD * k], b = env_samples[PSF_ENV_RECORD * k + 1u];
       ls.wi = a.xyz;
       ls.pdf = a.w;
       ls.radiance = b.xyz;
@@ -365,7 +411,8 @@ __kernel void trace_paths(FrameParams params, __global const uint* sobol, __glob
   for (uint depth = depth0; (int)params.max_depth < 0 || depth < params.max_depth; ++depth) {
     hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
     if (env_presampled) {
-      env_sample_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+      env_block_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+      env_cell_slot(k, env, env_data, env_samples);
       env_texel_slot(k, env, env_data, env_samples);
     }
     Ray next;
