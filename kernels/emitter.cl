@@ -66,23 +66,6 @@ inline uint sample_cdf_guided(__global const float* cdf, uint n, __global const 
 
 /* --- the environment -------------------------------------------------------- */
 
-/* A hint to fetch the cache line at global address p, for a work-item further
- * on: the wavefront's environment kernels (shade.cl) read the map's tables and
- * texels at random, one line per path, and a work-item's own read waits on
- * memory, where a prefetch issued PSF_PREFETCH_AHEAD paths earlier overlaps
- * that wait with the paths in between. PSF_PREFETCH (set by the host for CPU
- * devices): Clang's __builtin_prefetch, since OpenCL's prefetch() is empty on
- * PoCL; elsewhere nothing. */
-#ifndef PSF_PREFETCH
-#define PSF_PREFETCH 0
-#endif
-#define PSF_PREFETCH_AHEAD 16u
-#if PSF_PREFETCH
-#define psf_prefetch(p) __builtin_prefetch((p), 0, 3)
-#else
-#define psf_prefetch(p) ((void)0)
-#endif
-
 /* World direction to the map's frame. */
 inline float3 env_to_map(Environment env, float3 d) {
   return (float3)(dot(env.to_map0.xyz, d), dot(env.to_map1.xyz, d), dot(env.to_map2.xyz, d));

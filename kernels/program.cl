@@ -2,6 +2,24 @@
  * The host builds this file with `-cl-std=CL1.2`; `#include "..."` lines are
  * expanded by the host from the sources embedded at build time. */
 #include "psf_shared.h"
+
+/* A hint to fetch the cache line at global address p for a work-item further
+ * on. Kernels that read at random, one line per work-item, wait on memory in
+ * each work-item in turn where PoCL runs them as a loop; a prefetch issued
+ * PSF_PREFETCH_AHEAD work-items earlier overlaps those waits (the environment's
+ * sampling kernels in shade.cl, gather_tuples in tuples.cl). PSF_PREFETCH (set
+ * by the host for CPU devices): Clang's __builtin_prefetch, since OpenCL's
+ * prefetch() is empty on PoCL; elsewhere nothing. */
+#ifndef PSF_PREFETCH
+#define PSF_PREFETCH 0
+#endif
+#define PSF_PREFETCH_AHEAD 16u
+#if PSF_PREFETCH
+#define psf_prefetch(p) __builtin_prefetch((p), 0, 3)
+#else
+#define psf_prefetch(p) ((void)0)
+#endif
+
 #include "layout.cl"
 #include "sampling.cl"
 #include "texture.cl"

@@ -81,6 +81,15 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
   uint i0 = get_global_id(0) * PSF_GATHER_LANES;
   if (i0 >= v) return; /* tuples without a vertex are not filtered (scatter_values) */
   uint last = v - 1u;
+  if (PSF_PREFETCH) /* the vertices and values of the tuples PSF_PREFETCH_AHEAD on (program.cl) */
+    for (uint k = 0u; k < PSF_GATHER_LANES; ++k) {
+      uint a = i0 + PSF_PREFETCH_AHEAD + k;
+      if (a < v) {
+        uint j = order[a];
+        psf_prefetch(vertices + j);
+        psf_prefetch(values + j);
+      }
+    }
   float8 x, y, z, nx, ny, nz, ar, ag, ab, r, cr, cg, cb;
   int8 tag;
   PSF_GATHER_LANE(0)
