@@ -160,7 +160,7 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   dirty_count_ = 0;
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
-  rt_.launch("cell_keys", n, kLocal, p, vertices, keys_, indices_);
+  rt_.launch("cell_keys", (n + gather_lanes_ - 1) / gather_lanes_, kLocal, p, gather_lanes_, vertices, keys_, indices_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1, 0, 0, RadixKernels::automatic,
              &sort_scratch_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);

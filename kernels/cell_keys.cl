@@ -19,35 +19,66 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-/* ceil(log2(r)) for a normal float r > 0, exactly (no rounding of log2): with
- * r = m 2^e, m in [0.5, 1), from the exponent bits; e - 1 where m = 0.5. */
-inline int grid_level(float r) {
-  uint b = as_uint(r);
-  int e = (int)((b >> 23) & 0xFFu) - 126;
-  return (b & 0x7FFFFFu) == 0u ? e - 1 : e;
-}
-
-/* 2^e exactly, from the exponent bits where 2^e is a normal float (PoCL's
- * ldexp multiplies in a loop). */
-inline float pow2i(int e) { return e >= -126 && e <= 127 ? as_float((e + 127) << 23) : ldexp(1.0f, e); }
-
-/* Edge length of the cells of a level. */
-inline float cell_size(int level, uint cells27) { return pow2i(cells27 ? level : level + 1); }
-
-inline int3 cell_of(float3 x, float size) {
-  float inv = 1.0f / size; /* exact: size is a power of two */
-  return (int3)((int)floor(x.x * inv), (int)floor(x.y * inv), (int)floor(x.z * inv));
-}
-
-/* Spreads the low 10 bits of v to every third bit (Morton order). */
-inline uint spread_bits3(uint v) {
-  v &= 0x3FFu;
-  v = (v | (v << 16)) & 0x030000FFu;
-  v = (v | (v << 8)) & 0x0300F00Fu;
-  v = (v | (v << 4)) & 0x030C30C3u;
-  v = (v | (v << 2)) & 0x09249249u;
-  return v;
-}
+/* The functions of a vertex's cell key are defined for one vertex (float, int,
+ * uint) and for eight (float8, int8, uint8: cell_keys on CPUs, eight paths per
+ * work-item, which PoCL's scalar loop over work-items runs 8 times as fast) from
+ * one body each, so that both give the same keys bit for bit (filter.cl looks
+ * the cells up with the scalar ones). In the vector forms a comparison is -1 or
+ * 0 per lane and ?: selects per lane. */
+#define PSF_DEFINE_CELL_KEY(S)                                                                                     \
+  /* ceil(log2(r)) for a normal float r > 0, exactly (no rounding of log2): with  */                               \
+  /* r = m 2^e, m in [0.5, 1), from the exponent bits; e - 1 where m = 0.5. */                                     \
+  inline int##S grid_level##S(float##S r) {                                                                        \
+    uint##S b = as_uint##S(r);                                                                                     \
+    int##S e = as_int##S((b >> 23) & 0xFFu) - 126;                                                                \
+    return (b & 0x7FFFFFu) == 0u ? e - 1 : e;                                                                      \
+  }                                                                                                                \
+  /* 2^e exactly, from the exponent bits, for e in [-126, 127]; 0 below (the radii */                              \
+  /* are at least 1e-30: levels from -99) and infinity above. */                                                   \
+  inline float##S pow2i##S(int##S e) {                                                                             \
+    return e > 127 ? (float##S)(INFINITY) : e < -126 ? (float##S)(0.0f) : as_float##S((e + 127) << 23);          \
+  }                                                                                                                \
+  /* Edge length of the cells of a level. */                                                                       \
+  inline float##S cell_size##S(int##S level, uint cells27) { return pow2i##S(level + (cells27 ? 0 : 1)); }         \
+  /* A coordinate's cell along one axis; inv = 1 / size, exact: size is a power of two. */                         \
+  inline int##S cell_coord##S(float##S x, float##S inv) { return convert_int##S(floor(x * inv)); }                 \
+  /* Spreads the low 10 bits of v to every third bit (Morton order). */                                            \
+  inline uint##S spread_bits3##S(uint##S v) {                                                                      \
+    v &= 0x3FFu;                                                                                                   \
+    v = (v | (v << 16)) & 0x030000FFu;                                                                             \
+    v = (v | (v << 8)) & 0x0300F00Fu;                                                                              \
+    v = (v | (v << 4)) & 0x030C30C3u;                                                                              \
+    v = (v | (v << 2)) & 0x09249249u;                                                                              \
+    return v;                                                                                                      \
+  }                                                                                                                \
+  inline int##S cell_offset##S(int##S c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); } \
+  inline uint##S cell_morton_part##S(int##S c, uint axis, uint per_axis) {                                         \
+    return spread_bits3##S(as_uint##S(cell_offset##S(c, axis)) & ((1u << per_axis) - 1u)) << axis;               \
+  }                                                                                                                \
+  inline uint##S cell_block_part##S(int##S c, uint axis, uint per_axis) {                                          \
+    const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;                               \
+    return as_uint##S(cell_offset##S(c, axis) >> (int)per_axis) * prime;                                          \
+  }                                                                                                                \
+  inline uint##S cell_level_part##S(int##S level) { return as_uint##S(level) * 2654435761u; }                     \
+  inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint key_bits) {                            \
+    return (morton ^ psf_hash##S(blocks)) & ((1u << key_bits) - 1u);                                              \
+  }                                                                                                                \
+  inline uint##S cell_key##S(int##S level, int##S cx, int##S cy, int##S cz, uint key_bits) {                      \
+    uint per_axis = cell_key_bits_per_axis(key_bits);                                                             \
+    uint##S morton = cell_morton_part##S(cx, 0u, per_axis) | cell_morton_part##S(cy, 1u, per_axis) |              \
+                     cell_morton_part##S(cz, 2u, per_axis);                                                       \
+    uint##S blocks = cell_block_part##S(cx, 0u, per_axis) ^ cell_block_part##S(cy, 1u, per_axis) ^                \
+                     cell_block_part##S(cz, 2u, per_axis) ^ cell_level_part##S(level);                            \
+    return cell_key_of_parts##S(morton, blocks, key_bits);                                                        \
+  }                                                                                                                \
+  /* The query radius of a path's filtering vertex from its camera path length d */                                \
+  /* (position.w) and footprint stretch s (albedo.w, 0: no vertex); 0 without one. */                              \
+  inline float##S vertex_radius##S(FilterParams p, float##S d, float##S s) {                                       \
+    float##S r0 = p.r0 > 0.0f ? (float##S)(p.r0) : d * p.footprint;                                              \
+    if (p.stretch) r0 *= s;                                                                                        \
+    return s == 0.0f ? (float##S)(0.0f) : r0 * p.n_scale;                                                          \
+  }                                                                                                                \
+  inline int##S vertex_level##S(float##S r) { return grid_level##S(fmax(r, 1e-30f)); }
 
 /* The key of a cell: the Morton code of its coordinates' low bits (as many per
  * axis as the key has bits for), so that the sort puts cells near each other in
@@ -60,69 +91,91 @@ inline uint spread_bits3(uint v) {
  * a key held 38 tuples where a cell holds 26, and the filter scanned the others'
  * too. Keys may still collide by chance (a table of 2 keys per tuple);
  * filter.cl's distance and level tests keep such cells apart, and it visits a key
- * shared by two of a query's cells once. */
-inline uint cell_key_bits_per_axis(uint key_bits) { return min(key_bits / 3u, 10u); }
-
-/* A key is built from per-axis parts, so that the filter computes each
+ * shared by two of a query's cells once.
+ *
+ * A key is built from per-axis parts, so that the filter computes each
  * coordinate's once for all the cells it visits: the coordinate's Morton bits
  * (spread_bits3 of its low per_axis bits, shifted by the axis), and its block
  * (the floor of c / 2^per_axis, an arithmetic shift) times a large odd constant
  * of the axis (Teschner et al.'s spatial hash); the level's part is its own such
  * product. key = (x | y | z Morton bits) ^ lowbias32(x ^ y ^ z ^ level blocks).
- * The coordinates are offset first, so that block boundaries do not fall on
- * the planes scenes are built on (a floor at y = 0 lay on one, and the filter's
- * queries there visited cells of two blocks, whose keys it must compare). */
-inline int cell_offset(int c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); }
+ * The coordinates are offset first (cell_offset), so that block boundaries do
+ * not fall on the planes scenes are built on (a floor at y = 0 lay on one, and
+ * the filter's queries there visited cells of two blocks, whose keys it must
+ * compare). */
+inline uint cell_key_bits_per_axis(uint key_bits) { return min(key_bits / 3u, 10u); }
 
-inline uint cell_morton_part(int c, uint axis, uint per_axis) {
-  return spread_bits3((uint)cell_offset(c, axis) & ((1u << per_axis) - 1u)) << axis;
+PSF_DEFINE_CELL_KEY()
+PSF_DEFINE_CELL_KEY(8)
+
+inline int3 cell_of(float3 x, float size) {
+  float inv = 1.0f / size;
+  return (int3)(cell_coord(x.x, inv), cell_coord(x.y, inv), cell_coord(x.z, inv));
 }
-
-inline uint cell_block_part(int c, uint axis, uint per_axis) {
-  const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;
-  return (uint)(cell_offset(c, axis) >> (int)per_axis) * prime;
-}
-
-inline uint cell_level_part(int level) { return (uint)level * 2654435761u; }
-
-inline uint cell_key_of_parts(uint morton, uint blocks, uint key_bits) {
-  return (morton ^ psf_hash(blocks)) & ((1u << key_bits) - 1u);
-}
-
-inline uint cell_key(int level, int3 c, uint key_bits) {
-  uint per_axis = cell_key_bits_per_axis(key_bits);
-  uint morton = cell_morton_part(c.x, 0u, per_axis) | cell_morton_part(c.y, 1u, per_axis) |
-                cell_morton_part(c.z, 2u, per_axis);
-  uint blocks = cell_block_part(c.x, 0u, per_axis) ^ cell_block_part(c.y, 1u, per_axis) ^
-                cell_block_part(c.z, 2u, per_axis) ^ cell_level_part(level);
-  return cell_key_of_parts(morton, blocks, key_bits);
-}
-
-/* The query radius of a path's filtering vertex, 0 for a path without one. */
-inline float vertex_radius(FilterParams p, float4 position, float4 albedo) {
-  if (albedo.w == 0.0f) return 0.0f;
-  float r0 = p.r0 > 0.0f ? p.r0 : position.w * p.footprint;
-  if (p.stretch) r0 *= albedo.w;
-  return r0 * p.n_scale;
-}
-
-inline int vertex_level(float r) { return grid_level(fmax(r, 1e-30f)); }
 
 /* The filter's tag of a vertex with radius r > 0: 4 level + 2 light-sample
  * visibility (filter.cl adds the bit of a finite value). */
 inline int vertex_tag(float r, float4 normal) { return 4 * vertex_level(r) + (normal.w != 0.0f ? 2 : 0); }
 
-__kernel void cell_keys(FilterParams p, __global const PathVertex* vertices, __global uint* keys,
+/* One lane of an eight-path work-item: path min(i0 + k, last). */
+#define PSF_KEY_LANE(k)                                     \
+  {                                                         \
+    uint j = min(i0 + k##u, last);                          \
+    float4 xj = vertices[j].position;                       \
+    x.s##k = xj.x;                                          \
+    y.s##k = xj.y;                                          \
+    z.s##k = xj.z;                                          \
+    d.s##k = xj.w;                                          \
+    s.s##k = vertices[j].albedo.w;                          \
+  }
+
+/* lanes: paths per work-item, 1 (GPUs) or PSF_GATHER_LANES (CPUs: the vector
+ * forms of the key's functions; 2^20 paths of the Cornell box took 15 ms one by
+ * one). */
+__kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* vertices, __global uint* keys,
                         __global uint* indices) {
-  uint i = get_global_id(0);
-  if (i >= p.count) return;
-  float4 x = vertices[i].position, a = vertices[i].albedo;
-  indices[i] = i;
-  float r = vertex_radius(p, x, a);
-  if (r == 0.0f) {
-    keys[i] = 1u << p.key_bits;
+  if (lanes == 1u) {
+    uint i = get_global_id(0);
+    if (i >= p.count) return;
+    float4 x = vertices[i].position;
+    indices[i] = i;
+    float r = vertex_radius(p, x.w, vertices[i].albedo.w);
+    if (r == 0.0f) {
+      keys[i] = 1u << p.key_bits;
+      return;
+    }
+    int level = vertex_level(r);
+    int3 c = cell_of(x.xyz, cell_size(level, p.cells27));
+    keys[i] = cell_key(level, c.x, c.y, c.z, p.key_bits);
     return;
   }
-  int level = vertex_level(r);
-  keys[i] = cell_key(level, cell_of(x.xyz, cell_size(level, p.cells27)), p.key_bits);
+  uint i0 = get_global_id(0) * PSF_GATHER_LANES;
+  if (i0 >= p.count) return;
+  uint last = p.count - 1u;
+  float8 x, y, z, d, s;
+  PSF_KEY_LANE(0)
+  PSF_KEY_LANE(1)
+  PSF_KEY_LANE(2)
+  PSF_KEY_LANE(3)
+  PSF_KEY_LANE(4)
+  PSF_KEY_LANE(5)
+  PSF_KEY_LANE(6)
+  PSF_KEY_LANE(7)
+  float8 r = vertex_radius8(p, d, s);
+  int8 level = vertex_level8(r);
+  float8 inv = 1.0f / cell_size8(level, p.cells27);
+  uint8 key = cell_key8(level, cell_coord8(x, inv), cell_coord8(y, inv), cell_coord8(z, inv), p.key_bits);
+  key = r == 0.0f ? (uint8)(1u << p.key_bits) : key;
+  uint8 index = (uint8)(i0) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
+  if (i0 + PSF_GATHER_LANES - 1u <= last) {
+    vstore8(key, 0, keys + i0);
+    vstore8(index, 0, indices + i0);
+    return;
+  }
+  uint kk[8];
+  vstore8(key, 0, kk);
+  for (uint k = 0u; i0 + k <= last; ++k) {
+    keys[i0 + k] = kk[k];
+    indices[i0 + k] = i0 + k;
+  }
 }

@@ -30,7 +30,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
   {                                                                                      \
     uint j = order[min(i0 + k##u, last)];                                                \
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
-    float rj = vertex_radius(p, xj, aj);                                                 \
+    float rj = vertex_radius(p, xj.w, aj.w);                                             \
     float4 cj = values[j];                                                               \
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     x.s##k = xj.x;                                                                       \
@@ -59,7 +59,7 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
     if (i >= v) return;
     uint j = order[i];
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo;
-    float rj = vertex_radius(p, xj, aj);
+    float rj = vertex_radius(p, xj.w, aj.w);
     float4 cj = values[j];
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
     sorted[PSF_SORTED_X * stride + i] = xj.x;
