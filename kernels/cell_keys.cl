@@ -12,10 +12,15 @@
  * ball holds the area of surface those pixels see (psf_shared.h). Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
  * searched) or 2^(l+1) (8 cells searched), so a cell is never smaller than the
- * query radius; only vertices of one level are neighbours. Keys map (level,
- * cell) into [0, 2^key_bits) in Morton order (cell_key); paths without a vertex
- * get the key 2^key_bits and sort behind all others. Shared keys only cost time:
- * filter.cl tests distances and levels. */
+ * query radius; only vertices of one level are neighbours. Keys map (class,
+ * cell) into [0, 2^key_bits) in Morton order (cell_key), the class being 2 level
+ * + light-sample visibility: vertices that disagree on either are never
+ * neighbours, so each class's vertices get cells of their own and a query scans
+ * only its own class's (Sponza, lit by the default sky, whose vertices compare
+ * hemisphere rays: 11.6 vectors of 8 candidates per query where the level alone
+ * gave 13.0). Paths without a vertex get the key 2^key_bits and sort behind all
+ * others. Shared keys only cost time: filter.cl tests distances, levels and
+ * visibility. */
 
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -59,16 +64,16 @@
     const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;                               \
     return as_uint##S(cell_offset##S(c, axis) >> (int)per_axis) * prime;                                          \
   }                                                                                                                \
-  inline uint##S cell_level_part##S(int##S level) { return as_uint##S(level) * 2654435761u; }                     \
+  inline uint##S cell_class_part##S(int##S key_class) { return as_uint##S(key_class) * 2654435761u; }             \
   inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint key_bits) {                            \
     return (morton ^ psf_hash##S(blocks)) & ((1u << key_bits) - 1u);                                              \
   }                                                                                                                \
-  inline uint##S cell_key##S(int##S level, int##S cx, int##S cy, int##S cz, uint key_bits) {                      \
+  inline uint##S cell_key##S(int##S key_class, int##S cx, int##S cy, int##S cz, uint key_bits) {                  \
     uint per_axis = cell_key_bits_per_axis(key_bits);                                                             \
     uint##S morton = cell_morton_part##S(cx, 0u, per_axis) | cell_morton_part##S(cy, 1u, per_axis) |              \
                      cell_morton_part##S(cz, 2u, per_axis);                                                       \
     uint##S blocks = cell_block_part##S(cx, 0u, per_axis) ^ cell_block_part##S(cy, 1u, per_axis) ^                \
-                     cell_block_part##S(cz, 2u, per_axis) ^ cell_level_part##S(level);                            \
+                     cell_block_part##S(cz, 2u, per_axis) ^ cell_class_part##S(key_class);                        \
     return cell_key_of_parts##S(morton, blocks, key_bits);                                                        \
   }                                                                                                                \
   /* The query radius of a path's filtering vertex from its camera path length d */                                \
@@ -83,7 +88,7 @@
 /* The key of a cell: the Morton code of its coordinates' low bits (as many per
  * axis as the key has bits for), so that the sort puts cells near each other in
  * space near each other in memory and the filter finds its neighbours' ranges and
- * tuples in cache; XORed with a hash of the level and of the block of 2^per_axis
+ * tuples in cache; XORed with a hash of the class and of the block of 2^per_axis
  * cells per axis that holds the cell. Inside a block the XOR is one constant,
  * which maps aligned runs of Morton codes onto aligned runs and so keeps the
  * order's locality. Without the block's hash, cells a period apart shared a key:
@@ -97,8 +102,8 @@
  * coordinate's once for all the cells it visits: the coordinate's Morton bits
  * (spread_bits3 of its low per_axis bits, shifted by the axis), and its block
  * (the floor of c / 2^per_axis, an arithmetic shift) times a large odd constant
- * of the axis (Teschner et al.'s spatial hash); the level's part is its own such
- * product. key = (x | y | z Morton bits) ^ lowbias32(x ^ y ^ z ^ level blocks).
+ * of the axis (Teschner et al.'s spatial hash); the class's part is its own such
+ * product. key = (x | y | z Morton bits) ^ lowbias32(x ^ y ^ z blocks ^ class part).
  * The coordinates are offset first (cell_offset), so that block boundaries do
  * not fall on the planes scenes are built on (a floor at y = 0 lay on one, and
  * the filter's queries there visited cells of two blocks, whose keys it must
@@ -117,6 +122,9 @@ inline int3 cell_of(float3 x, float size) {
  * visibility (filter.cl adds the bit of a finite value). */
 inline int vertex_tag(float r, float4 normal) { return 4 * vertex_level(r) + (normal.w != 0.0f ? 2 : 0); }
 
+/* The key's class of a vertex: 2 level + visibility, the tag's upper bits. */
+inline int tag_key_class(int tag) { return tag >> 1; }
+
 /* One lane of an eight-path work-item: path min(i0 + k, last). */
 #define PSF_KEY_LANE(k)                                     \
   {                                                         \
@@ -127,6 +135,7 @@ inline int vertex_tag(float r, float4 normal) { return 4 * vertex_level(r) + (no
     z.s##k = xj.z;                                          \
     d.s##k = xj.w;                                          \
     s.s##k = vertices[j].albedo.w;                          \
+    v.s##k = vertices[j].normal.w;                          \
   }
 
 /* lanes: paths per work-item, 1 (GPUs) or PSF_GATHER_LANES (CPUs: the vector
@@ -146,13 +155,13 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
     }
     int level = vertex_level(r);
     int3 c = cell_of(x.xyz, cell_size(level, p.cells27));
-    keys[i] = cell_key(level, c.x, c.y, c.z, p.key_bits);
+    keys[i] = cell_key(tag_key_class(vertex_tag(r, vertices[i].normal)), c.x, c.y, c.z, p.key_bits);
     return;
   }
   uint i0 = get_global_id(0) * PSF_GATHER_LANES;
   if (i0 >= p.count) return;
   uint last = p.count - 1u;
-  float8 x, y, z, d, s;
+  float8 x, y, z, d, s, v;
   PSF_KEY_LANE(0)
   PSF_KEY_LANE(1)
   PSF_KEY_LANE(2)
@@ -164,7 +173,8 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
   float8 r = vertex_radius8(p, d, s);
   int8 level = vertex_level8(r);
   float8 inv = 1.0f / cell_size8(level, p.cells27);
-  uint8 key = cell_key8(level, cell_coord8(x, inv), cell_coord8(y, inv), cell_coord8(z, inv), p.key_bits);
+  int8 key_class = 2 * level + (v != 0.0f ? 1 : 0); /* tag_key_class */
+  uint8 key = cell_key8(key_class, cell_coord8(x, inv), cell_coord8(y, inv), cell_coord8(z, inv), p.key_bits);
   key = r == 0.0f ? (uint8)(1u << p.key_bits) : key;
   uint8 index = (uint8)(i0) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
   if (i0 + PSF_GATHER_LANES - 1u <= last) {

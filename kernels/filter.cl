@@ -116,7 +116,7 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
     mz[k] = cell_morton_part(lo.z + k, 2u, per_axis);
     bx[k] = cell_block_part(lo.x + k, 0u, per_axis);
     by[k] = cell_block_part(lo.y + k, 1u, per_axis);
-    bz[k] = cell_block_part(lo.z + k, 2u, per_axis) ^ cell_level_part(level);
+    bz[k] = cell_block_part(lo.z + k, 2u, per_axis) ^ cell_class_part(tag_key_class(tag));
   }
   const bool one_block = bx[0] == bx[hi.x - lo.x] && by[0] == by[hi.y - lo.y] && bz[0] == bz[hi.z - lo.z];
   const bool repeats = per_axis < 2u || !one_block;

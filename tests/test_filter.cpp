@@ -304,9 +304,9 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
 
 // The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
 // plus an offset, its low bits in Morton order and its block (the rest) times a
-// constant; the blocks' and level's products XORed and hashed (lowbias32) into
-// the Morton code.
-uint32_t host_cell_key(int level, const int c[3], uint32_t key_bits) {
+// constant; the blocks' and the class's (2 level + light-sample visibility)
+// products XORed and hashed (lowbias32) into the Morton code.
+uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
   auto spread = [](uint32_t v) {
     uint32_t out = 0;
     for (int b = 0; b < 10; ++b) out |= ((v >> b) & 1u) << (3 * b);
@@ -323,7 +323,7 @@ uint32_t host_cell_key(int level, const int c[3], uint32_t key_bits) {
   const int offset[3] = {1237, 2741, 3593};
   const uint32_t prime[3] = {73856093u, 19349663u, 83492791u};
   const uint32_t per_axis = std::min(key_bits / 3, 10u);
-  uint32_t morton = 0, blocks = uint32_t(level) * 2654435761u;
+  uint32_t morton = 0, blocks = uint32_t(key_class) * 2654435761u;
   for (int a = 0; a < 3; ++a) {
     int o = c[a] + offset[a];
     morton |= spread(uint32_t(o) & ((1u << per_axis) - 1u)) << a;
@@ -353,7 +353,9 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
     for (int y = -64; y < 64 && !found; ++y)
       for (int x = -64; x < 64 && !found; ++x) {
         const int a[3] = {x, y, z}, b[3] = {x + 1, y, z};
-        if ((x + 1 + 1237) % 8 == 0 && host_cell_key(level, a, key_bits) == host_cell_key(level, b, key_bits)) {
+        // The tuples below see their light (normal.w = 1): class 2 level + 1.
+        if ((x + 1 + 1237) % 8 == 0 &&
+            host_cell_key(2 * level + 1, a, key_bits) == host_cell_key(2 * level + 1, b, key_bits)) {
           std::copy(a, a + 3, pair);
           found = true;
         }
