@@ -72,18 +72,20 @@ inline void env_block_slot(uint k, uint j, FrameParams params, __global const ui
                            __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
                            __global const float* env_data, __global const PathState* states,
                            __global float4* env_samples) {
-  uint pixel = states[j].pixel, sample = states[j].sample;
-  uint dim = params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * states[j].depth;
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
   uint fine = 0u;
   if (params.num_emitters > 0u) {
-    const uint key = pixel_seed(params.seed, pixel);
-    float ul = sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_SELECT);
+    /* The bounce's dimensions drawn together, as shade_path draws them (one
+     * pass over the index's bits for all, where three draws of one each took
+     * three). */
+    PathState st = states[j];
+    float8 u = bounce_samples(params, sobol, pixel_seed(params.seed, st.pixel), st);
+    float ul = bounce_sample(u, PSF_DIM_LIGHT_SELECT);
     Emitter em = emitters[sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
       uint2 yb;
-      a = env_sample_block(env, env_data, sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV),
-                           sample_1d_keyed(sobol, key, sample, dim + PSF_DIM_LIGHT_UV + 1u), &yb);
+      a = env_sample_block(env, env_data, bounce_sample(u, PSF_DIM_LIGHT_UV), bounce_sample(u, PSF_DIM_LIGHT_UV + 1u),
+                           &yb);
       b = (float4)(as_float(yb.x), as_float(yb.y), em.radiance.w, 1.0f);
       fine = (uint)env_texel_cdf_offset(env, yb.x, yb.y);
     }
