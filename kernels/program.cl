@@ -7,7 +7,8 @@
  * on. Kernels that read at random, one line per work-item, wait on memory in
  * each work-item in turn where PoCL runs them as a loop; a prefetch issued
  * PSF_PREFETCH_AHEAD work-items earlier overlaps those waits (the environment's
- * sampling kernels in shade.cl, gather_tuples in tuples.cl). PSF_PREFETCH (set
+ * sampling kernels in shade.cl, gather_tuples and scatter_values in tuples.cl; the
+ * latter's writes with psf_prefetch_write). PSF_PREFETCH (set
  * by the host for CPU devices): Clang's __builtin_prefetch, since OpenCL's
  * prefetch() is empty on PoCL; elsewhere nothing. */
 #ifndef PSF_PREFETCH
@@ -16,8 +17,10 @@
 #define PSF_PREFETCH_AHEAD 16u
 #if PSF_PREFETCH
 #define psf_prefetch(p) __builtin_prefetch((p), 0, 3)
+#define psf_prefetch_write(p) __builtin_prefetch((p), 1, 3)
 #else
 #define psf_prefetch(p) ((void)0)
+#define psf_prefetch_write(p) ((void)0)
 #endif
 
 #include "layout.cl"

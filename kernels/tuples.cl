@@ -121,6 +121,11 @@ __kernel void scatter_values(uint count, uint stride, __global const uint* order
                              __global const float4* unfiltered, __global float4* values, __global uint* counts) {
   uint i = get_global_id(0);
   if (i >= count) return;
+  if (PSF_PREFETCH && i + PSF_PREFETCH_AHEAD < count) { /* the lines the path 16 on writes (program.cl) */
+    uint a = order[i + PSF_PREFETCH_AHEAD];
+    psf_prefetch_write(values + a);
+    psf_prefetch_write(counts + a);
+  }
   uint j = order[i];
   if (i >= *valid) { /* no filtering vertex: its own value */
     values[j] = unfiltered[j];
