@@ -70,8 +70,13 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   uint fx = pixel % params.width + (uint)camera.right.w, fy = pixel / params.width + (uint)camera.down.w;
   uint film_pixel = fy * camera.width + fx;
   const uint key = pixel_seed(params.seed, film_pixel);
-  float u = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
-  float v = sample_1d_keyed(sobol, key, sample, PSF_DIM_PIXEL + 1);
+  /* Dimensions 0-7 drawn together (one pass over the sample index's bits,
+   * sampling.cl): the pixel's two, and the lens's. */
+#if PSF_DIM_LENS != PSF_DIM_PIXEL + 2
+#error "the lens dimensions are read as u8.s2 and u8.s3"
+#endif
+  float8 u8 = sample_8d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
+  float u = u8.s0, v = u8.s1;
   float s = ((float)fx + 0.5f + pixel_filter_offset(camera, u)) / (float)camera.width + camera.shift_s;
   float t = ((float)fy + 0.5f + pixel_filter_offset(camera, v)) / (float)camera.height + camera.shift_t;
   float3 dir = camera.forward.xyz + (2.0f * s - 1.0f) * camera.right.xyz + (2.0f * t - 1.0f) * camera.down.xyz;
@@ -82,8 +87,8 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   } else if (camera.aperture > 0.0f) {
     /* A thin lens: a point of the lens disk (uniform by area), aimed at where
      * the pinhole ray meets the plane in focus (dir has forward component 1). */
-    float r = camera.aperture * sqrt(sample_1d_keyed(sobol, key, sample, PSF_DIM_LENS));
-    float c, sn = psf_sincos(2.0f * 3.14159265358979f * sample_1d_keyed(sobol, key, sample, PSF_DIM_LENS + 1), &c);
+    float r = camera.aperture * sqrt(u8.s2); /* PSF_DIM_LENS */
+    float c, sn = psf_sincos(2.0f * 3.14159265358979f * u8.s3, &c);
     float3 lens = r * (c * normalize(camera.right.xyz) + sn * normalize(camera.down.xyz));
     dir = camera.focus * dir - lens;
     org += lens;
