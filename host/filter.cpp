@@ -160,14 +160,14 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   dirty_count_ = 0;
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
-  rt_.launch("cell_keys", (n + gather_lanes_ - 1) / gather_lanes_, kLocal, p, gather_lanes_, vertices, keys_, indices_);
+  const uint32_t lane_items = (n + gather_lanes_ - 1) / gather_lanes_;  // cell_keys and gather_tuples
+  rt_.launch("cell_keys", lane_items, kLocal, p, gather_lanes_, vertices, keys_, indices_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1, 0, 0, RadixKernels::automatic,
              &sort_scratch_);
   rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
   dirty_count_ = n;
   dirty_bits_ = p.key_bits;
-  const uint32_t gather_items = (n + gather_lanes_ - 1) / gather_lanes_;
-  rt_.launch("gather_tuples", gather_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, values, valid_,
+  rt_.launch("gather_tuples", lane_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, values, valid_,
              sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);

@@ -80,9 +80,9 @@ size_t scan_scratch_entries(uint32_t total);
 
 class PathSpaceFilter {
  public:
-  // Buffers for batches of up to `capacity` tuples. gather_lanes: tuples per
-  // work-item of gather_tuples, 1 or PSF_GATHER_LANES; 0 picks by device kind
-  // (1 on GPUs, PSF_GATHER_LANES on CPUs).
+  // Buffers for batches of up to `capacity` tuples. gather_lanes: paths per
+  // work-item of cell_keys and gather_tuples, 1 or PSF_GATHER_LANES; 0 picks by
+  // device kind (1 on GPUs, PSF_GATHER_LANES on CPUs).
   PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes = 0);
 
   // Filters `params.count` tuples: `vertices` (PathVertex, path order) and their
@@ -104,7 +104,7 @@ class PathSpaceFilter {
   Runtime& rt_;
   uint32_t capacity_;
   uint32_t stride_;        // floats between two fields of sorted_ (capacity + padding)
-  uint32_t gather_lanes_;  // tuples per work-item of gather_tuples
+  uint32_t gather_lanes_;  // paths per work-item of cell_keys and gather_tuples
   cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;

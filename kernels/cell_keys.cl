@@ -26,7 +26,8 @@
 
 /* The functions of a vertex's cell key are defined for one vertex (float, int,
  * uint) and for eight (float8, int8, uint8: cell_keys on CPUs, eight paths per
- * work-item, which PoCL's scalar loop over work-items runs 8 times as fast) from
+ * work-item in vector arithmetic, where PoCL runs the one-path kernel as a
+ * scalar loop over work-items; Sponza's 2^20 paths 8.6-8.9 -> 3.0-3.3 ms) from
  * one body each, so that both give the same keys bit for bit (filter.cl looks
  * the cells up with the scalar ones). In the vector forms a comparison is -1 or
  * 0 per lane and ?: selects per lane. */

@@ -24,7 +24,7 @@
  * the shading point, and the one that waits on memory: a line of the map's
  * block cdfs, one of a block's texel cdf, then texels, all at random. In short
  * kernels of their own the last two are prefetched for the path 16 slots on (on
- * CPUs; emitter.cl psf_prefetch), so that the waits of many paths overlap, which
+ * CPUs; program.cl psf_prefetch), so that the waits of many paths overlap, which
  * the long shade kernel cannot do (PoCL, living room at 2 spp: the three kernels
  * 0.80-0.85 s of device time where the two without prefetches took 1.16-1.26 s).
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and

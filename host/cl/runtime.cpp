@@ -219,8 +219,8 @@ Runtime::Runtime(const DeviceInfo& device, const std::string& extra_options) : d
   if (extra_options.find("PSF_FILTER_LANES") == std::string::npos)
     options += device_.type == "GPU" ? " -DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1"
                                      : " -DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0";
-  // Prefetches in the environment's sampling kernels (kernels/emitter.cl): Clang's
-  // builtin on CPU devices (PoCL), where OpenCL's prefetch() does nothing.
+  // Prefetches in the kernels that read at random (kernels/program.cl psf_prefetch):
+  // Clang's builtin on CPU devices (PoCL), where OpenCL's prefetch() does nothing.
   if (device_.type == "CPU" && extra_options.find("PSF_PREFETCH") == std::string::npos)
     options += " -DPSF_PREFETCH=1";
   if (!extra_options.empty()) options += " " + extra_options;
