@@ -78,15 +78,14 @@ inline float3 env_to_world(Environment env, float3 m) {
 
 /* The map coordinates (u, v) in [0, 1]^2 of the unit map-frame direction m. */
 inline float2 env_uv(float3 m) {
-  float u = atan2(m.x, -m.z) * (0.5f / PSF_ENV_PI);
+  float u = psf_atan2(m.x, -m.z) * (0.5f / PSF_ENV_PI);
   if (u < 0.0f) u += 1.0f;
   return (float2)(u, acos(clamp(m.y, -1.0f, 1.0f)) * (1.0f / PSF_ENV_PI));
 }
 
 /* The cell (x, y) of the sampling grid (W x H cells of the (u, v) square) holding
- * the unit map-frame direction m. */
-inline uint2 env_texel(Environment env, float3 m) {
-  float2 uv = env_uv(m);
+ * the map coordinates uv. */
+inline uint2 env_cell_of_uv(Environment env, float2 uv) {
   uint x = min((uint)(uv.x * (float)env.width), env.width - 1u);
   uint y = min((uint)(uv.y * (float)env.height), env.height - 1u);
   return (uint2)(x, y);
@@ -149,11 +148,35 @@ inline float env_column_prob(Environment env, __global const float* data, uint x
   return (blocks[b + 1u] - blocks[b]) * (fine[k] - (k > 0u ? fine[k - 1u] : 0.0f));
 }
 
+/* The solid-angle pdf with which env_sample returns the map-frame direction m
+ * (unit) of map coordinates uv = env_uv(m), for a map (env.width > 0). */
+inline float env_map_pdf(Environment env, __global const float* data, float3 m, float2 uv) {
+  float sin_theta = sqrt(fmax(m.x * m.x + m.z * m.z, 0.0f));
+  if (!(sin_theta > 0.0f)) return 0.0f;
+  uint2 t = env_cell_of_uv(env, uv);
+  __global const float* marginal = data + env_marginal_offset(env);
+  float p_uv = (marginal[t.y + 1u] - marginal[t.y]) * (float)env.height * env_column_prob(env, data, t.x, t.y) *
+               (float)env.width;
+  return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
+}
+
+/* Radiance arriving from world direction d (unit) from infinitely far away and,
+ * where pdf is not null, the solid-angle pdf with which env_sample returns d,
+ * from one computation of the map coordinates. */
+inline float3 env_radiance_pdf(Environment env, __global const float* data, float3 d, float* pdf) {
+  if (!env.present || env.width == 0u) {
+    if (pdf) *pdf = env.present ? 1.0f / (4.0f * PSF_ENV_PI) : 0.0f;
+    return env.present ? env.scale.xyz : (float3)(0.0f);
+  }
+  float3 m = env_to_map(env, d);
+  float2 uv = env_uv(m);
+  if (pdf) *pdf = env_map_pdf(env, data, m, uv);
+  return env_lookup(env, data, uv) * env.scale.xyz;
+}
+
 /* Radiance arriving from world direction d (unit) from infinitely far away. */
 inline float3 env_radiance(Environment env, __global const float* data, float3 d) {
-  if (!env.present) return (float3)(0.0f);
-  if (env.width == 0u) return env.scale.xyz;
-  return env_lookup(env, data, env_uv(env_to_map(env, d))) * env.scale.xyz;
+  return env_radiance_pdf(env, data, d, 0);
 }
 
 /* Solid-angle pdf with which env_sample returns world direction d (unit). */
@@ -161,13 +184,7 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   if (!env.present) return 0.0f;
   if (env.width == 0u) return 1.0f / (4.0f * PSF_ENV_PI);
   float3 m = env_to_map(env, d);
-  float sin_theta = sqrt(fmax(m.x * m.x + m.z * m.z, 0.0f));
-  if (!(sin_theta > 0.0f)) return 0.0f;
-  uint2 t = env_texel(env, m);
-  __global const float* marginal = data + env_marginal_offset(env);
-  float p_uv = (marginal[t.y + 1u] - marginal[t.y]) * (float)env.height * env_column_prob(env, data, t.x, t.y) *
-               (float)env.width;
-  return p_uv / (2.0f * PSF_ENV_PI * PSF_ENV_PI * sin_theta);
+  return env_map_pdf(env, data, m, env_uv(m));
 }
 
 /* Sampling a map's distribution (env.width > 0) by the inversion method in two

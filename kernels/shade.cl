@@ -188,10 +188,11 @@ inline bool shade_path(uint k, uint j, FrameParams params, __global const uint* 
      * unless it left the camera or a delta lobe (emitter.cl). */
     if (env.present && !(st.depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT))) {
       float3 d = normalize(ray.dir.xyz);
-      float w = 1.0f;
-      if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR))
-        w = power_heuristic(st.throughput.w, env.scale.w * env_pdf(env, env_data, d));
-      add_radiance(&st, st.throughput.xyz * env_radiance(env, env_data, d) * w);
+      float w = 1.0f, pdf;
+      bool mis = st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR);
+      float3 radiance = env_radiance_pdf(env, env_data, d, mis ? &pdf : 0);
+      if (mis) w = power_heuristic(st.throughput.w, env.scale.w * pdf);
+      add_radiance(&st, st.throughput.xyz * radiance * w);
     }
     st.flags &= ~PSF_PATH_ALIVE;
     shadow_rays[k] = shadow;

@@ -194,6 +194,42 @@ TEST_CASE("Sampling: eight dimensions at once equal the dimensions one at a time
   }
 }
 
+TEST_CASE("Sampling: psf_atan2 matches atan2 in double precision", "[sampling]") {
+  // Directions all round the circle at radii from 1e-6 to 1e6, random pairs,
+  // the axes and the origin (0 by definition). Tolerance 4e-7 absolute: about 1
+  // ulp of pi, what float atan2 gives.
+  auto& rt = psf::test::runtime();
+  std::vector<cl_float2> yx;
+  for (int i = 0; i < 20000; ++i) {
+    double a = -M_PI + 2.0 * M_PI * (i + 0.5) / 20000.0;
+    for (double r : {1e-6, 1.0, 1e6}) yx.push_back({{float(r * std::sin(a)), float(r * std::cos(a))}});
+  }
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int i = 0; i < 20000; ++i) yx.push_back({{u(rng), u(rng)}});
+  for (float v : {1.0f, -1.0f, 0.5f}) {
+    yx.push_back({{v, 0.0f}});
+    yx.push_back({{0.0f, v}});
+    yx.push_back({{v, v}});
+    yx.push_back({{v, -v}});
+  }
+  cl::Buffer in = rt.upload(yx), out = rt.buffer(CL_MEM_WRITE_ONLY, (yx.size() + 1) * sizeof(float));
+  rt.launch("atan2_values", yx.size(), 64, in, cl_uint(yx.size()), out);
+  auto got = rt.download<float>(out, yx.size());
+  double worst = 0;
+  size_t bad = 0;
+  for (size_t i = 0; i < yx.size(); ++i) {
+    double e = std::abs(got[i] - std::atan2(double(yx[i].s[0]), double(yx[i].s[1])));
+    worst = std::max(worst, e);
+    bad += e > 4e-7 || !std::isfinite(got[i]);
+  }
+  INFO("largest error " << worst);
+  CHECK(bad == 0);
+  cl::Buffer origin = rt.upload(std::vector<cl_float2>{{{0.0f, 0.0f}}});
+  rt.launch("atan2_values", 1, 64, origin, cl_uint(1), out);
+  CHECK(rt.download<float>(out, 1)[0] == 0.0f);
+}
+
 TEST_CASE("Sampling: psf_sincos matches sin and cos in double precision", "[sampling]") {
   // The warps' angles lie in [-pi, 2 pi]; the reduction holds to |x| <= 8192.
   // Tolerance 3e-7 absolute: about 2.5 ulp of 1, what float sincos gives.
