@@ -478,6 +478,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
       if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
         rt.launch("shade_env_samples", n_live, L, p, s.sobol, s.emitters, s.emitter_cdf, s.env, s.env_data, n_live,
                   b.queue[in], states, b.env_samples);
+        rt.launch("shade_env_blocks", n_live, L, s.env, s.env_data, n_live, b.env_samples);
         rt.launch("shade_env_cells", n_live, L, s.env, s.env_data, n_live, b.env_samples);
         rt.launch("shade_env_texels", n_live, L, s.env, s.env_data, n_live, b.env_samples);
       }

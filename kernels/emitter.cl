@@ -187,28 +187,39 @@ inline float env_pdf(Environment env, __global const float* data, float3 d) {
   return env_map_pdf(env, data, m, env_uv(m));
 }
 
-/* Sampling a map's distribution (env.width > 0) by the inversion method in two
- * halves, so that a wavefront can run each over all paths before the next
+/* Sampling a map's distribution (env.width > 0) by the inversion method in
+ * three steps, so that a wavefront can run each over all paths before the next
  * (shade.cl): the processor then overlaps the cache misses of many paths, where
- * one path's chain of them (the row's block cdf, then the block's texel cdf)
- * waits on each in turn.
- * env_sample_block: the row, from the marginal cdf by u2, and the block of the
- * row, from its block cdf by u1. Returns (ub, fv, row_p, block_p): u1's remainder
- * inside the block, u2's inside the row, and the two probabilities; *yb the row
- * and the block. */
-inline float4 env_sample_block(Environment env, __global const float* data, float u1, float u2, uint2* yb) {
+ * one path's chain of them (the row's block guide and block cdf, then the
+ * block's texel cdf) waits on each in turn.
+ * env_sample_row: the row, from the marginal cdf by u2 (a small table, in
+ * cache). Returns (u1, fv, row_p, 0): u2's remainder inside the row and the
+ * row's probability; *y the row. */
+inline float4 env_sample_row(Environment env, __global const float* data, float u1, float u2, uint* y) {
   __global const float* marginal = data + env_marginal_offset(env);
-  uint y = sample_cdf_guided(marginal + 1, env.height, data + env_guide_offset(env), u2);
-  float row_lo = marginal[y], row_p = marginal[y + 1u] - row_lo;
-  /* The column: a block of the row, then a texel of the block, each by the
-   * remainder of u1 (the inversion method, so that u1's strata stay intact). */
+  *y = sample_cdf_guided(marginal + 1, env.height, data + env_guide_offset(env), u2);
+  float row_lo = marginal[*y], row_p = marginal[*y + 1u] - row_lo;
+  return (float4)(u1, clamp((u2 - row_lo) / row_p, 0.0f, 1.0f), row_p, 0.0f);
+}
+
+/* Where env_sample_block reads row y's tables for u1: the guide entry, and the
+ * first entry of the block cdf the search starts from (add the guide's value). */
+inline uint env_block_guide_at(Environment env, uint y, float u1) {
   uint nb = env_blocks(env);
+  return (uint)env_block_guide_offset(env, y) + min((uint)(u1 * (float)nb), nb - 1u);
+}
+inline uint env_block_cdf_at(Environment env, uint y) { return (uint)env_block_cdf_offset(env, y) + 1u; }
+
+/* env_sample_block: the block of row y, from its block cdf by u1 = r.x
+ * (env_sample_row's record r). Returns (ub, fv, row_p, block_p): u1's remainder
+ * inside the block, u2's inside the row, and the two probabilities; *b the
+ * block. The column is a block of the row, then a texel of the block, each by
+ * the remainder of u1 (the inversion method, so that u1's strata stay intact). */
+inline float4 env_sample_block(Environment env, __global const float* data, float4 r, uint y, uint* b) {
   __global const float* blocks = data + env_block_cdf_offset(env, y);
-  uint b = sample_cdf_guided(blocks + 1, nb, data + env_block_guide_offset(env, y), u1);
-  float block_lo = blocks[b], block_p = blocks[b + 1u] - block_lo;
-  *yb = (uint2)(y, b);
-  return (float4)(clamp((u1 - block_lo) / block_p, 0.0f, 1.0f), clamp((u2 - row_lo) / row_p, 0.0f, 1.0f), row_p,
-                  block_p);
+  *b = sample_cdf_guided(blocks + 1, env_blocks(env), data + env_block_guide_offset(env, y), r.x);
+  float block_lo = blocks[*b], block_p = blocks[*b + 1u] - block_lo;
+  return (float4)(clamp((r.x - block_lo) / block_p, 0.0f, 1.0f), r.y, r.z, block_p);
 }
 
 /* env_sample_cell: the texel of block yb by the remainder ub (env_sample_block's
@@ -245,12 +256,12 @@ inline float3 env_sample_cell(Environment env, __global const float* data, float
   return env_to_world(env, m);
 }
 
-/* A world direction from a map's distribution (env.width > 0): both halves. */
+/* A world direction from a map's distribution (env.width > 0): all three steps. */
 inline float3 env_sample_texel(Environment env, __global const float* data, float u1, float u2, float* pdf,
                                float2* uv) {
-  uint2 yb;
-  float4 r = env_sample_block(env, data, u1, u2, &yb);
-  return env_sample_cell(env, data, r, yb, pdf, uv);
+  uint y, b;
+  float4 r = env_sample_block(env, data, env_sample_row(env, data, u1, u2, &y), y, &b);
+  return env_sample_cell(env, data, r, (uint2)(y, b), pdf, uv);
 }
 
 /* A world direction from the environment's distribution; *pdf its solid-angle

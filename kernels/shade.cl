@@ -16,23 +16,24 @@
  * pixel gets radiance + alpha * c; samples a light (shadow ray + pending
  * contribution) and the BSDF (next ray). Depth follows Mitsuba's max_depth: the
  * number of path segments, so max_depth 1 shows emitters only and 2 adds direct light.
- * shade_env_samples, shade_env_cells and shade_env_texels (before shade, for
- * scenes lit by an environment map): draw each live path's light choice and,
- * where it is the environment, the row and block of the map, then the texel,
- * direction and pdf, then read the map's radiance there (four texels,
- * bilinear). This is the part of next-event estimation that does not depend on
- * the shading point, and the one that waits on memory: a line of the map's
- * block cdfs, one of a block's texel cdf, then texels, all at random. In short
- * kernels of their own the last two are prefetched for the path 16 slots on (on
- * CPUs; program.cl psf_prefetch), so that the waits of many paths overlap, which
- * the long shade kernel cannot do (PoCL, living room at 2 spp: the three kernels
- * 0.80-0.85 s of device time where the two without prefetches took 1.16-1.26 s).
+ * shade_env_samples, shade_env_blocks, shade_env_cells and shade_env_texels
+ * (before shade, for scenes lit by an environment map): draw each live path's
+ * light choice and, where it is the environment, the row of the map, then the
+ * block of the row, then the texel, direction and pdf, then read the map's
+ * radiance there (four texels, bilinear). This is the part of next-event
+ * estimation that does not depend on the shading point, and the one that waits
+ * on memory: the row's block guide and block cdf, a block's texel cdf, then
+ * texels, all at random. In short kernels of their own each is prefetched for
+ * the path 16 slots on (on CPUs; program.cl psf_prefetch), so that the waits of
+ * many paths overlap, which the long shade kernel cannot do (PoCL, living room
+ * at 2 spp: the kernels but the first 0.80-0.85 s of device time where the two
+ * without prefetches took 1.16-1.26 s).
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility (visibility.cl may
  * replace it by a hemisphere ray's).
  * trace_paths (CPU devices, and the wavefront's tail on GPUs): all of the above
  * for one path per work-item, bounce after bounce, from the same inline functions
- * (env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
+ * (env_row_slot, env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
 
@@ -58,22 +59,24 @@ inline float bounce_sample(float8 u, uint offset) {
 
 /* The record for slot k, PSF_ENV_RECORD float4s from env_samples[3k]: [3k] =
  * (wi, pdf), [3k + 1] = (radiance, 1 if the environment was chosen, else 0),
- * drawn in three steps (emitter.cl): env_block_slot chooses the light and, where
- * it is the environment, the row and the block of the map, and leaves
- * env_sample_block's record, [3k] = (ub, fv, row_p, block_p) and [3k + 1] = (y,
- * b, selection probability, 1); env_cell_slot turns it into the direction and
- * pdf, with the sample's map coordinates (u, v) in place of the radiance;
- * env_texel_slot reads the radiance there. [3k + 2] holds what the next step
- * reads, for the kernels' prefetches: x the block's texel cdf (its offset in the
- * map's data), written by env_block_slot, y the first texel env_lookup reads,
- * by env_cell_slot; each kernel reads the word of slots further on that the
- * kernel before wrote, and writes another. */
-inline void env_block_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
-                           __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
-                           __global const float* env_data, __global const PathState* states,
-                           __global float4* env_samples) {
+ * drawn in four steps (emitter.cl): env_row_slot chooses the light and, where
+ * it is the environment, the row of the map, and leaves env_sample_row's
+ * record, [3k] = (u1, fv, row_p, 0) and [3k + 1] = (y, 0, selection
+ * probability, 1); env_block_slot finds the block, [3k] = (ub, fv, row_p,
+ * block_p) and [3k + 1] = (y, b, selection probability, 1); env_cell_slot turns
+ * that into the direction and pdf, with the sample's map coordinates (u, v) in
+ * place of the radiance; env_texel_slot reads the radiance there. [3k + 2]
+ * holds what the steps after read, for the kernels' prefetches: z and w the
+ * row's block guide entry and block cdf (offsets in the map's data, written by
+ * env_row_slot), x the block's texel cdf (by env_block_slot), y the first texel
+ * env_lookup reads (by env_cell_slot); each kernel reads the words of slots
+ * further on that a kernel before wrote, and writes another. */
+inline void env_row_slot(uint k, uint j, FrameParams params, __global const uint* sobol,
+                         __global const Emitter* emitters, __global const float* emitter_cdf, Environment env,
+                         __global const float* env_data, __global const PathState* states,
+                         __global float4* env_samples) {
   float4 a = (float4)(0.0f), b = (float4)(0.0f);
-  uint fine = 0u;
+  uint guide = 0u, blocks = 0u;
   if (params.num_emitters > 0u) {
     /* The bounce's dimensions drawn together, as shade_path draws them (one
      * pass over the index's bits for all, where three draws of one each took
@@ -83,21 +86,31 @@ inline void env_block_slot(uint k, uint j, FrameParams params, __global const ui
     float ul = bounce_sample(u, PSF_DIM_LIGHT_SELECT);
     Emitter em = emitters[sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, ul)];
     if (em.type == PSF_EMITTER_ENVIRONMENT) {
-      uint2 yb;
-      a = env_sample_block(env, env_data, bounce_sample(u, PSF_DIM_LIGHT_UV), bounce_sample(u, PSF_DIM_LIGHT_UV + 1u),
-                           &yb);
-      b = (float4)(as_float(yb.x), as_float(yb.y), em.radiance.w, 1.0f);
-      fine = (uint)env_texel_cdf_offset(env, yb.x, yb.y);
+      uint y;
+      a = env_sample_row(env, env_data, bounce_sample(u, PSF_DIM_LIGHT_UV), bounce_sample(u, PSF_DIM_LIGHT_UV + 1u),
+                         &y);
+      b = (float4)(as_float(y), 0.0f, em.radiance.w, 1.0f);
+      guide = env_block_guide_at(env, y, a.x);
+      blocks = env_block_cdf_at(env, y);
     }
   }
   env_samples[PSF_ENV_RECORD * k] = a;
   env_samples[PSF_ENV_RECORD * k + 1u] = b;
-  env_samples[PSF_ENV_RECORD * k + 2u] = (float4)(as_float(fine), 0.0f, 0.0f, 0.0f);
+  env_samples[PSF_ENV_RECORD * k + 2u] = (float4)(0.0f, 0.0f, as_float(guide), as_float(blocks));
 }
 
-/* The words of slot k's record [3k + 2] (env_block_slot). */
+/* The words of slot k's record [3k + 2] (env_row_slot). */
 inline __global uint* env_ahead(__global float4* env_samples, uint k) {
   return (__global uint*)(env_samples + PSF_ENV_RECORD * k + 2u);
+}
+
+inline void env_block_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
+  float4 b = env_samples[PSF_ENV_RECORD * k + 1u];
+  if (b.w == 0.0f) return;
+  uint y = as_uint(b.x), blk;
+  env_samples[PSF_ENV_RECORD * k] = env_sample_block(env, env_data, env_samples[PSF_ENV_RECORD * k], y, &blk);
+  env_samples[PSF_ENV_RECORD * k + 1u] = (float4)(b.x, as_float(blk), b.z, 1.0f);
+  env_ahead(env_samples, k)[0] = (uint)env_texel_cdf_offset(env, y, blk);
 }
 
 inline void env_cell_slot(uint k, Environment env, __global const float* env_data, __global float4* env_samples) {
@@ -127,7 +140,23 @@ __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, 
                                 __global float4* env_samples) {
   uint k = get_global_id(0);
   if (k >= count) return;
-  env_block_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+  env_row_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+}
+
+__kernel void shade_env_blocks(Environment env, __global const float* env_data, uint count,
+                               __global float4* env_samples) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  if (PSF_PREFETCH) { /* two steps ahead: the guide entry, then (once it is in) the block cdf it points to */
+    if (k + 2u * PSF_PREFETCH_AHEAD < count)
+      psf_prefetch(env_data + env_ahead(env_samples, k + 2u * PSF_PREFETCH_AHEAD)[2]);
+    if (k + PSF_PREFETCH_AHEAD < count) {
+      __global const uint* w = env_ahead(env_samples, k + PSF_PREFETCH_AHEAD);
+      uint blocks = w[3];
+      if (blocks != 0u) psf_prefetch(env_data + blocks + as_uint(env_data[w[2]]));
+    }
+  }
+  env_block_slot(k, env, env_data, env_samples);
 }
 
 __kernel void shade_env_cells(Environment env, __global const float* env_data, uint count,
@@ -414,7 +443,8 @@ __kernel void trace_paths(FrameParams params, __global const uint* sobol, __glob
   for (uint depth = depth0; (int)params.max_depth < 0 || depth < params.max_depth; ++depth) {
     hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
     if (env_presampled) {
-      env_block_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+      env_row_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
+      env_block_slot(k, env, env_data, env_samples);
       env_cell_slot(k, env, env_data, env_samples);
       env_texel_slot(k, env, env_data, env_samples);
     }
