@@ -239,7 +239,7 @@ double NoiseMonitor::add(const BatchImages& b) {
 namespace {
 
 // Whether the scene's environment is a map whose light samples the wavefront draws
-// in kernels of their own (shade_env_samples, shade_env_texels).
+// in kernels of their own (shade_env_samples, shade_env_blocks, shade_env_cells, shade_env_texels).
 bool env_map_sampled(const Environment& env) { return env.present && env.width > 0; }
 
 // Paths of pixel i among the first `paths` paths of a render: i, i + pixels, ...
