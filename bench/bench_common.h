@@ -100,7 +100,7 @@ inline const std::vector<std::string>& visibility_kernels() {
   return k;
 }
 inline const std::vector<std::string>& filter_kernels() {
-  static const std::vector<std::string> k = {"cell_keys",   "radix_", "clear_ranges", "cell_ranges",
+  static const std::vector<std::string> k = {"cell_keys", "radix_",  "cell_ranges",
                                              "gather_tuples", "filter", "scatter_values"};
   return k;
 }

@@ -408,7 +408,7 @@ int main(int argc, char** argv) {
         const std::vector<std::pair<const char*, std::vector<std::string>>> stages = {
             {"keys", {"cell_keys"}},
             {"sort", {"radix_"}},
-            {"ranges", {"clear_ranges", "cell_ranges"}},
+            {"ranges", {"cell_ranges"}},
             {"gather", {"gather_tuples"}},
             {"filter", {"filter"}},
             {"scatter", {"scatter_values"}}};

@@ -114,17 +114,18 @@ void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& t
 
 size_t PathSpaceFilter::bytes_per_tuple() {
   // sorted tuples (PSF_SORTED_FIELDS arrays), keys and indices (2x each),
-  // values (2x, as r, g, b arrays), counts, ranges (2 uints for each of up to 4
-  // cells per tuple). The arrays' padding is per batch, not per tuple.
+  // values (2x, as r, g, b arrays), counts, cell starts (a uint for each of up to
+  // 4 keys per tuple). The arrays' padding is per batch, not per tuple.
   return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
-         sizeof(uint32_t) + 4 * 2 * sizeof(uint32_t);
+         sizeof(uint32_t) + 4 * sizeof(uint32_t);
 }
 
-PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes)
+PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes, uint32_t filter_queries)
     : rt_(rt),
       capacity_(capacity),
       stride_(std::max(capacity, 1u) + PSF_SORTED_PAD),
-      gather_lanes_(gather_lanes ? gather_lanes : rt.device().type == "GPU" ? 1 : PSF_GATHER_LANES) {
+      gather_lanes_(gather_lanes ? gather_lanes : rt.device().type == "GPU" ? 1 : PSF_GATHER_LANES),
+      filter_queries_(filter_queries ? filter_queries : rt.device().type == "GPU" ? 1 : PSF_FILTER_QUERIES) {
   if (gather_lanes_ != 1 && gather_lanes_ != PSF_GATHER_LANES)
     throw std::invalid_argument("PathSpaceFilter: gather_tuples takes 1 or PSF_GATHER_LANES tuples per work-item");
   size_t n = std::max(capacity, 1u);
@@ -137,10 +138,9 @@ PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather
   values_a_ = rt.buffer(CL_MEM_READ_WRITE, 3 * size_t(stride_) * sizeof(float));
   values_b_ = rt.buffer(CL_MEM_READ_WRITE, 3 * size_t(stride_) * sizeof(float));
   sorted_counts_ = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
-  ranges_ = rt.buffer(CL_MEM_READ_WRITE, cells * sizeof(cl_uint2));
+  starts_ = rt.buffer(CL_MEM_READ_WRITE, (cells + 1) * sizeof(uint32_t));
   max_count_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
   valid_ = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
-  rt.zero(ranges_, cells * sizeof(cl_uint2));  // kept empty between runs by clear_ranges
   // The arrays' padding is read (and ignored) by filter.cl: give it values.
   rt.zero(sorted_, size_t(PSF_SORTED_FIELDS) * stride_ * sizeof(float));
   rt.zero(values_a_, 3 * size_t(stride_) * sizeof(float));
@@ -155,25 +155,21 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   if (n > capacity_) throw std::invalid_argument("PathSpaceFilter: batch larger than its capacity");
   p.key_bits = filter_key_bits(n);
 
-  // keys_ still holds the last run's sorted keys: empty the ranges it wrote.
-  if (dirty_count_ > 0) rt_.launch("clear_ranges", dirty_count_, kLocal, dirty_count_, dirty_bits_, keys_, ranges_);
-  dirty_count_ = 0;
   // Cell keys, then the (key, path index) pairs sorted by key: key_bits + 1 bits,
   // since paths without a vertex have the key 2^key_bits.
   const uint32_t lane_items = (n + gather_lanes_ - 1) / gather_lanes_;  // cell_keys and gather_tuples
   rt_.launch("cell_keys", lane_items, kLocal, p, gather_lanes_, vertices, keys_, indices_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1, 0, 0, RadixKernels::automatic,
              &sort_scratch_);
-  rt_.launch("cell_ranges", n, kLocal, n, p.key_bits, keys_, ranges_, valid_);
-  dirty_count_ = n;
-  dirty_bits_ = p.key_bits;
+  rt_.launch("cell_ranges", n + 1, kLocal, n, p.key_bits, keys_, starts_, valid_);
   rt_.launch("gather_tuples", lane_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, values, valid_,
              sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
   // every iteration averages the same tuples, so the counts are those of any.
   for (int it = 0; it < std::max(iterations, 1); ++it) {
-    rt_.launch("filter", n, kLocal, p, stride_, valid_, sorted_, values_a_, ranges_, values_b_, sorted_counts_);
+    rt_.launch("filter", (n + filter_queries_ - 1) / filter_queries_, kLocal, p, stride_, filter_queries_, valid_,
+               sorted_, values_a_, starts_, values_b_, sorted_counts_);
     std::swap(values_a_, values_b_);
   }
   rt_.zero(max_count_, sizeof(uint32_t));

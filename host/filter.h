@@ -82,8 +82,10 @@ class PathSpaceFilter {
  public:
   // Buffers for batches of up to `capacity` tuples. gather_lanes: paths per
   // work-item of cell_keys and gather_tuples, 1 or PSF_GATHER_LANES; 0 picks by
-  // device kind (1 on GPUs, PSF_GATHER_LANES on CPUs).
-  PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes = 0);
+  // device kind (1 on GPUs, PSF_GATHER_LANES on CPUs). filter_queries: queries
+  // per work-item of filter (>= 1); 0 picks by device kind (1 on GPUs,
+  // PSF_FILTER_QUERIES on CPUs).
+  PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes = 0, uint32_t filter_queries = 0);
 
   // Filters `params.count` tuples: `vertices` (PathVertex, path order) and their
   // values c (float4, path order) into `filtered` (c-bar, path order) and `counts`
@@ -94,7 +96,8 @@ class PathSpaceFilter {
   // The stages' intermediate results of the last run, for tests.
   const cl::Buffer& sorted_keys() const { return keys_; }
   const cl::Buffer& sorted_indices() const { return indices_; }
-  const cl::Buffer& cell_ranges() const { return ranges_; }  // cl_uint2 (first, end) per key
+  // uint per key k <= 2^key_bits: the tuples of keys below k; cell k is [starts[k], starts[k + 1]).
+  const cl::Buffer& cell_starts() const { return starts_; }
   const cl::Buffer& valid_count() const { return valid_; }   // uint: tuples with a vertex
 
   // Bytes of device memory per tuple of capacity (for batch sizing).
@@ -105,13 +108,11 @@ class PathSpaceFilter {
   uint32_t capacity_;
   uint32_t stride_;        // floats between two fields of sorted_ (capacity + padding)
   uint32_t gather_lanes_;  // paths per work-item of cell_keys and gather_tuples
+  uint32_t filter_queries_;  // queries per work-item of filter (1 on GPUs, PSF_FILTER_QUERIES on CPUs)
   cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
-  cl::Buffer values_a_, values_b_, sorted_counts_, ranges_, max_count_, valid_;
+  cl::Buffer values_a_, values_b_, sorted_counts_, starts_, max_count_, valid_;
   RadixScratch sort_scratch_;
-  // The last run's tuples and key bits: keys_ holds its sorted keys, whose
-  // entries of ranges_ the next run empties first.
-  uint32_t dirty_count_ = 0, dirty_bits_ = 0;
 };
 
 }  // namespace psf

@@ -452,9 +452,8 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   result.filter_off_after = filter_off_after;
   for (auto& rt : runtimes)
     for (const auto& [name, t] : rt->stats()) {
-      bool filter_stage = name == "cell_keys" || name.rfind("radix_", 0) == 0 || name == "clear_ranges" ||
-                          name == "cell_ranges" || name == "gather_tuples" || name.rfind("filter", 0) == 0 ||
-                          name == "scatter_values";
+      bool filter_stage = name == "cell_keys" || name.rfind("radix_", 0) == 0 || name == "cell_ranges" ||
+                          name == "gather_tuples" || name.rfind("filter", 0) == 0 || name == "scatter_values";
       (filter_stage ? result.filter_ms : result.trace_ms) += t.ms;
     }
   if (o.stats) {

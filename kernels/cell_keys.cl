@@ -48,26 +48,28 @@
   inline float##S cell_size##S(int##S level, uint cells27) { return pow2i##S(level + (cells27 ? 0 : 1)); }         \
   /* A coordinate's cell along one axis; inv = 1 / size, exact: size is a power of two. */                         \
   inline int##S cell_coord##S(float##S x, float##S inv) { return convert_int##S(floor(x * inv)); }                 \
-  /* Spreads the low 10 bits of v to every third bit (Morton order). */                                            \
-  inline uint##S spread_bits3##S(uint##S v) {                                                                      \
+  /* Spreads the low 10 bits of v to every other bit (Morton order of two axes). */                                 \
+  inline uint##S spread_bits2##S(uint##S v) {                                                                      \
     v &= 0x3FFu;                                                                                                   \
-    v = (v | (v << 16)) & 0x030000FFu;                                                                             \
-    v = (v | (v << 8)) & 0x0300F00Fu;                                                                              \
-    v = (v | (v << 4)) & 0x030C30C3u;                                                                              \
-    v = (v | (v << 2)) & 0x09249249u;                                                                              \
+    v = (v | (v << 8)) & 0x00FF00FFu;                                                                              \
+    v = (v | (v << 4)) & 0x0F0F0F0Fu;                                                                              \
+    v = (v | (v << 2)) & 0x33333333u;                                                                              \
+    v = (v | (v << 1)) & 0x55555555u;                                                                              \
     return v;                                                                                                      \
   }                                                                                                                \
   inline int##S cell_offset##S(int##S c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); } \
+  /* x's low bits as they are, y's and z's in Morton order above them. */                                           \
   inline uint##S cell_morton_part##S(int##S c, uint axis, uint per_axis) {                                         \
-    return spread_bits3##S(as_uint##S(cell_offset##S(c, axis)) & ((1u << per_axis) - 1u)) << axis;               \
+    uint##S low = as_uint##S(cell_offset##S(c, axis)) & ((1u << per_axis) - 1u);                                  \
+    return axis == 0u ? low : spread_bits2##S(low) << (per_axis + axis - 1u);                                     \
   }                                                                                                                \
   inline uint##S cell_block_part##S(int##S c, uint axis, uint per_axis) {                                          \
     const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;                               \
     return as_uint##S(cell_offset##S(c, axis) >> (int)per_axis) * prime;                                          \
   }                                                                                                                \
   inline uint##S cell_class_part##S(int##S key_class) { return as_uint##S(key_class) * 2654435761u; }             \
-  inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint key_bits) {                            \
-    return (morton ^ psf_hash##S(blocks)) & ((1u << key_bits) - 1u);                                              \
+  inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint per_axis, uint key_bits) {             \
+    return (morton ^ (psf_hash##S(blocks) << per_axis)) & ((1u << key_bits) - 1u);                                \
   }                                                                                                                \
   inline uint##S cell_key##S(int##S key_class, int##S cx, int##S cy, int##S cz, uint key_bits) {                  \
     uint per_axis = cell_key_bits_per_axis(key_bits);                                                             \
@@ -75,7 +77,7 @@
                      cell_morton_part##S(cz, 2u, per_axis);                                                       \
     uint##S blocks = cell_block_part##S(cx, 0u, per_axis) ^ cell_block_part##S(cy, 1u, per_axis) ^                \
                      cell_block_part##S(cz, 2u, per_axis) ^ cell_class_part##S(key_class);                        \
-    return cell_key_of_parts##S(morton, blocks, key_bits);                                                        \
+    return cell_key_of_parts##S(morton, blocks, per_axis, key_bits);                                              \
   }                                                                                                                \
   /* The query radius of a path's filtering vertex from its camera path length d */                                \
   /* (position.w) and footprint stretch s (albedo.w, 0: no vertex); 0 without one. */                              \
@@ -86,25 +88,29 @@
   }                                                                                                                \
   inline int##S vertex_level##S(float##S r) { return grid_level##S(fmax(r, 1e-30f)); }
 
-/* The key of a cell: the Morton code of its coordinates' low bits (as many per
- * axis as the key has bits for), so that the sort puts cells near each other in
- * space near each other in memory and the filter finds its neighbours' ranges and
- * tuples in cache; XORed with a hash of the class and of the block of 2^per_axis
- * cells per axis that holds the cell. Inside a block the XOR is one constant,
- * which maps aligned runs of Morton codes onto aligned runs and so keeps the
- * order's locality. Without the block's hash, cells a period apart shared a key:
- * in Sponza (about 240 cells across at its 2^20 tuples' levels, a period of 128)
- * a key held 38 tuples where a cell holds 26, and the filter scanned the others'
- * too. Keys may still collide by chance (a table of 2 keys per tuple);
- * filter.cl's distance and level tests keep such cells apart, and it visits a key
- * shared by two of a query's cells once.
+/* The key of a cell: within a block of 2^per_axis cells per axis (as many bits
+ * per axis as the key has for), the low bits of its x coordinate, and above them
+ * the Morton code of the low bits of y and z; the bits above x's XORed with a
+ * hash of the class and of the block. So the cells of a row along x within a
+ * block have consecutive keys, and their tuples are one run in sorted order,
+ * which the filter scans at once (its 2 or 3 cells per row); rows near each
+ * other in y and z are near each other in memory, so the filter finds their
+ * tuples in cache. The XOR leaves x's bits alone and is one constant inside a
+ * block, so it keeps both properties. Without the block's hash, cells a period
+ * apart shared a key: in Sponza (about 240 cells across at its 2^20 tuples'
+ * levels, a period of 128) a key held 38 tuples where a cell holds 26, and the
+ * filter scanned the others' too. Keys may still collide by chance (a table of 2
+ * keys per tuple); filter.cl's distance and level tests keep such cells apart,
+ * and a query whose cells span two blocks visits them cell by cell and a key
+ * shared by two of them once.
  *
  * A key is built from per-axis parts, so that the filter computes each
- * coordinate's once for all the cells it visits: the coordinate's Morton bits
- * (spread_bits3 of its low per_axis bits, shifted by the axis), and its block
- * (the floor of c / 2^per_axis, an arithmetic shift) times a large odd constant
- * of the axis (Teschner et al.'s spatial hash); the class's part is its own such
- * product. key = (x | y | z Morton bits) ^ lowbias32(x ^ y ^ z blocks ^ class part).
+ * coordinate's once for all the cells it visits: the coordinate's low bits (x's
+ * as they are, y's and z's spread to every other bit by spread_bits2 and
+ * shifted above x's), and its block (the floor of c / 2^per_axis, an arithmetic
+ * shift) times a large odd constant of the axis (Teschner et al.'s spatial
+ * hash); the class's part is its own such product.
+ * key = (x bits | y, z Morton bits) ^ (lowbias32(x ^ y ^ z blocks ^ class part) << per_axis).
  * The coordinates are offset first (cell_offset), so that block boundaries do
  * not fall on the planes scenes are built on (a floor at y = 0 lay on one, and
  * the filter's queries there visited cells of two blocks, whose keys it must

@@ -8,9 +8,9 @@
  * equal light-sample visibility, and the same grid level (cell_keys.cl). The
  * centre tuple always counts, so the average is never empty; a non-finite c_j
  * of a neighbour is left out (the centre's own is kept and counted by accumulate).
- * Reads: the tuples' fields and values in cell order (tuples.cl), the cell
- * ranges. Writes, in cell order: c-bar_i and the number of tuples averaged;
- * filter_max_count then finds the batch's largest count.
+ * Reads: the tuples' fields and values in cell order (tuples.cl), the cells'
+ * starts (cell_ranges.cl). Writes, in cell order: c-bar_i and the number of
+ * tuples averaged; filter_max_count then finds the batch's largest count.
  * Neighbour cells whose keys collide are visited once. */
 
 #pragma OPENCL FP_CONTRACT OFF
@@ -60,12 +60,19 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
 #define filter_lane_isum PSF_CAT(filter_isum, PSF_FILTER_LANES)
 
 /* sorted: the PSF_SORTED_* fields of the tuples in cell order, `stride` floats
- * apart; values and filtered: r, g, b arrays `stride` apart. */
-__kernel void filter(FilterParams p, uint stride, __global const uint* valid, __global const float* sorted,
-                     __global const float* values, __global const uint2* ranges, __global float* filtered,
-                     __global uint* counts) {
-  uint i = get_global_id(0);
-  if (i >= *valid) return; /* tuples with a vertex come first in cell order (cell_ranges.cl) */
+ * apart; values and filtered: r, g, b arrays `stride` apart; starts: where each
+ * key's tuples start in cell order (2^key_bits + 1 entries). queries: the
+ * consecutive tuples (in cell order) each work-item averages, 1 (GPUs) or
+ * PSF_FILTER_QUERIES (CPUs). Consecutive tuples mostly share a cell, and a
+ * work-item keeps the last cell's key parts for the next query of the same cell
+ * and class. */
+__kernel void filter(FilterParams p, uint stride, uint queries, __global const uint* valid,
+                     __global const float* sorted, __global const float* values, __global const uint* starts,
+                     __global float* filtered, __global uint* counts) {
+  const uint nvalid = *valid; /* tuples with a vertex come first in cell order (cell_ranges.cl) */
+  const uint i0 = get_global_id(0) * queries;
+  if (i0 >= nvalid) return;
+  const uint i1 = min(nvalid, i0 + queries);
   __global const float* xs = sorted + PSF_SORTED_X * stride;
   __global const float* ys = sorted + PSF_SORTED_Y * stride;
   __global const float* zs = sorted + PSF_SORTED_Z * stride;
@@ -79,98 +86,112 @@ __kernel void filter(FilterParams p, uint stride, __global const uint* valid, __
   __global const float* vr = values;
   __global const float* vg = values + stride;
   __global const float* vb = values + 2 * stride;
-  float r = sorted[PSF_SORTED_R * stride + i];
-  float3 x = (float3)(xs[i], ys[i], zs[i]);
-  float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
-  float3 ai = (float3)(ars[i], ags[i], abs_[i]);
-  /* tag = 4 level + 2 visibility + finite: a neighbour must match the centre's
-   * level and visibility and have a finite c_j (a NaN/Inf never spreads; the
-   * centre's own always counts). Finiteness is that of the values gathered:
-   * later iterations' averages are finite wherever those were (barring a sum
-   * that overflows). */
-  int tag = tags[i] | 1;
-  int level = tag >> 2;
-  float size = cell_size(level, p.cells27);
-  int3 c = cell_of(x, size);
-  /* The cells that can hold points within r: c, and along each axis the
-   * neighbour across a face nearer to x than r (with a margin for rounding:
-   * visiting a cell too many never changes the result). Cells of size >= r (27)
-   * or >= 2r (8) make that at most 3 or 2 cells per axis. */
-  float3 below = x - convert_float3(c) * size;             /* distance to the lower face */
-  float3 above = convert_float3(c + (int3)(1)) * size - x; /* to the upper face */
-  float reach = r * 1.0001f;
-  int3 lo = c - (int3)(below.x < reach ? 1 : 0, below.y < reach ? 1 : 0, below.z < reach ? 1 : 0);
-  int3 hi = c + (int3)(above.x < reach ? 1 : 0, above.y < reach ? 1 : 0, above.z < reach ? 1 : 0);
-  float r2 = r * r, tol2 = p.albedo_tol * p.albedo_tol;
-  floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
-  intL taken = (intL)(0);
-  /* The keys' parts of the (at most 3) coordinates along each axis, computed
-   * once (cell_keys.cl). Cells of one block have distinct keys where a key has
-   * at least 2 bits per axis; cells of different blocks (or of tiny batches'
-   * keys) may share one, and only then are repeats looked for. */
   const uint per_axis = cell_key_bits_per_axis(p.key_bits);
+  const float r2_tol = p.albedo_tol * p.albedo_tol;
+  /* The cached cell: its coordinates and class, and the keys' parts of its
+   * coordinates -1, 0, +1 along each axis (cell_keys.cl). */
+  int3 cc = (int3)(0);
+  int cclass = 0;
+  bool cached = false;
   uint mx[3], my[3], mz[3], bx[3], by[3], bz[3];
-  for (int k = 0; k < 3; ++k) {
-    mx[k] = cell_morton_part(lo.x + k, 0u, per_axis);
-    my[k] = cell_morton_part(lo.y + k, 1u, per_axis);
-    mz[k] = cell_morton_part(lo.z + k, 2u, per_axis);
-    bx[k] = cell_block_part(lo.x + k, 0u, per_axis);
-    by[k] = cell_block_part(lo.y + k, 1u, per_axis);
-    bz[k] = cell_block_part(lo.z + k, 2u, per_axis) ^ cell_class_part(tag_key_class(tag));
-  }
-  const bool one_block = bx[0] == bx[hi.x - lo.x] && by[0] == by[hi.y - lo.y] && bz[0] == bz[hi.z - lo.z];
-  const bool repeats = per_axis < 2u || !one_block;
-  const uint hash0 = psf_hash(bx[0] ^ by[0] ^ bz[0]); /* every cell's, where one_block */
-  uint seen[27];
-  uint nseen = 0u;
-  for (int kz = 0; kz <= hi.z - lo.z; ++kz)
-    for (int ky = 0; ky <= hi.y - lo.y; ++ky)
-      for (int kx = 0; kx <= hi.x - lo.x; ++kx) {
-        uint morton = mx[kx] | my[ky] | mz[kz];
-        uint key = one_block ? (morton ^ hash0) & ((1u << p.key_bits) - 1u)
-                             : cell_key_of_parts(morton, bx[kx] ^ by[ky] ^ bz[kz], p.key_bits);
-        uint2 range = ranges[key];
-        if (range.x >= range.y) continue;
-        if (repeats) {
-          bool dup = false;
-          for (uint s = 0u; s < nseen; ++s) dup = dup || seen[s] == key;
-          if (dup) continue;
-          seen[nseen++] = key;
-        }
-        for (uint j = range.x; j < range.y; j += PSF_FILTER_LANES) {
-          intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;
-          floatL dx = vloadL(0, xs + j) - (floatL)(x.x);
-          floatL dy = vloadL(0, ys + j) - (floatL)(x.y);
-          floatL dz = vloadL(0, zs + j) - (floatL)(x.z);
-          intL in = dx * dx + dy * dy + dz * dz < (floatL)(r2);
-#if PSF_FILTER_SKIP
-          if (!any(in | (idx == (intL)((int)i)))) continue;
-#endif
-          floatL dot = vloadL(0, nxs + j) * ni.x + vloadL(0, nys + j) * ni.y + vloadL(0, nzs + j) * ni.z;
-          floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);
-          floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);
-          floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);
-          intL similar = (vloadL(0, tags + j) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
-                         (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));
-          floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
-          intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar));
-          sr += select((floatL)(0.0f), cr, take);
-          sg += select((floatL)(0.0f), cg, take);
-          sb += select((floatL)(0.0f), cb, take);
-          taken -= take; /* take is -1 where true */
-        }
+  for (uint i = i0; i < i1; ++i) {
+    float r = sorted[PSF_SORTED_R * stride + i];
+    float3 x = (float3)(xs[i], ys[i], zs[i]);
+    float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
+    float3 ai = (float3)(ars[i], ags[i], abs_[i]);
+    /* tag = 4 level + 2 visibility + finite: a neighbour must match the centre's
+     * level and visibility and have a finite c_j (a NaN/Inf never spreads; the
+     * centre's own always counts). Finiteness is that of the values gathered:
+     * later iterations' averages are finite wherever those were (barring a sum
+     * that overflows). */
+    int tag = tags[i] | 1;
+    int level = tag >> 2;
+    float size = cell_size(level, p.cells27);
+    int3 c = cell_of(x, size);
+    /* The cells that can hold points within r: c, and along each axis the
+     * neighbour across a face nearer to x than r (with a margin for rounding:
+     * visiting a cell too many never changes the result). Cells of size >= r (27)
+     * or >= 2r (8) make that at most 3 or 2 cells per axis. lo and hi are
+     * offsets from c - 1, in [0, 2]. */
+    float3 below = x - convert_float3(c) * size;             /* distance to the lower face */
+    float3 above = convert_float3(c + (int3)(1)) * size - x; /* to the upper face */
+    float reach = r * 1.0001f;
+    int3 lo = (int3)(below.x < reach ? 0 : 1, below.y < reach ? 0 : 1, below.z < reach ? 0 : 1);
+    int3 hi = (int3)(above.x < reach ? 2 : 1, above.y < reach ? 2 : 1, above.z < reach ? 2 : 1);
+    int key_class = tag_key_class(tag);
+    if (!cached || any(c != cc) || key_class != cclass) {
+      cached = true;
+      cc = c;
+      cclass = key_class;
+      for (int k = 0; k < 3; ++k) {
+        mx[k] = cell_morton_part(c.x - 1 + k, 0u, per_axis);
+        my[k] = cell_morton_part(c.y - 1 + k, 1u, per_axis);
+        mz[k] = cell_morton_part(c.z - 1 + k, 2u, per_axis);
+        bx[k] = cell_block_part(c.x - 1 + k, 0u, per_axis);
+        by[k] = cell_block_part(c.y - 1 + k, 1u, per_axis);
+        bz[k] = cell_block_part(c.z - 1 + k, 2u, per_axis) ^ cell_class_part(key_class);
       }
-  uint n = (uint)filter_lane_isum(taken);
-  float3 sum = (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb));
-  if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
-    sum = (float3)(vr[i], vg[i], vb[i]);
-    n = 1u;
+    }
+    float r2 = r * r;
+    floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
+    intL taken = (intL)(0);
+    /* Cells of one block have distinct keys where a key has at least 2 bits per
+     * axis, and the cells of a row along x have consecutive keys (cell_keys.cl):
+     * their tuples are one run in cell order, scanned at once from the first
+     * nonempty cell's start to the last one's end. Cells of different blocks
+     * (or of tiny batches' keys) may share a key; a query whose cells span two
+     * blocks scans cell by cell and looks for repeats. */
+    const bool one_block = per_axis >= 2u && bx[lo.x] == bx[hi.x] && by[lo.y] == by[hi.y] && bz[lo.z] == bz[hi.z];
+    uint seen[27];
+    uint nseen = 0u;
+    for (int kz = lo.z; kz <= hi.z; ++kz)
+      for (int ky = lo.y; ky <= hi.y; ++ky)
+        for (int kx = lo.x; kx <= hi.x; kx = one_block ? hi.x + 1 : kx + 1) {
+          uint key = cell_key_of_parts(mx[kx] | my[ky] | mz[kz], bx[kx] ^ by[ky] ^ bz[kz], per_axis, p.key_bits);
+          uint last = one_block ? key + (uint)(hi.x - kx) : key; /* the row's last cell */
+          uint2 range = (uint2)(starts[key], starts[last + 1u]);
+          if (range.x >= range.y) continue;
+          if (!one_block) {
+            bool dup = false;
+            for (uint t = 0u; t < nseen; ++t) dup = dup || seen[t] == key;
+            if (dup) continue;
+            seen[nseen++] = key;
+          }
+          for (uint j = range.x; j < range.y; j += PSF_FILTER_LANES) {
+            intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;
+            floatL dx = vloadL(0, xs + j) - (floatL)(x.x);
+            floatL dy = vloadL(0, ys + j) - (floatL)(x.y);
+            floatL dz = vloadL(0, zs + j) - (floatL)(x.z);
+            intL in = dx * dx + dy * dy + dz * dz < (floatL)(r2);
+#if PSF_FILTER_SKIP
+            if (!any(in | (idx == (intL)((int)i)))) continue;
+#endif
+            floatL dot = vloadL(0, nxs + j) * ni.x + vloadL(0, nys + j) * ni.y + vloadL(0, nzs + j) * ni.z;
+            floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);
+            floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);
+            floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);
+            intL similar = (vloadL(0, tags + j) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
+                           (dar * dar + dag * dag + dab * dab <= (floatL)(r2_tol));
+            floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
+            intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar));
+            sr += select((floatL)(0.0f), cr, take);
+            sg += select((floatL)(0.0f), cg, take);
+            sb += select((floatL)(0.0f), cb, take);
+            taken -= take; /* take is -1 where true */
+          }
+        }
+    uint n = (uint)filter_lane_isum(taken);
+    float3 sum = (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb));
+    if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
+      sum = (float3)(vr[i], vg[i], vb[i]);
+      n = 1u;
+    }
+    float3 mean = sum / (float)n;
+    filtered[i] = mean.x;
+    filtered[stride + i] = mean.y;
+    filtered[2 * stride + i] = mean.z;
+    counts[i] = n;
   }
-  float3 mean = sum / (float)n;
-  filtered[i] = mean.x;
-  filtered[stride + i] = mean.y;
-  filtered[2 * stride + i] = mean.z;
-  counts[i] = n;
 }
 
 /* The largest count of the n tuples into *max_count (zero before the launch):

@@ -476,4 +476,7 @@ typedef struct {
 /* Tuples per work-item of gather_tuples (tuples.cl). */
 #define PSF_GATHER_LANES 8u
 
+/* Queries per work-item of filter (filter.cl) on CPUs. */
+#define PSF_FILTER_QUERIES 16u
+
 #endif /* PSF_SHARED_H */

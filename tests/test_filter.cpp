@@ -101,8 +101,9 @@ DeviceResult run_with(psf::Runtime& rt, psf::PathSpaceFilter& filter, const std:
 }
 
 DeviceResult run_filter(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, FilterParams p,
-                        int iterations, psf::Runtime& rt = psf::test::runtime(), uint32_t gather_lanes = 0) {
-  psf::PathSpaceFilter filter(rt, uint32_t(v.size()), gather_lanes);
+                        int iterations, psf::Runtime& rt = psf::test::runtime(), uint32_t gather_lanes = 0,
+                        uint32_t filter_queries = 0) {
+  psf::PathSpaceFilter filter(rt, uint32_t(v.size()), gather_lanes, filter_queries);
   return run_with(rt, filter, v, c, p, iterations);
 }
 
@@ -240,7 +241,7 @@ TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]")
   psf::PathSpaceFilter filter(rt, n);
   cl::Buffer vb = rt.upload(v), cb = rt.upload(random_values(n, 4));
   cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4)), counts = rt.buffer(CL_MEM_READ_WRITE, n * 4);
-  // A batch of other tuples and radii first: the ranges it wrote must not outlive it.
+  // A batch of other tuples and radii first: the starts it wrote must not outlive it.
   p.count = n;
   p.footprint = 0.03f;
   cl::Buffer other = rt.upload(random_tuples(n, 9, 1.0f));
@@ -250,29 +251,35 @@ TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]")
   uint32_t bits = psf::filter_key_bits(n), cells = 1u << bits;
   auto keys = rt.download<uint32_t>(filter.sorted_keys(), n);
   auto order = rt.download<uint32_t>(filter.sorted_indices(), n);
-  auto ranges = rt.download<cl_uint2>(filter.cell_ranges(), cells);
-  std::vector<uint32_t> start(cells), end(cells);
-  for (uint32_t k = 0; k < cells; ++k) {
-    start[k] = ranges[k].s[0];
-    end[k] = ranges[k].s[1];
-  }
+  auto starts = rt.download<uint32_t>(filter.cell_starts(), cells + 1);
   CHECK(std::is_sorted(keys.begin(), keys.end()));
   std::vector<uint32_t> perm = order;
   std::sort(perm.begin(), perm.end());
   for (uint32_t i = 0; i < n; ++i) REQUIRE(perm[i] == i);  // a permutation
-  // Plain scan: every key's first and one-past-last position; absent keys empty.
-  std::vector<uint32_t> ref_start(cells, 0), ref_end(cells, 0);
+  // Plain scan: every present key's first and one-past-last position; an absent
+  // key's start is where it would be inserted, its end the same (empty).
+  std::vector<uint32_t> ref_start(cells + 1, n), ref_end(cells, 0);
+  std::vector<bool> present(cells, false);
   size_t invalid = 0;
-  for (uint32_t i = 0; i < n; ++i) {
-    if (keys[i] >= cells) {
-      ++invalid;
-      continue;
-    }
-    if (i == 0 || keys[i - 1] != keys[i]) ref_start[keys[i]] = i;
-    ref_end[keys[i]] = i + 1;
+  for (uint32_t i = n; i-- > 0;) {
+    const uint32_t k = std::min(keys[i], cells);
+    if (k == cells) ++invalid;
+    for (uint32_t e = i == 0 ? 0 : std::min(keys[i - 1], cells) + 1; e <= k; ++e) ref_start[e] = i;
   }
-  CHECK(start == ref_start);
-  CHECK(end == ref_end);
+  for (uint32_t i = 0; i < n; ++i)
+    if (keys[i] < cells) {
+      present[keys[i]] = true;
+      ref_end[keys[i]] = i + 1;
+    }
+  size_t wrong = 0, empty_wrong = 0;
+  for (uint32_t k = 0; k < cells; ++k) {
+    wrong += starts[k] != ref_start[k];
+    if (present[k]) wrong += starts[k + 1] != ref_end[k];
+    else empty_wrong += starts[k + 1] != starts[k];
+  }
+  CHECK(wrong == 0);
+  CHECK(empty_wrong == 0);
+  CHECK(starts[cells] == n - invalid);
   size_t expect_invalid = std::count_if(v.begin(), v.end(), [](auto& t) { return t.albedo.s[3] == 0.0f; });
   CHECK(invalid == expect_invalid);
   CHECK(rt.download<uint32_t>(filter.valid_count(), 1)[0] == n - invalid);
@@ -303,15 +310,11 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
 }
 
 // The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
-// plus an offset, its low bits in Morton order and its block (the rest) times a
-// constant; the blocks' and the class's (2 level + light-sample visibility)
-// products XORed and hashed (lowbias32) into the Morton code.
+// plus an offset, split into its low bits and its block (the rest); the low bits
+// of x as they are, those of y and z interleaved above them; the blocks times a
+// constant per axis, XORed with the class's (2 level + light-sample visibility)
+// product, hashed (lowbias32) and XORed into the bits above x's.
 uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
-  auto spread = [](uint32_t v) {
-    uint32_t out = 0;
-    for (int b = 0; b < 10; ++b) out |= ((v >> b) & 1u) << (3 * b);
-    return out;
-  };
   auto lowbias32 = [](uint32_t x) {
     x ^= x >> 16;
     x *= 0x7feb352du;
@@ -323,13 +326,16 @@ uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
   const int offset[3] = {1237, 2741, 3593};
   const uint32_t prime[3] = {73856093u, 19349663u, 83492791u};
   const uint32_t per_axis = std::min(key_bits / 3, 10u);
-  uint32_t morton = 0, blocks = uint32_t(key_class) * 2654435761u;
+  uint32_t low[3], blocks = uint32_t(key_class) * 2654435761u;
   for (int a = 0; a < 3; ++a) {
     int o = c[a] + offset[a];
-    morton |= spread(uint32_t(o) & ((1u << per_axis) - 1u)) << a;
+    low[a] = uint32_t(o) & ((1u << per_axis) - 1u);
     blocks ^= uint32_t(o >> per_axis) * prime[a];  // arithmetic shift: the floor
   }
-  return (morton ^ lowbias32(blocks)) & ((1u << key_bits) - 1u);
+  uint32_t key = low[0];
+  for (uint32_t b = 0; b < per_axis; ++b)
+    key |= (((low[1] >> b) & 1u) << (per_axis + 2 * b)) | (((low[2] >> b) & 1u) << (per_axis + 2 * b + 1));
+  return (key ^ (lowbias32(blocks) << per_axis)) & ((1u << key_bits) - 1u);
 }
 
 TEST_CASE("Filter: a key shared by two of a query's cells (of different key blocks) is visited once", "[filter]") {
@@ -337,10 +343,12 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
   // cells of neighbouring blocks can share one by chance, and the filter must
   // then scan it once. With 300 tuples (keys of 10 bits: blocks of 8 cells per
   // axis, 1024 keys) and a global radius of 0.02 (cells of 1/16), the key
-  // written again here finds two cells side by side, in different blocks, with
-  // one key; the tuples lie on a plane through both, within two cells of their
-  // common face, so that the queries near it visit both cells. Scanning the key
-  // twice would count their own cell's tuples (the centre among them) twice.
+  // written again here finds two cells side by side along y, in different
+  // blocks, with one key (neighbours along x never share one: x's low bits are
+  // the key's); the tuples lie on a plane through both, within two cells of
+  // their common face, so that the queries near it visit both cells. Scanning
+  // the key twice would count their own cell's tuples (the centre among them)
+  // twice.
   FilterParams p = default_params();
   p.r0 = 0.02f;
   const uint32_t n = 300, key_bits = psf::filter_key_bits(n);
@@ -352,22 +360,22 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
   for (int z = 0; z < 64 && !found; ++z)
     for (int y = -64; y < 64 && !found; ++y)
       for (int x = -64; x < 64 && !found; ++x) {
-        const int a[3] = {x, y, z}, b[3] = {x + 1, y, z};
+        const int a[3] = {x, y, z}, b[3] = {x, y + 1, z};
         // The tuples below see their light (normal.w = 1): class 2 level + 1.
-        if ((x + 1 + 1237) % 8 == 0 &&
+        if ((y + 1 + 2741) % 8 == 0 &&
             host_cell_key(2 * level + 1, a, key_bits) == host_cell_key(2 * level + 1, b, key_bits)) {
           std::copy(a, a + 3, pair);
           found = true;
         }
       }
   REQUIRE(found);
-  INFO("cells (" << pair[0] << ", " << pair[1] << ", " << pair[2] << ") and the next along x share a key");
+  INFO("cells (" << pair[0] << ", " << pair[1] << ", " << pair[2] << ") and the next along y share a key");
   std::mt19937 rng(17);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::vector<PathVertex> v(n);
-  const float face = float(pair[0] + 1) * size;
+  const float face = float(pair[1] + 1) * size;
   for (auto& t : v) {
-    t.position = {{face + (u(rng) - 0.5f) * 4.0f * size, (float(pair[1]) + u(rng)) * size,
+    t.position = {{(float(pair[0]) + u(rng)) * size, face + (u(rng) - 0.5f) * 4.0f * size,
                    (float(pair[2]) + 0.5f) * size, 1.0f}};
     t.normal = {{0, 0, 1, 1}};
     t.albedo = {{0.5f, 0.5f, 0.5f, 1}};
@@ -384,9 +392,9 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
   auto order = rt.download<uint32_t>(filter.sorted_indices(), n);
   std::set<uint32_t> left, right;
   for (uint32_t k = 0; k < n; ++k) {
-    const float x = v[order[k]].position.s[0];  // the two cells: within one cell of the face
-    if (x >= face - size && x < face) left.insert(keys[k]);
-    if (x >= face && x < face + size) right.insert(keys[k]);
+    const float y = v[order[k]].position.s[1];  // the two cells: within one cell of the face
+    if (y >= face - size && y < face) left.insert(keys[k]);
+    if (y >= face && y < face + size) right.insert(keys[k]);
   }
   CHECK(left.size() == 1);
   CHECK(left == right);
@@ -480,7 +488,7 @@ TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force
       auto c = random_values(n, 32 + n);
       for (size_t i = 0; i < c.size(); i += 53) c[i].s[2] = std::nanf("");
       p.footprint = footprint;
-      auto dev = run_filter(v, c, p, 2, rt, gpu ? PSF_GATHER_LANES : 1);
+      auto dev = run_filter(v, c, p, 2, rt, gpu ? PSF_GATHER_LANES : 1, gpu ? PSF_FILTER_QUERIES : 1);
       auto ref = brute_force(v, c, p, 2);
       size_t wrong = 0;
       for (size_t i = 0; i < c.size(); ++i) {
