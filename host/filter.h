@@ -26,7 +26,7 @@ struct FilterOptions {
   int iterations = 1;             // averaging passes, each over the previous result (--iterations)
   float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
   float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)
-  bool cells27 = false;           // cells of size r searched 3x3x3 instead of 2r searched 2x2x2
+  bool cells27 = false;           // cells of size r (3x3 rows along x searched) instead of 2r (2x2 rows)
   // > 0: similar vertices agree on whether one hemisphere ray of this length (scene
   // units) hits something (kernels/visibility.cl); 0: on their light sample's
   // visibility; kVisibilityRayAuto: by the scene (Renderer::visibility_ray).

@@ -11,9 +11,10 @@
  * FilterParams.stretch times the vertex's 1 / sqrt(cos theta_i), so that the
  * ball holds the area of surface those pixels see (psf_shared.h). Vertices are
  * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
- * searched) or 2^(l+1) (8 cells searched), so a cell is never smaller than the
- * query radius; only vertices of one level are neighbours. Keys map (class,
- * cell) into [0, 2^key_bits) in Morton order (cell_key), the class being 2 level
+ * searched) or 2^(l+1) (8 cells searched) along y and z, a quarter of that along
+ * x, so a cell is never smaller than the query radius along y and z; only
+ * vertices of one level are neighbours. Keys map (class, cell) into
+ * [0, 2^key_bits) in rows along x (cell_key), the class being 2 level
  * + light-sample visibility: vertices that disagree on either are never
  * neighbours, so each class's vertices get cells of their own and a query scans
  * only its own class's (Sponza, lit by the default sky, whose vertices compare
@@ -44,7 +45,7 @@
   inline float##S pow2i##S(int##S e) {                                                                             \
     return e > 127 ? (float##S)(INFINITY) : e < -126 ? (float##S)(0.0f) : as_float##S((e + 127) << 23);          \
   }                                                                                                                \
-  /* Edge length of the cells of a level. */                                                                       \
+  /* Edge length of the cells of a level along y and z; along x it is a quarter of that (PSF_CELL_X_SPLIT). */      \
   inline float##S cell_size##S(int##S level, uint cells27) { return pow2i##S(level + (cells27 ? 0 : 1)); }         \
   /* A coordinate's cell along one axis; inv = 1 / size, exact: size is a power of two. */                         \
   inline int##S cell_coord##S(float##S x, float##S inv) { return convert_int##S(floor(x * inv)); }                 \
@@ -60,16 +61,17 @@
   inline int##S cell_offset##S(int##S c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); } \
   /* x's low bits as they are, y's and z's in Morton order above them. */                                           \
   inline uint##S cell_morton_part##S(int##S c, uint axis, uint per_axis) {                                         \
-    uint##S low = as_uint##S(cell_offset##S(c, axis)) & ((1u << per_axis) - 1u);                                  \
-    return axis == 0u ? low : spread_bits2##S(low) << (per_axis + axis - 1u);                                     \
+    const uint bits = cell_axis_bits(axis, per_axis);                                                              \
+    uint##S low = as_uint##S(cell_offset##S(c, axis)) & ((1u << bits) - 1u);                                      \
+    return axis == 0u ? low : spread_bits2##S(low) << (cell_axis_bits(0u, per_axis) + axis - 1u);                 \
   }                                                                                                                \
   inline uint##S cell_block_part##S(int##S c, uint axis, uint per_axis) {                                          \
     const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;                               \
-    return as_uint##S(cell_offset##S(c, axis) >> (int)per_axis) * prime;                                          \
+    return as_uint##S(cell_offset##S(c, axis) >> (int)cell_axis_bits(axis, per_axis)) * prime;                    \
   }                                                                                                                \
   inline uint##S cell_class_part##S(int##S key_class) { return as_uint##S(key_class) * 2654435761u; }             \
   inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint per_axis, uint key_bits) {             \
-    return (morton ^ (psf_hash##S(blocks) << per_axis)) & ((1u << key_bits) - 1u);                                \
+    return (morton + psf_hash##S(blocks)) & ((1u << key_bits) - 1u);                                              \
   }                                                                                                                \
   inline uint##S cell_key##S(int##S key_class, int##S cx, int##S cy, int##S cz, uint key_bits) {                  \
     uint per_axis = cell_key_bits_per_axis(key_bits);                                                             \
@@ -88,41 +90,52 @@
   }                                                                                                                \
   inline int##S vertex_level##S(float##S r) { return grid_level##S(fmax(r, 1e-30f)); }
 
-/* The key of a cell: within a block of 2^per_axis cells per axis (as many bits
- * per axis as the key has for), the low bits of its x coordinate, and above them
- * the Morton code of the low bits of y and z; the bits above x's XORed with a
- * hash of the class and of the block. So the cells of a row along x within a
- * block have consecutive keys, and their tuples are one run in sorted order,
- * which the filter scans at once (its 2 or 3 cells per row); rows near each
- * other in y and z are near each other in memory, so the filter finds their
- * tuples in cache. The XOR leaves x's bits alone and is one constant inside a
- * block, so it keeps both properties. Without the block's hash, cells a period
- * apart shared a key: in Sponza (about 240 cells across at its 2^20 tuples'
- * levels, a period of 128) a key held 38 tuples where a cell holds 26, and the
- * filter scanned the others' too. Keys may still collide by chance (a table of 2
- * keys per tuple); filter.cl's distance and level tests keep such cells apart,
- * and a query whose cells span two blocks visits them cell by cell and a key
- * shared by two of them once.
+/* The key of a cell. Cells are 4 times narrower along x than along y and z
+ * (PSF_CELL_X_SPLIT), and keys come in blocks of 2^(per_axis + 2) x 2^(per_axis
+ * - 1) x 2^(per_axis - 1) cells (per_axis: the key's bits / 3). Within a block a
+ * cell's key is the low bits of its x coordinate with the Morton code of y's and
+ * z's above them, plus a hash of the class and of the block (modulo the table's
+ * size). So the cells of a row along x within a block have consecutive keys
+ * (wrapping at most once at the table's end), and their tuples are one run in
+ * sorted order, which the filter scans at once: the row is cut to the ball's
+ * reach along x at a quarter of a cell (Sponza's queries scan 6.7 vectors of 8
+ * candidates where whole cells of 2r gave 11.6), and rows near each other in y
+ * and z are near each other in memory, where the filter finds them in cache.
+ * The hash is added, not XORed into the bits above x's: cells on a plane of
+ * constant x share x's low bits, and would have been confined to 1/2^(per_axis +
+ * 2) of the table (the Cornell box's side walls: 75 cells per key). Without the
+ * block's hash, cells a period apart shared a key: in Sponza (about 240 cells
+ * across at its 2^20 tuples' levels, a period of 128) a key held 38 tuples where
+ * a cell holds 26, and the filter scanned the others' too. Keys may still
+ * collide by chance (a table of 2 keys per tuple); filter.cl's distance and
+ * level tests keep such cells apart, and a query whose cells span two blocks
+ * visits them cell by cell, taking from each only the tuples inside it.
  *
  * A key is built from per-axis parts, so that the filter computes each
  * coordinate's once for all the cells it visits: the coordinate's low bits (x's
  * as they are, y's and z's spread to every other bit by spread_bits2 and
- * shifted above x's), and its block (the floor of c / 2^per_axis, an arithmetic
- * shift) times a large odd constant of the axis (Teschner et al.'s spatial
- * hash); the class's part is its own such product.
- * key = (x bits | y, z Morton bits) ^ (lowbias32(x ^ y ^ z blocks ^ class part) << per_axis).
+ * shifted above x's), and its block (an arithmetic shift: the floor) times a
+ * large odd constant of the axis (Teschner et al.'s spatial hash); the class's
+ * part is its own such product.
+ * key = (x bits | y, z Morton bits) + lowbias32(x ^ y ^ z blocks ^ class part).
  * The coordinates are offset first (cell_offset), so that block boundaries do
  * not fall on the planes scenes are built on (a floor at y = 0 lay on one, and
- * the filter's queries there visited cells of two blocks, whose keys it must
- * compare). */
+ * the filter's queries there visited cells of two blocks cell by cell). */
 inline uint cell_key_bits_per_axis(uint key_bits) { return min(key_bits / 3u, 10u); }
+
+/* Cells are PSF_CELL_X_SPLIT times narrower along x than along y and z (a power
+ * of two), and x's part of a key has log2(PSF_CELL_X_SPLIT) = 2 bits more than
+ * the key's per-axis share, y's and z's one bit less each. */
+#define PSF_CELL_X_SPLIT 4.0f
+inline uint cell_axis_bits(uint axis, uint per_axis) { return axis == 0u ? per_axis + 2u : max(per_axis, 1u) - 1u; }
 
 PSF_DEFINE_CELL_KEY()
 PSF_DEFINE_CELL_KEY(8)
 
+/* The cell of x in the grid whose cells are `size` along y and z (cell_size). */
 inline int3 cell_of(float3 x, float size) {
   float inv = 1.0f / size;
-  return (int3)(cell_coord(x.x, inv), cell_coord(x.y, inv), cell_coord(x.z, inv));
+  return (int3)(cell_coord(x.x, inv * PSF_CELL_X_SPLIT), cell_coord(x.y, inv), cell_coord(x.z, inv));
 }
 
 /* The filter's tag of a vertex with radius r > 0: 4 level + 2 light-sample
@@ -181,7 +194,8 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
   int8 level = vertex_level8(r);
   float8 inv = 1.0f / cell_size8(level, p.cells27);
   int8 key_class = 2 * level + (v != 0.0f ? 1 : 0); /* tag_key_class */
-  uint8 key = cell_key8(key_class, cell_coord8(x, inv), cell_coord8(y, inv), cell_coord8(z, inv), p.key_bits);
+  uint8 key = cell_key8(key_class, cell_coord8(x, inv * PSF_CELL_X_SPLIT), cell_coord8(y, inv), cell_coord8(z, inv),
+                        p.key_bits);
   key = r == 0.0f ? (uint8)(1u << p.key_bits) : key;
   uint8 index = (uint8)(i0) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
   if (i0 + PSF_GATHER_LANES - 1u <= last) {

@@ -36,6 +36,7 @@
 #define floatL PSF_CAT(float, PSF_FILTER_LANES)
 #define intL PSF_CAT(int, PSF_FILTER_LANES)
 #define vloadL PSF_CAT(vload, PSF_FILTER_LANES)
+#define convert_intL PSF_CAT(convert_int, PSF_FILTER_LANES)
 #if PSF_FILTER_LANES == 2
 #define PSF_FILTER_LANE_INDEX ((int2)(0, 1))
 #elif PSF_FILTER_LANES == 4
@@ -59,13 +60,44 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
 #define filter_lane_sum PSF_CAT(filter_sum, PSF_FILTER_LANES)
 #define filter_lane_isum PSF_CAT(filter_isum, PSF_FILTER_LANES)
 
+/* Tests the candidates [range.x, range.y) against query i (the centre x, ni, ai,
+ * tag, r2) PSF_FILTER_LANES at a time and adds those taken to sr, sg, sb and
+ * taken. MEMBER: an intL expression of the candidates' index j, true for those
+ * that count in this run (the cell-by-cell scans take only their cell's). */
+#define PSF_FILTER_SCAN(range, MEMBER)                                                                            \
+  for (uint j = (range).x; j < (range).y; j += PSF_FILTER_LANES) {                                                \
+    intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;                                                             \
+    floatL dx = vloadL(0, xs + j) - (floatL)(x.x);                                                                 \
+    floatL dy = vloadL(0, ys + j) - (floatL)(x.y);                                                                 \
+    floatL dz = vloadL(0, zs + j) - (floatL)(x.z);                                                                 \
+    intL in = dx * dx + dy * dy + dz * dz < (floatL)(r2);                                                          \
+    PSF_FILTER_SKIP_TEST                                                                                           \
+    floatL dot = vloadL(0, nxs + j) * ni.x + vloadL(0, nys + j) * ni.y + vloadL(0, nzs + j) * ni.z;              \
+    floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);                                                              \
+    floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);                                                              \
+    floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);                                                             \
+    intL similar = (vloadL(0, tags + j) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &                        \
+                   (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));                                          \
+    floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);                                 \
+    intL take = (idx < (intL)((int)(range).y)) & ((idx == (intL)((int)i)) | (in & similar)) & (MEMBER);            \
+    sr += select((floatL)(0.0f), cr, take);                                                                        \
+    sg += select((floatL)(0.0f), cg, take);                                                                        \
+    sb += select((floatL)(0.0f), cb, take);                                                                        \
+    taken -= take; /* take is -1 where true */                                                                     \
+  }
+#if PSF_FILTER_SKIP
+#define PSF_FILTER_SKIP_TEST \
+  if (!any(in | (idx == (intL)((int)i)))) continue;
+#else
+#define PSF_FILTER_SKIP_TEST
+#endif
+
 /* sorted: the PSF_SORTED_* fields of the tuples in cell order, `stride` floats
  * apart; values and filtered: r, g, b arrays `stride` apart; starts: where each
  * key's tuples start in cell order (2^key_bits + 1 entries). queries: the
  * consecutive tuples (in cell order) each work-item averages, 1 (GPUs) or
- * PSF_FILTER_QUERIES (CPUs). Consecutive tuples mostly share a cell, and a
- * work-item keeps the last cell's key parts for the next query of the same cell
- * and class. */
+ * PSF_FILTER_QUERIES (CPUs); consecutive tuples mostly share a row of cells, and a
+ * work-item keeps the last one's key parts for the next. */
 __kernel void filter(FilterParams p, uint stride, uint queries, __global const uint* valid,
                      __global const float* sorted, __global const float* values, __global const uint* starts,
                      __global float* filtered, __global uint* counts) {
@@ -87,13 +119,12 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
   __global const float* vg = values + stride;
   __global const float* vb = values + 2 * stride;
   const uint per_axis = cell_key_bits_per_axis(p.key_bits);
-  const float r2_tol = p.albedo_tol * p.albedo_tol;
-  /* The cached cell: its coordinates and class, and the keys' parts of its
-   * coordinates -1, 0, +1 along each axis (cell_keys.cl). */
-  int3 cc = (int3)(0);
-  int cclass = 0;
+  const float tol2 = p.albedo_tol * p.albedo_tol;
+  /* The cached row: the y and z coordinates and class of the last query's cell,
+   * and the keys' parts of the coordinates -1, 0, +1 around them (cell_keys.cl). */
+  int cy = 0, cz = 0, cclass = 0;
   bool cached = false;
-  uint mx[3], my[3], mz[3], bx[3], by[3], bz[3];
+  uint my[3], mz[3], by[3], bz[3];
   for (uint i = i0; i < i1; ++i) {
     float r = sorted[PSF_SORTED_R * stride + i];
     float3 x = (float3)(xs[i], ys[i], zs[i]);
@@ -106,80 +137,73 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
      * that overflows). */
     int tag = tags[i] | 1;
     int level = tag >> 2;
-    float size = cell_size(level, p.cells27);
+    float size = cell_size(level, p.cells27), inv = 1.0f / size, inv_x = inv * PSF_CELL_X_SPLIT;
     int3 c = cell_of(x, size);
-    /* The cells that can hold points within r: c, and along each axis the
-     * neighbour across a face nearer to x than r (with a margin for rounding:
-     * visiting a cell too many never changes the result). Cells of size >= r (27)
-     * or >= 2r (8) make that at most 3 or 2 cells per axis. lo and hi are
-     * offsets from c - 1, in [0, 2]. */
-    float3 below = x - convert_float3(c) * size;             /* distance to the lower face */
-    float3 above = convert_float3(c + (int3)(1)) * size - x; /* to the upper face */
+    /* The cells that can hold points within r. Along y and z: c, and the
+     * neighbour across a face nearer to x than r (cells of size >= r (27) or >= 2r
+     * (8) make that at most 3 or 2), as offsets lo_*, hi_* from c - 1. Along x, where
+     * cells are PSF_CELL_X_SPLIT times narrower: from `left` cells below c to
+     * `right` above, as many as the ball reaches. With a margin for rounding:
+     * visiting a cell too many never changes the result. The distances to the
+     * faces are exact (c times a power of two, subtracted from a nearby x). */
+    float3 cell_lo = convert_float3(c) * (float3)(size / PSF_CELL_X_SPLIT, size, size);
+    float3 below = x - cell_lo;                                                               /* to the lower face */
+    float3 above = convert_float3(c + (int3)(1)) * (float3)(size / PSF_CELL_X_SPLIT, size, size) - x; /* upper */
     float reach = r * 1.0001f;
-    int3 lo = (int3)(below.x < reach ? 0 : 1, below.y < reach ? 0 : 1, below.z < reach ? 0 : 1);
-    int3 hi = (int3)(above.x < reach ? 2 : 1, above.y < reach ? 2 : 1, above.z < reach ? 2 : 1);
+    int lo_y = below.y < reach ? 0 : 1, hi_y = above.y < reach ? 2 : 1;
+    int lo_z = below.z < reach ? 0 : 1, hi_z = above.z < reach ? 2 : 1;
+    int left = below.x < reach ? convert_int(floor((reach - below.x) * inv_x)) + 1 : 0;
+    int right = above.x < reach ? convert_int(floor((reach - above.x) * inv_x)) + 1 : 0;
     int key_class = tag_key_class(tag);
-    if (!cached || any(c != cc) || key_class != cclass) {
+    if (!cached || c.y != cy || c.z != cz || key_class != cclass) {
       cached = true;
-      cc = c;
+      cy = c.y;
+      cz = c.z;
       cclass = key_class;
       for (int k = 0; k < 3; ++k) {
-        mx[k] = cell_morton_part(c.x - 1 + k, 0u, per_axis);
         my[k] = cell_morton_part(c.y - 1 + k, 1u, per_axis);
         mz[k] = cell_morton_part(c.z - 1 + k, 2u, per_axis);
-        bx[k] = cell_block_part(c.x - 1 + k, 0u, per_axis);
         by[k] = cell_block_part(c.y - 1 + k, 1u, per_axis);
         bz[k] = cell_block_part(c.z - 1 + k, 2u, per_axis) ^ cell_class_part(key_class);
       }
     }
+    const uint mx_lo = cell_morton_part(c.x - left, 0u, per_axis);
+    const uint bx_lo = cell_block_part(c.x - left, 0u, per_axis);
     float r2 = r * r;
     floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
     intL taken = (intL)(0);
     /* Cells of one block have distinct keys where a key has at least 2 bits per
      * axis, and the cells of a row along x have consecutive keys (cell_keys.cl):
-     * their tuples are one run in cell order, scanned at once from the first
-     * nonempty cell's start to the last one's end. Cells of different blocks
-     * (or of tiny batches' keys) may share a key; a query whose cells span two
-     * blocks scans cell by cell and looks for repeats. */
-    const bool one_block = per_axis >= 2u && bx[lo.x] == bx[hi.x] && by[lo.y] == by[hi.y] && bz[lo.z] == bz[hi.z];
-    uint seen[27];
-    uint nseen = 0u;
-    for (int kz = lo.z; kz <= hi.z; ++kz)
-      for (int ky = lo.y; ky <= hi.y; ++ky)
-        for (int kx = lo.x; kx <= hi.x; kx = one_block ? hi.x + 1 : kx + 1) {
-          uint key = cell_key_of_parts(mx[kx] | my[ky] | mz[kz], bx[kx] ^ by[ky] ^ bz[kz], per_axis, p.key_bits);
-          uint last = one_block ? key + (uint)(hi.x - kx) : key; /* the row's last cell */
-          uint2 range = (uint2)(starts[key], starts[last + 1u]);
-          if (range.x >= range.y) continue;
-          if (!one_block) {
-            bool dup = false;
-            for (uint t = 0u; t < nseen; ++t) dup = dup || seen[t] == key;
-            if (dup) continue;
-            seen[nseen++] = key;
+     * each row's tuples are one run in cell order, from its first cell's start to
+     * its last one's end. A query whose cells span two blocks (whose keys another
+     * of its cells may share) visits them cell by cell instead, and takes from
+     * each only the tuples that lie in it, so that none counts twice. */
+    const bool one_block = per_axis >= 2u && bx_lo == cell_block_part(c.x + right, 0u, per_axis) &&
+                           by[lo_y] == by[hi_y] && bz[lo_z] == bz[hi_z];
+    for (int kz = lo_z; kz <= hi_z; ++kz)
+      for (int ky = lo_y; ky <= hi_y; ++ky) {
+        if (one_block) {
+          /* The row's keys, key .. end - 1, wrap around the table's end at most once. */
+          uint key = cell_key_of_parts(mx_lo | my[ky] | mz[kz], bx_lo ^ by[ky] ^ bz[kz], per_axis, p.key_bits);
+          uint end = key + (uint)(left + right) + 1u, cells = 1u << p.key_bits;
+          uint wrap = end > cells ? end - cells : 0u;
+          uint2 range = (uint2)(starts[key], starts[end - wrap]);
+          for (int part = 0; part < (wrap > 0u ? 2 : 1); ++part) {
+            PSF_FILTER_SCAN(range, (intL)(-1))
+            range = (uint2)(starts[0], starts[wrap]);
           }
-          for (uint j = range.x; j < range.y; j += PSF_FILTER_LANES) {
-            intL idx = (intL)((int)j) + PSF_FILTER_LANE_INDEX;
-            floatL dx = vloadL(0, xs + j) - (floatL)(x.x);
-            floatL dy = vloadL(0, ys + j) - (floatL)(x.y);
-            floatL dz = vloadL(0, zs + j) - (floatL)(x.z);
-            intL in = dx * dx + dy * dy + dz * dz < (floatL)(r2);
-#if PSF_FILTER_SKIP
-            if (!any(in | (idx == (intL)((int)i)))) continue;
-#endif
-            floatL dot = vloadL(0, nxs + j) * ni.x + vloadL(0, nys + j) * ni.y + vloadL(0, nzs + j) * ni.z;
-            floatL dar = vloadL(0, ars + j) - (floatL)(ai.x);
-            floatL dag = vloadL(0, ags + j) - (floatL)(ai.y);
-            floatL dab = vloadL(0, abs_ + j) - (floatL)(ai.z);
-            intL similar = (vloadL(0, tags + j) == (intL)(tag)) & (dot >= (floatL)(p.normal_cos)) &
-                           (dar * dar + dag * dag + dab * dab <= (floatL)(r2_tol));
-            floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);
-            intL take = (idx < (intL)((int)range.y)) & ((idx == (intL)((int)i)) | (in & similar));
-            sr += select((floatL)(0.0f), cr, take);
-            sg += select((floatL)(0.0f), cg, take);
-            sb += select((floatL)(0.0f), cb, take);
-            taken -= take; /* take is -1 where true */
+        } else {
+          for (int kx = -left; kx <= right; ++kx) {
+            uint key = cell_key_of_parts(cell_morton_part(c.x + kx, 0u, per_axis) | my[ky] | mz[kz],
+                                         cell_block_part(c.x + kx, 0u, per_axis) ^ by[ky] ^ bz[kz], per_axis,
+                                         p.key_bits);
+            uint2 range = (uint2)(starts[key], starts[key + 1u]);
+            PSF_FILTER_SCAN(range, (convert_intL(floor(vloadL(0, xs + j) * inv_x)) == (intL)(c.x + kx)) &
+                                       (convert_intL(floor(vloadL(0, ys + j) * inv)) == (intL)(c.y - 1 + ky)) &
+                                       (convert_intL(floor(vloadL(0, zs + j) * inv)) == (intL)(c.z - 1 + kz)))
           }
         }
+      }
     uint n = (uint)filter_lane_isum(taken);
     float3 sum = (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb));
     if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */

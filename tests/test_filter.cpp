@@ -310,10 +310,12 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
 }
 
 // The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
-// plus an offset, split into its low bits and its block (the rest); the low bits
-// of x as they are, those of y and z interleaved above them; the blocks times a
-// constant per axis, XORed with the class's (2 level + light-sample visibility)
-// product, hashed (lowbias32) and XORed into the bits above x's.
+// (x's in cells 4 times narrower) plus an offset, split into its low bits (x:
+// the key's per-axis share + 2, y and z: the share - 1) and its block (the
+// rest); the low bits of x as they are, those of y and z interleaved above them;
+// the blocks times a constant per axis, XORed with the class's (2 level +
+// light-sample visibility) product, hashed (lowbias32) and added (modulo the
+// table's size).
 uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
   auto lowbias32 = [](uint32_t x) {
     x ^= x >> 16;
@@ -326,29 +328,29 @@ uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
   const int offset[3] = {1237, 2741, 3593};
   const uint32_t prime[3] = {73856093u, 19349663u, 83492791u};
   const uint32_t per_axis = std::min(key_bits / 3, 10u);
+  const uint32_t bits[3] = {per_axis + 2, std::max(per_axis, 1u) - 1, std::max(per_axis, 1u) - 1};
   uint32_t low[3], blocks = uint32_t(key_class) * 2654435761u;
   for (int a = 0; a < 3; ++a) {
     int o = c[a] + offset[a];
-    low[a] = uint32_t(o) & ((1u << per_axis) - 1u);
-    blocks ^= uint32_t(o >> per_axis) * prime[a];  // arithmetic shift: the floor
+    low[a] = uint32_t(o) & ((1u << bits[a]) - 1u);
+    blocks ^= uint32_t(o >> bits[a]) * prime[a];  // arithmetic shift: the floor
   }
   uint32_t key = low[0];
-  for (uint32_t b = 0; b < per_axis; ++b)
-    key |= (((low[1] >> b) & 1u) << (per_axis + 2 * b)) | (((low[2] >> b) & 1u) << (per_axis + 2 * b + 1));
-  return (key ^ (lowbias32(blocks) << per_axis)) & ((1u << key_bits) - 1u);
+  for (uint32_t b = 0; b < bits[1]; ++b)
+    key |= (((low[1] >> b) & 1u) << (bits[0] + 2 * b)) | (((low[2] >> b) & 1u) << (bits[0] + 2 * b + 1));
+  return (key + lowbias32(blocks)) & ((1u << key_bits) - 1u);
 }
 
 TEST_CASE("Filter: a key shared by two of a query's cells (of different key blocks) is visited once", "[filter]") {
   // Cells of one block of 2^(key bits / 3) cells per axis have distinct keys;
   // cells of neighbouring blocks can share one by chance, and the filter must
-  // then scan it once. With 300 tuples (keys of 10 bits: blocks of 8 cells per
-  // axis, 1024 keys) and a global radius of 0.02 (cells of 1/16), the key
-  // written again here finds two cells side by side along y, in different
-  // blocks, with one key (neighbours along x never share one: x's low bits are
-  // the key's); the tuples lie on a plane through both, within two cells of
-  // their common face, so that the queries near it visit both cells. Scanning
-  // the key twice would count their own cell's tuples (the centre among them)
-  // twice.
+  // then scan it once. With 300 tuples (keys of 10 bits: blocks of 4 cells
+  // along y and z, 1024 keys) and a global radius of 0.02 (cells of 1/16, 1/64
+  // along x), the key written again here finds two cells side by side along y,
+  // in different blocks, with one key (neighbours along x never share one: x's
+  // low bits are the key's); the tuples lie on a plane through both, within two
+  // cells of their common face, so that the queries near it visit both cells.
+  // Counting a tuple of either cell twice would change counts and averages.
   FilterParams p = default_params();
   p.r0 = 0.02f;
   const uint32_t n = 300, key_bits = psf::filter_key_bits(n);
@@ -362,7 +364,7 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
       for (int x = -64; x < 64 && !found; ++x) {
         const int a[3] = {x, y, z}, b[3] = {x, y + 1, z};
         // The tuples below see their light (normal.w = 1): class 2 level + 1.
-        if ((y + 1 + 2741) % 8 == 0 &&
+        if ((y + 1 + 2741) % 4 == 0 &&
             host_cell_key(2 * level + 1, a, key_bits) == host_cell_key(2 * level + 1, b, key_bits)) {
           std::copy(a, a + 3, pair);
           found = true;
@@ -375,7 +377,7 @@ TEST_CASE("Filter: a key shared by two of a query's cells (of different key bloc
   std::vector<PathVertex> v(n);
   const float face = float(pair[1] + 1) * size;
   for (auto& t : v) {
-    t.position = {{(float(pair[0]) + u(rng)) * size, face + (u(rng) - 0.5f) * 4.0f * size,
+    t.position = {{(float(pair[0]) + u(rng)) * size / 4.0f, face + (u(rng) - 0.5f) * 4.0f * size,
                    (float(pair[2]) + 0.5f) * size, 1.0f}};
     t.normal = {{0, 0, 1, 1}};
     t.albedo = {{0.5f, 0.5f, 0.5f, 1}};
