@@ -45,7 +45,7 @@
   inline float##S pow2i##S(int##S e) {                                                                             \
     return e > 127 ? (float##S)(INFINITY) : e < -126 ? (float##S)(0.0f) : as_float##S((e + 127) << 23);          \
   }                                                                                                                \
-  /* Edge length of the cells of a level along y and z; along x it is a quarter of that (PSF_CELL_X_SPLIT). */      \
+  /* Edge length of the cells of a level along y and z; along x it is cell_x_split times less. */                 \
   inline float##S cell_size##S(int##S level, uint cells27) { return pow2i##S(level + (cells27 ? 0 : 1)); }         \
   /* A coordinate's cell along one axis; inv = 1 / size, exact: size is a power of two. */                         \
   inline int##S cell_coord##S(float##S x, float##S inv) { return convert_int##S(floor(x * inv)); }                 \
@@ -60,26 +60,25 @@
   }                                                                                                                \
   inline int##S cell_offset##S(int##S c, uint axis) { return c + (axis == 0u ? 1237 : axis == 1u ? 2741 : 3593); } \
   /* x's low bits as they are, y's and z's in Morton order above them. */                                           \
-  inline uint##S cell_morton_part##S(int##S c, uint axis, uint per_axis) {                                         \
-    const uint bits = cell_axis_bits(axis, per_axis);                                                              \
+  inline uint##S cell_morton_part##S(int##S c, uint axis, uint layout) {                                           \
+    const uint bits = cell_axis_bits(axis, layout);                                                                \
     uint##S low = as_uint##S(cell_offset##S(c, axis)) & ((1u << bits) - 1u);                                      \
-    return axis == 0u ? low : spread_bits2##S(low) << (cell_axis_bits(0u, per_axis) + axis - 1u);                 \
+    return axis == 0u ? low : spread_bits2##S(low) << (cell_axis_bits(0u, layout) + axis - 1u);                   \
   }                                                                                                                \
-  inline uint##S cell_block_part##S(int##S c, uint axis, uint per_axis) {                                          \
+  inline uint##S cell_block_part##S(int##S c, uint axis, uint layout) {                                            \
     const uint prime = axis == 0u ? 73856093u : axis == 1u ? 19349663u : 83492791u;                               \
-    return as_uint##S(cell_offset##S(c, axis) >> (int)cell_axis_bits(axis, per_axis)) * prime;                    \
+    return as_uint##S(cell_offset##S(c, axis) >> (int)cell_axis_bits(axis, layout)) * prime;                      \
   }                                                                                                                \
   inline uint##S cell_class_part##S(int##S key_class) { return as_uint##S(key_class) * 2654435761u; }             \
-  inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint per_axis, uint key_bits) {             \
+  inline uint##S cell_key_of_parts##S(uint##S morton, uint##S blocks, uint key_bits) {                            \
     return (morton + psf_hash##S(blocks)) & ((1u << key_bits) - 1u);                                              \
   }                                                                                                                \
-  inline uint##S cell_key##S(int##S key_class, int##S cx, int##S cy, int##S cz, uint key_bits) {                  \
-    uint per_axis = cell_key_bits_per_axis(key_bits);                                                             \
-    uint##S morton = cell_morton_part##S(cx, 0u, per_axis) | cell_morton_part##S(cy, 1u, per_axis) |              \
-                     cell_morton_part##S(cz, 2u, per_axis);                                                       \
-    uint##S blocks = cell_block_part##S(cx, 0u, per_axis) ^ cell_block_part##S(cy, 1u, per_axis) ^                \
-                     cell_block_part##S(cz, 2u, per_axis) ^ cell_class_part##S(key_class);                        \
-    return cell_key_of_parts##S(morton, blocks, per_axis, key_bits);                                              \
+  inline uint##S cell_key##S(int##S key_class, int##S cx, int##S cy, int##S cz, uint layout, uint key_bits) {     \
+    uint##S morton = cell_morton_part##S(cx, 0u, layout) | cell_morton_part##S(cy, 1u, layout) |                  \
+                     cell_morton_part##S(cz, 2u, layout);                                                         \
+    uint##S blocks = cell_block_part##S(cx, 0u, layout) ^ cell_block_part##S(cy, 1u, layout) ^                    \
+                     cell_block_part##S(cz, 2u, layout) ^ cell_class_part##S(key_class);                          \
+    return cell_key_of_parts##S(morton, blocks, key_bits);                                                        \
   }                                                                                                                \
   /* The query radius of a path's filtering vertex from its camera path length d */                                \
   /* (position.w) and footprint stretch s (albedo.w, 0: no vertex); 0 without one. */                              \
@@ -123,19 +122,31 @@
  * the filter's queries there visited cells of two blocks cell by cell). */
 inline uint cell_key_bits_per_axis(uint key_bits) { return min(key_bits / 3u, 10u); }
 
-/* Cells are PSF_CELL_X_SPLIT times narrower along x than along y and z (a power
- * of two), and x's part of a key has log2(PSF_CELL_X_SPLIT) = 2 bits more than
- * the key's per-axis share, y's and z's one bit less each. */
-#define PSF_CELL_X_SPLIT 4.0f
-inline uint cell_axis_bits(uint axis, uint per_axis) { return axis == 0u ? per_axis + 2u : max(per_axis, 1u) - 1u; }
+/* With cells of 2r (the default), cells are 4 times narrower along x than along
+ * y and z, and x's part of a key has 2 bits more than the key's per-axis share,
+ * y's and z's one bit less each. Cells of r (cells27) are cubes: split along x
+ * as well, they saved few candidates (Sponza, living room, Cornell box: 5.9,
+ * 11.1 and 8.3 vectors of 8 per query against 6.4, 11.0 and 7.1 as cubes) for
+ * rows up to 11 cells long that crowd the key table. The layout of a batch's
+ * keys: per_axis | x's extra bits << 8. */
+inline float cell_x_split(uint cells27) { return cells27 ? 1.0f : 4.0f; }
+inline uint cell_key_layout(uint key_bits, uint cells27) {
+  return cell_key_bits_per_axis(key_bits) | (cells27 ? 0u : 2u << 8);
+}
+inline uint cell_layout_per_axis(uint layout) { return layout & 0xFFu; }
+inline uint cell_axis_bits(uint axis, uint layout) {
+  const uint per_axis = layout & 0xFFu, extra = layout >> 8;
+  return axis == 0u ? per_axis + extra : max(per_axis, extra >> 1) - (extra >> 1);
+}
 
 PSF_DEFINE_CELL_KEY()
 PSF_DEFINE_CELL_KEY(8)
 
-/* The cell of x in the grid whose cells are `size` along y and z (cell_size). */
-inline int3 cell_of(float3 x, float size) {
+/* The cell of x in the grid whose cells are `size` along y and z (cell_size) and
+ * size / split along x (cell_x_split). */
+inline int3 cell_of(float3 x, float size, float split) {
   float inv = 1.0f / size;
-  return (int3)(cell_coord(x.x, inv * PSF_CELL_X_SPLIT), cell_coord(x.y, inv), cell_coord(x.z, inv));
+  return (int3)(cell_coord(x.x, inv * split), cell_coord(x.y, inv), cell_coord(x.z, inv));
 }
 
 /* The filter's tag of a vertex with radius r > 0: 4 level + 2 light-sample
@@ -174,8 +185,9 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
       return;
     }
     int level = vertex_level(r);
-    int3 c = cell_of(x.xyz, cell_size(level, p.cells27));
-    keys[i] = cell_key(tag_key_class(vertex_tag(r, vertices[i].normal)), c.x, c.y, c.z, p.key_bits);
+    int3 c = cell_of(x.xyz, cell_size(level, p.cells27), cell_x_split(p.cells27));
+    keys[i] = cell_key(tag_key_class(vertex_tag(r, vertices[i].normal)), c.x, c.y, c.z,
+                       cell_key_layout(p.key_bits, p.cells27), p.key_bits);
     return;
   }
   uint i0 = get_global_id(0) * PSF_GATHER_LANES;
@@ -194,8 +206,8 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
   int8 level = vertex_level8(r);
   float8 inv = 1.0f / cell_size8(level, p.cells27);
   int8 key_class = 2 * level + (v != 0.0f ? 1 : 0); /* tag_key_class */
-  uint8 key = cell_key8(key_class, cell_coord8(x, inv * PSF_CELL_X_SPLIT), cell_coord8(y, inv), cell_coord8(z, inv),
-                        p.key_bits);
+  uint8 key = cell_key8(key_class, cell_coord8(x, inv * cell_x_split(p.cells27)), cell_coord8(y, inv),
+                        cell_coord8(z, inv), cell_key_layout(p.key_bits, p.cells27), p.key_bits);
   key = r == 0.0f ? (uint8)(1u << p.key_bits) : key;
   uint8 index = (uint8)(i0) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
   if (i0 + PSF_GATHER_LANES - 1u <= last) {

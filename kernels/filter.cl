@@ -118,7 +118,8 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
   __global const float* vr = values;
   __global const float* vg = values + stride;
   __global const float* vb = values + 2 * stride;
-  const uint per_axis = cell_key_bits_per_axis(p.key_bits);
+  const uint layout = cell_key_layout(p.key_bits, p.cells27);
+  const float split = cell_x_split(p.cells27); /* cells are this many times narrower along x */
   const float tol2 = p.albedo_tol * p.albedo_tol;
   /* The cached row: the y and z coordinates and class of the last query's cell,
    * and the keys' parts of the coordinates -1, 0, +1 around them (cell_keys.cl). */
@@ -137,18 +138,18 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
      * that overflows). */
     int tag = tags[i] | 1;
     int level = tag >> 2;
-    float size = cell_size(level, p.cells27), inv = 1.0f / size, inv_x = inv * PSF_CELL_X_SPLIT;
-    int3 c = cell_of(x, size);
+    float size = cell_size(level, p.cells27), inv = 1.0f / size, inv_x = inv * split;
+    int3 c = cell_of(x, size, split);
     /* The cells that can hold points within r. Along y and z: c, and the
      * neighbour across a face nearer to x than r (cells of size >= r (27) or >= 2r
      * (8) make that at most 3 or 2), as offsets lo_*, hi_* from c - 1. Along x, where
-     * cells are PSF_CELL_X_SPLIT times narrower: from `left` cells below c to
+     * cells are `split` times narrower (with cells of 2r): from `left` cells below c to
      * `right` above, as many as the ball reaches. With a margin for rounding:
      * visiting a cell too many never changes the result. The distances to the
      * faces are exact (c times a power of two, subtracted from a nearby x). */
-    float3 cell_lo = convert_float3(c) * (float3)(size / PSF_CELL_X_SPLIT, size, size);
+    float3 cell_lo = convert_float3(c) * (float3)(size / split, size, size);
     float3 below = x - cell_lo;                                                               /* to the lower face */
-    float3 above = convert_float3(c + (int3)(1)) * (float3)(size / PSF_CELL_X_SPLIT, size, size) - x; /* upper */
+    float3 above = convert_float3(c + (int3)(1)) * (float3)(size / split, size, size) - x; /* to the upper face */
     float reach = r * 1.0001f;
     int lo_y = below.y < reach ? 0 : 1, hi_y = above.y < reach ? 2 : 1;
     int lo_z = below.z < reach ? 0 : 1, hi_z = above.z < reach ? 2 : 1;
@@ -161,14 +162,14 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
       cz = c.z;
       cclass = key_class;
       for (int k = 0; k < 3; ++k) {
-        my[k] = cell_morton_part(c.y - 1 + k, 1u, per_axis);
-        mz[k] = cell_morton_part(c.z - 1 + k, 2u, per_axis);
-        by[k] = cell_block_part(c.y - 1 + k, 1u, per_axis);
-        bz[k] = cell_block_part(c.z - 1 + k, 2u, per_axis) ^ cell_class_part(key_class);
+        my[k] = cell_morton_part(c.y - 1 + k, 1u, layout);
+        mz[k] = cell_morton_part(c.z - 1 + k, 2u, layout);
+        by[k] = cell_block_part(c.y - 1 + k, 1u, layout);
+        bz[k] = cell_block_part(c.z - 1 + k, 2u, layout) ^ cell_class_part(key_class);
       }
     }
-    const uint mx_lo = cell_morton_part(c.x - left, 0u, per_axis);
-    const uint bx_lo = cell_block_part(c.x - left, 0u, per_axis);
+    const uint mx_lo = cell_morton_part(c.x - left, 0u, layout);
+    const uint bx_lo = cell_block_part(c.x - left, 0u, layout);
     float r2 = r * r;
     floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
     intL taken = (intL)(0);
@@ -178,13 +179,14 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
      * its last one's end. A query whose cells span two blocks (whose keys another
      * of its cells may share) visits them cell by cell instead, and takes from
      * each only the tuples that lie in it, so that none counts twice. */
-    const bool one_block = per_axis >= 2u && bx_lo == cell_block_part(c.x + right, 0u, per_axis) &&
-                           by[lo_y] == by[hi_y] && bz[lo_z] == bz[hi_z];
+    const bool one_block = cell_layout_per_axis(layout) >= 2u &&
+                           bx_lo == cell_block_part(c.x + right, 0u, layout) && by[lo_y] == by[hi_y] &&
+                           bz[lo_z] == bz[hi_z];
     for (int kz = lo_z; kz <= hi_z; ++kz)
       for (int ky = lo_y; ky <= hi_y; ++ky) {
         if (one_block) {
           /* The row's keys, key .. end - 1, wrap around the table's end at most once. */
-          uint key = cell_key_of_parts(mx_lo | my[ky] | mz[kz], bx_lo ^ by[ky] ^ bz[kz], per_axis, p.key_bits);
+          uint key = cell_key_of_parts(mx_lo | my[ky] | mz[kz], bx_lo ^ by[ky] ^ bz[kz], p.key_bits);
           uint end = key + (uint)(left + right) + 1u, cells = 1u << p.key_bits;
           uint wrap = end > cells ? end - cells : 0u;
           uint2 range = (uint2)(starts[key], starts[end - wrap]);
@@ -194,9 +196,8 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
           }
         } else {
           for (int kx = -left; kx <= right; ++kx) {
-            uint key = cell_key_of_parts(cell_morton_part(c.x + kx, 0u, per_axis) | my[ky] | mz[kz],
-                                         cell_block_part(c.x + kx, 0u, per_axis) ^ by[ky] ^ bz[kz], per_axis,
-                                         p.key_bits);
+            uint key = cell_key_of_parts(cell_morton_part(c.x + kx, 0u, layout) | my[ky] | mz[kz],
+                                         cell_block_part(c.x + kx, 0u, layout) ^ by[ky] ^ bz[kz], p.key_bits);
             uint2 range = (uint2)(starts[key], starts[key + 1u]);
             PSF_FILTER_SCAN(range, (convert_intL(floor(vloadL(0, xs + j) * inv_x)) == (intL)(c.x + kx)) &
                                        (convert_intL(floor(vloadL(0, ys + j) * inv)) == (intL)(c.y - 1 + ky)) &

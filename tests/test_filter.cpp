@@ -310,13 +310,13 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
 }
 
 // The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
-// (x's in cells 4 times narrower) plus an offset, split into its low bits (x:
-// the key's per-axis share + 2, y and z: the share - 1) and its block (the
-// rest); the low bits of x as they are, those of y and z interleaved above them;
+// (x's in cells 4 times narrower with cells of 2r) plus an offset, split into
+// its low bits (with cells of 2r x: the key's per-axis share + 2, y and z: the
+// share - 1; cubes of r: the share each) and its block (the rest); the low bits of x as they are, those of y and z interleaved above them;
 // the blocks times a constant per axis, XORed with the class's (2 level +
 // light-sample visibility) product, hashed (lowbias32) and added (modulo the
 // table's size).
-uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
+uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits, bool cells27 = false) {
   auto lowbias32 = [](uint32_t x) {
     x ^= x >> 16;
     x *= 0x7feb352du;
@@ -328,7 +328,8 @@ uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits) {
   const int offset[3] = {1237, 2741, 3593};
   const uint32_t prime[3] = {73856093u, 19349663u, 83492791u};
   const uint32_t per_axis = std::min(key_bits / 3, 10u);
-  const uint32_t bits[3] = {per_axis + 2, std::max(per_axis, 1u) - 1, std::max(per_axis, 1u) - 1};
+  const uint32_t yz = cells27 ? per_axis : std::max(per_axis, 1u) - 1;
+  const uint32_t bits[3] = {cells27 ? per_axis : per_axis + 2, yz, yz};
   uint32_t low[3], blocks = uint32_t(key_class) * 2654435761u;
   for (int a = 0; a < 3; ++a) {
     int o = c[a] + offset[a];
