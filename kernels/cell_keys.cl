@@ -10,9 +10,10 @@
  * of a few pixels at the camera path length d_i) or a global r0; with
  * FilterParams.stretch times the vertex's 1 / sqrt(cos theta_i), so that the
  * ball holds the area of surface those pixels see (psf_shared.h). Vertices are
- * binned by level l_i = ceil(log2 r_i) into grids of cell size 2^l (27 cells
- * searched) or 2^(l+1) (8 cells searched) along y and z, a quarter of that along
- * x, so a cell is never smaller than the query radius along y and z; only
+ * binned by level l_i = ceil(log2 r_i) into grids of cubes of 2^l (27 cells
+ * searched) or of cells 2^(l+1) along y and z and a quarter of that along x (8
+ * cells' rows searched), so a cell is never smaller than the query radius along
+ * y and z; only
  * vertices of one level are neighbours. Keys map (class, cell) into
  * [0, 2^key_bits) in rows along x (cell_key), the class being 2 level
  * + light-sample visibility: vertices that disagree on either are never
@@ -89,9 +90,10 @@
   }                                                                                                                \
   inline int##S vertex_level##S(float##S r) { return grid_level##S(fmax(r, 1e-30f)); }
 
-/* The key of a cell. Cells are 4 times narrower along x than along y and z
- * (PSF_CELL_X_SPLIT), and keys come in blocks of 2^(per_axis + 2) x 2^(per_axis
- * - 1) x 2^(per_axis - 1) cells (per_axis: the key's bits / 3). Within a block a
+/* The key of a cell. With cells of 2r, cells are 4 times narrower along x than
+ * along y and z (cell_x_split), and keys come in blocks of 2^(per_axis + 2) x
+ * 2^(per_axis - 1) x 2^(per_axis - 1) cells (per_axis: the key's bits / 3; cubes
+ * of r: 2^per_axis per axis, cell_key_layout). Within a block a
  * cell's key is the low bits of its x coordinate with the Morton code of y's and
  * z's above them, plus a hash of the class and of the block (modulo the table's
  * size). So the cells of a row along x within a block have consecutive keys
