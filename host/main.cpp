@@ -376,7 +376,8 @@ int main(int argc, char** argv) {
                      "hits something; light, their light sample's visibility; auto (default): a ray of 1 % of the "
                      "scene's size where the only light is an environment, else light")
       ->check(CLI::IsMember({"auto", "light"}) | finite_number(0.0, kFloatMax, true));
-  render->add_flag("--cells27", ra.fopt.cells27, "Neighbour search in cells of size r (3x3 rows along x) instead of 2r (2x2 rows)");
+  render->add_flag("--cells27", ra.fopt.cells27,
+                   "Neighbour search in cells of size r (3x3 rows along x) instead of 2r (2x2 rows)");
   render->add_option("--min-removed", ra.fopt.min_removed,
                      "Filtering switches itself off after a batch where it removed less than this fraction of the "
                      "noise; 0: only when no vertex has a neighbour (0.2)")
