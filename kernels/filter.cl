@@ -121,6 +121,7 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
   const uint layout = cell_key_layout(p.key_bits, p.cells27);
   const float split = cell_x_split(p.cells27); /* cells are this many times narrower along x */
   const float tol2 = p.albedo_tol * p.albedo_tol;
+  const uint cells = 1u << p.key_bits; /* keys: [0, cells) */
   /* The cached row: the y and z coordinates and class of the last query's cell,
    * and the keys' parts of the coordinates -1, 0, +1 around them (cell_keys.cl). */
   int cy = 0, cz = 0, cclass = 0;
@@ -147,9 +148,9 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
      * `right` above, as many as the ball reaches. With a margin for rounding:
      * visiting a cell too many never changes the result. The distances to the
      * faces are exact (c times a power of two, subtracted from a nearby x). */
-    float3 cell_lo = convert_float3(c) * (float3)(size / split, size, size);
-    float3 below = x - cell_lo;                                                               /* to the lower face */
-    float3 above = convert_float3(c + (int3)(1)) * (float3)(size / split, size, size) - x; /* to the upper face */
+    float3 edge = (float3)(size / split, size, size);
+    float3 below = x - convert_float3(c) * edge;             /* distance to the lower face */
+    float3 above = convert_float3(c + (int3)(1)) * edge - x; /* to the upper face */
     float reach = r * 1.0001f;
     int lo_y = below.y < reach ? 0 : 1, hi_y = above.y < reach ? 2 : 1;
     int lo_z = below.z < reach ? 0 : 1, hi_z = above.z < reach ? 2 : 1;
@@ -187,7 +188,7 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
         if (one_block) {
           /* The row's keys, key .. end - 1, wrap around the table's end at most once. */
           uint key = cell_key_of_parts(mx_lo | my[ky] | mz[kz], bx_lo ^ by[ky] ^ bz[kz], p.key_bits);
-          uint end = key + (uint)(left + right) + 1u, cells = 1u << p.key_bits;
+          uint end = key + (uint)(left + right) + 1u;
           uint wrap = end > cells ? end - cells : 0u;
           uint2 range = (uint2)(starts[key], starts[end - wrap]);
           for (int part = 0; part < (wrap > 0u ? 2 : 1); ++part) {
