@@ -138,18 +138,15 @@ inline Frame frame_from_normal_tangent(float3 n, float3 dpdu) {
 inline float3 frame_to_local(Frame f, float3 v) { return (float3)(dot(v, f.s), dot(v, f.t), dot(v, f.n)); }
 inline float3 frame_to_world(Frame f, float3 v) { return v.x * f.s + v.y * f.t + v.z * f.n; }
 
-/* Shirley-Chiu concentric map of [0,1)^2 onto the unit disk. */
+/* Shirley-Chiu concentric map of [0,1)^2 onto the unit disk. With selects
+ * instead of branches: which of |a|, |b| is larger is a coin toss per sample,
+ * and a mispredicted branch on it cost more than the one division both share. */
 inline float2 square_to_disk(float u1, float u2) {
   float a = 2.0f * u1 - 1.0f, b = 2.0f * u2 - 1.0f;
-  if (a == 0.0f && b == 0.0f) return (float2)(0.0f, 0.0f);
-  float r, phi;
-  if (fabs(a) > fabs(b)) {
-    r = a;
-    phi = (PSF_PI / 4.0f) * (b / a);
-  } else {
-    r = b;
-    phi = (PSF_PI / 2.0f) - (PSF_PI / 4.0f) * (a / b);
-  }
+  bool wide = fabs(a) > fabs(b), centre = a == 0.0f && b == 0.0f;
+  float r = wide ? a : b; /* 0 only at the centre, which maps to r = 0 whatever phi is */
+  float q = (wide ? b : a) / (centre ? 1.0f : r);
+  float phi = wide ? (PSF_PI / 4.0f) * q : (PSF_PI / 2.0f) - (PSF_PI / 4.0f) * q;
   float c;
   float s = psf_sincos(phi, &c);
   return (float2)(r * c, r * s);
