@@ -282,15 +282,32 @@ inline Frame surface_frame_general(Material* m, __global const TriAttrib* a, flo
   return f;
 }
 
-/* The flat, untextured, isotropic case inline (no call), the rest in surface_frame_general. */
+/* The untextured, isotropic cases inline (no call), flat or with interpolated
+ * normals (surface_frame_general's steps for them, so the same frame bit for
+ * bit), the rest in surface_frame_general. */
 inline Frame surface_frame(Material* m, __global const TriAttrib* a, float b1, float b2, float3 p0, float3 p1,
                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
                            __global const half* texels, float3* unperturbed) {
-  if ((m->flags & (PSF_MATFLAG_NORMALS | PSF_MATFLAG_VERTEX_COLOR)) || m->tex_color != PSF_NO_TEXTURE ||
-      m->tex_bump != PSF_NO_TEXTURE || m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE ||
-      surface_metallic_map(m))
+  if ((m->flags & PSF_MATFLAG_VERTEX_COLOR) || m->tex_color != PSF_NO_TEXTURE || m->tex_bump != PSF_NO_TEXTURE ||
+      m->alpha_u != m->alpha_v || m->tex_alpha != PSF_NO_TEXTURE || surface_metallic_map(m))
     return surface_frame_general(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels, unperturbed);
-  float3 n = m->two_sided && !bsdf_transmits(*m) && dot(ng, wo) < 0.0f ? -ng : ng;
+  bool flip = m->two_sided && !bsdf_transmits(*m);
+  if (m->flags & PSF_MATFLAG_NORMALS) {
+    float3 ns = ng;
+    if (a->flags & PSF_TRI_NORMALS) {
+      float3 n = (1.0f - b1 - b2) * a->n0.xyz + b1 * a->n1.xyz + b2 * a->n2.xyz;
+      float len = length(n);
+      if (len > 0.0f) ns = n / len;
+    }
+    Frame f = frame_from_normal(ns);
+    if (flip && dot(f.n, wo) < 0.0f) {
+      f.n = -f.n;
+      ns = -ns;
+    }
+    *unperturbed = ns;
+    return f;
+  }
+  float3 n = flip && dot(ng, wo) < 0.0f ? -ng : ng;
   *unperturbed = n;
   return frame_from_normal(n);
 }
