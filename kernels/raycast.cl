@@ -206,7 +206,7 @@ BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float
  * noise: such rays hit their own sphere.
  * Out of line: inlined, the compiler hoists the direction's normalisation in
  * double out of the traversal loop, and every ray of a scene without spheres
- * paid for it (PoCL, Mitsuba's cbox: 7 % of its tracing time). */
+ * paid for it (PoCL, Mitsuba's cbox: 4-7 % of its tracing time). */
 #if defined(cl_khr_fp64) && PSF_BVH_WIDTH == 8
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double8 sphere_realw;
