@@ -13,9 +13,8 @@
  * binned by level l_i = ceil(log2 r_i) into grids of cubes of 2^l (27 cells
  * searched) or of cells 2^(l+1) along y and z and a quarter of that along x (8
  * cells' rows searched), so a cell is never smaller than the query radius along
- * y and z; only
- * vertices of one level are neighbours. Keys map (class, cell) into
- * [0, 2^key_bits) in rows along x (cell_key), the class being 2 level
+ * y and z; only vertices of one level are neighbours. Keys map (class, cell)
+ * into [0, 2^key_bits) in rows along x (cell_key), the class being 2 level
  * + light-sample visibility: vertices that disagree on either are never
  * neighbours, so each class's vertices get cells of their own and a query scans
  * only its own class's (Sponza, lit by the default sky, whose vertices compare
@@ -137,7 +136,7 @@ inline uint cell_key_layout(uint key_bits, uint cells27) {
 }
 inline uint cell_layout_per_axis(uint layout) { return layout & 0xFFu; }
 inline uint cell_axis_bits(uint axis, uint layout) {
-  const uint per_axis = layout & 0xFFu, extra = layout >> 8;
+  const uint per_axis = cell_layout_per_axis(layout), extra = layout >> 8;
   return axis == 0u ? per_axis + extra : max(per_axis, extra >> 1) - (extra >> 1);
 }
 

@@ -312,10 +312,10 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
 // The cell key of kernels/cell_keys.cl, written again: per axis the coordinate
 // (x's in cells 4 times narrower with cells of 2r) plus an offset, split into
 // its low bits (with cells of 2r x: the key's per-axis share + 2, y and z: the
-// share - 1; cubes of r: the share each) and its block (the rest); the low bits of x as they are, those of y and z interleaved above them;
-// the blocks times a constant per axis, XORed with the class's (2 level +
-// light-sample visibility) product, hashed (lowbias32) and added (modulo the
-// table's size).
+// share - 1; cubes of r: the share each) and its block (the rest); the low bits
+// of x as they are, those of y and z interleaved above them; the blocks times a
+// constant per axis, XORed with the class's (2 level + light-sample visibility)
+// product, hashed (lowbias32) and added (modulo the table's size).
 uint32_t host_cell_key(int key_class, const int c[3], uint32_t key_bits, bool cells27 = false) {
   auto lowbias32 = [](uint32_t x) {
     x ^= x >> 16;
