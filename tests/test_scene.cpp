@@ -213,12 +213,42 @@ TEST_CASE("Sensor to_world: lookat and the equivalent matrix give the same camer
   CHECK_FALSE(a.camera.mirrored);
   CHECK_FALSE(b.camera.mirrored);
 
-  // A reflection before the lookat keeps the view but mirrors the image.
+  // A reflection before the lookat keeps the view but mirrors the image
+  // left-right: the film's right axis flips, its down axis does not.
   psf::Scene m = sensor("<scale x=\"-1\"/><lookat origin=\"1,2,3\" target=\"11,2,3\" up=\"0,1,0\"/>");
   CHECK(m.camera.mirrored);
   CHECK(near(m.camera.origin, a.camera.origin));
   CHECK(near(m.camera.target, a.camera.target));
   CHECK(near(m.camera.up, a.camera.up));
+  Camera cm = psf::make_camera(m.camera, 64, 64);
+  for (int i = 0; i < 3; ++i) {
+    CHECK(cm.right.s[i] == Approx(-ca.right.s[i]).margin(1e-5));
+    CHECK(cm.down.s[i] == Approx(ca.down.s[i]).margin(1e-5));
+  }
+}
+
+TEST_CASE("Sensor to_world: a lookat without up takes Mitsuba's arbitrary axis", "[scene]") {
+  // Both Mitsubas complete the view direction to a basis and use its first axis
+  // as up; the camera's up is then that axis made orthogonal to the view.
+  auto up_of = [](const std::string& lookat, const std::string& version) {
+    psf::Scene s = load_text("<sensor type=\"perspective\"><transform name=\"to_world\">" + lookat +
+                                 "</transform></sensor>\n",
+                             {}, version);
+    return glm::normalize(s.camera.up);
+  };
+  const glm::vec3 dir = glm::normalize(glm::vec3(0, 0.4f, 0) - glm::vec3(1, 1.5f, 4));
+  auto orthogonal = [&](glm::vec3 up) { return glm::normalize(up - glm::dot(up, dir) * dir); };
+  // Mitsuba 3.6's coordinate_system(dir).first, and Mitsuba 0.5's coordinateSystem's
+  // second output, for this dir (worked out by hand from their definitions).
+  const glm::vec3 up3 = orthogonal({0.971655f, -0.031180f, -0.234339f});
+  const glm::vec3 up05 = orthogonal({0.972150f, -0.062140f, -0.225950f});
+  const std::string no_up = "<lookat origin=\"1,1.5,4\" target=\"0,0.4,0\"/>";
+  CHECK(glm::dot(up_of(no_up, "3.0.0"), up3) > 0.99999f);
+  CHECK(glm::dot(up_of("<lookat origin=\"1,1.5,4\" target=\"0,0.4,0\" up=\"0,0,0\"/>", "3.0.0"), up3) > 0.99999f);
+  CHECK(glm::dot(up_of(no_up, "0.5.0"), up05) > 0.99999f);
+  // Distinct enough that the check means something.
+  CHECK(glm::dot(up3, up05) < 0.9995f);
+  CHECK(glm::dot(up3, orthogonal({0, 1, 0})) < 0.5f);
 }
 
 TEST_CASE("Sensor: a sheared to_world warns", "[scene]") {
@@ -384,6 +414,21 @@ TEST_CASE("Colours: rgb, srgb, spectrum", "[scene]") {
     CHECK(near(radiance_of("<spectrum name=\"radiance\" value=\"400:0, 500:8, 600:15.6, 700:18.4\"/>"),
                {20.714f, 10.854f, 2.771f}, 1e-2f));
     CHECK(near(radiance_of("<rgb name=\"radiance\" value=\"17, 12, 4\"/>"), {17, 12, 4}));  // unbounded
+  }
+  SECTION("Mitsuba 3's spectrum plugins, as its RGB modes read them") {
+    // uniform: its value; srgb: its colour; d65: its scale times its colour or white.
+    CHECK(near(reflectance_of("<spectrum type=\"uniform\" name=\"reflectance\"><float name=\"value\" value=\"0.3\"/>"
+                              "</spectrum>"),
+               glm::vec3(0.3f)));
+    CHECK(near(reflectance_of("<spectrum type=\"srgb\" name=\"reflectance\"><rgb name=\"color\" value=\"0.2, 0.5, 0.9\"/>"
+                              "</spectrum>"),
+               {0.2f, 0.5f, 0.9f}));
+    CHECK(near(radiance_of("<spectrum type=\"d65\" name=\"radiance\"><float name=\"scale\" value=\"3\"/></spectrum>"),
+               glm::vec3(3.0f)));
+    CHECK(near(radiance_of("<spectrum type=\"d65\" name=\"radiance\"><rgb name=\"color\" value=\"1, 2, 4\"/>"
+                           "<float name=\"scale\" value=\"0.5\"/></spectrum>"),
+               {0.5f, 1.0f, 2.0f}));
+    CHECK(near(radiance_of("<spectrum type=\"d65\" name=\"radiance\"/>"), glm::vec3(1.0f)));
   }
   SECTION("spectrum from a file") {
     TempDir dir;
@@ -621,7 +666,7 @@ TEST_CASE("Shapes: tessellation, materials and area emitters", "[scene]") {
   CHECK(tri == s.triangles.size());
 }
 
-TEST_CASE("Shapes: spheres are analytic under a similarity to_world, else tessellated", "[scene]") {
+TEST_CASE("Shapes: spheres are analytic unless mirrored or masked", "[scene]") {
   // Rotation, uniform scale and translation: the centre and radius go through
   // to_world, the frame's axes are the rotation's columns; flip_normals is kept.
   psf::Scene s = load_text(
@@ -642,22 +687,36 @@ TEST_CASE("Shapes: spheres are analytic under a similarity to_world, else tessel
   CHECK(near(lo, {-1.5f, 3.5f, -1.5f}));
   CHECK(near(hi, {1.5f, 6.5f, 1.5f}));
 
-  // A non-uniform scale (an ellipsoid), a mirroring one, and a mask BSDF (cut-outs
-  // are alpha tests on triangles): tessellated, each with its vertices on the
-  // transformed sphere.
+  // A non-uniform scale: drawn as Mitsuba 3 draws it, with a warning: M = to_world
+  // * scale(radius) splits into a rotation Q and a stretch S (M = Q S), and the
+  // sphere has radius S[0][0], turned by Q. For M = R_y(90) diag(0.3, 0.6, 0.4)
+  // S is that diagonal (radius 0.3) and Q = R_y(90); for M = diag(0.3, 0.6, 0.4)
+  // R_y(90) = R_y(90) (R_y(90)^T diag R_y(90)), S[0][0] is the scale along
+  // R_y(90)'s first column (0, 0, -1): 0.4.
+  psf::Scene u = load_text(
+      "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"0.3\" y=\"0.6\" z=\"0.4\"/>"
+      "<rotate y=\"1\" angle=\"90\"/><translate x=\"5\"/></transform></shape>\n"
+      "<shape type=\"sphere\"><transform name=\"to_world\"><rotate y=\"1\" angle=\"90\"/>"
+      "<scale x=\"0.3\" y=\"0.6\" z=\"0.4\"/></transform></shape>\n");
+  REQUIRE(u.spheres.size() == 2);
+  CHECK(u.triangles.empty());
+  CHECK(u.spheres[0].radius == Approx(0.3f));
+  CHECK(near(u.spheres[0].center, {5, 0, 0}));
+  CHECK(near(u.spheres[0].axis_x, {0, 0, -1}));
+  CHECK(u.spheres[1].radius == Approx(0.4f));
+  CHECK(near(u.spheres[1].center, {0, 0, 0}));
+  CHECK(near(u.spheres[1].axis_x, {0, 0, -1}));
+  CHECK(count_warnings(u, "scales non-uniformly") == 2);
+
+  // A mirroring scale and a mask BSDF (cut-outs are alpha tests on triangles):
+  // tessellated, each with its vertices on the transformed sphere.
   psf::Scene t = load_text(
-      "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"2\" y=\"1\" z=\"1\"/></transform></shape>\n"
       "<shape type=\"sphere\"><transform name=\"to_world\"><scale x=\"-1\" y=\"1\" z=\"1\"/></transform></shape>\n"
       "<shape type=\"sphere\"><bsdf type=\"mask\"><float name=\"opacity\" value=\"0.5\"/>"
       "<bsdf type=\"diffuse\"/></bsdf></shape>\n");
   CHECK(t.spheres.empty());
-  REQUIRE(t.triangles.size() == 3 * size_t(2 * 64 + 2 * 64 * 30));
-  const size_t per = t.positions.size() / 3;
-  for (size_t i = 0; i < per; ++i) {
-    glm::vec3 p = t.positions[i];
-    CHECK(p.x * p.x / 4 + p.y * p.y + p.z * p.z == Approx(1.0f).epsilon(1e-5));
-    CHECK(glm::length(t.positions[per + i]) == Approx(1.0f).epsilon(1e-5));
-  }
+  REQUIRE(t.triangles.size() == 2 * size_t(2 * 64 + 2 * 64 * 30));
+  for (const glm::vec3& p : t.positions) CHECK(glm::length(p) == Approx(1.0f).epsilon(1e-5));
 }
 
 TEST_CASE("Shapes: a cylinder is Mitsuba's open tube from p0 to p1", "[scene]") {

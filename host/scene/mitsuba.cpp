@@ -715,18 +715,34 @@ class MitsubaLoader {
     return m;
   }
 
+  // The first vector of Mitsuba 3's coordinate_system(n) (Duff et al., "Building an
+  // Orthonormal Basis, Revisited", JCGT 2017), n a unit vector.
+  static glm::vec3 default_up_mitsuba3(glm::vec3 n) {
+    const float sign = std::signbit(n.z) ? -1.0f : 1.0f;
+    const float a = -1.0f / (sign + n.z), b = n.x * n.y * a;
+    return glm::vec3(sign * (n.x * n.x * a) + 1.0f, sign * b, -sign * n.x);
+  }
+  // The second vector b of Mitsuba 0.5's coordinateSystem(a, b, c), a a unit vector.
+  static glm::vec3 default_up_mitsuba05(glm::vec3 a) {
+    glm::vec3 c;
+    if (std::abs(a.x) > std::abs(a.y))
+      c = glm::vec3(a.z, 0.0f, -a.x) / std::sqrt(a.x * a.x + a.z * a.z);
+    else
+      c = glm::vec3(0.0f, a.z, -a.y) / std::sqrt(a.y * a.y + a.z * a.z);
+    return glm::cross(c, a);
+  }
+
   // Mitsuba's look_at: columns left = up x dir, up' = dir x left, dir, origin.
+  // Without an up (or a zero one) both Mitsubas complete dir to a basis and take
+  // its first vector: Mitsuba 3 by Duff et al.'s construction (coordinate_system),
+  // Mitsuba 0.5 by its older coordinateSystem.
   glm::mat4 look_at(pugi::xml_node c) const {
     glm::vec3 origin = vec_attr(c, "origin"), target = vec_attr(c, "target");
     glm::vec3 dir = target - origin;
     if (glm::length(dir) == 0.0f) fail(c, "<lookat> origin and target coincide");
     dir = glm::normalize(dir);
-    glm::vec3 up;
-    if (c.attribute("up")) {
-      up = vec_attr(c, "up");
-    } else {
-      up = std::abs(dir.y) < 0.9f ? glm::vec3(0, 1, 0) : glm::vec3(0, 0, 1);
-    }
+    glm::vec3 up = c.attribute("up") ? vec_attr(c, "up") : glm::vec3(0.0f);
+    if (glm::dot(up, up) == 0.0f) up = version_major_ >= 2 ? default_up_mitsuba3(dir) : default_up_mitsuba05(dir);
     glm::vec3 left = glm::cross(up, dir);
     if (glm::length(left) < 1e-6f * std::max(glm::length(up), 1e-30f))
       fail(c, "<lookat> up is parallel to the view direction");
@@ -813,6 +829,20 @@ class MitsubaLoader {
         }
       case Property::Kind::Object: {
         std::string type = attr(p->object, "type").value_or("?");
+        // Mitsuba 3's spectrum plugins in its RGB modes: uniform is its value, srgb
+        // its colour, d65 (the illuminant, which RGB modes leave out) its scale
+        // times its colour or white.
+        if (std::string(p->object.name()) == "spectrum" && (type == "uniform" || type == "srgb" || type == "d65")) {
+          const Element s = parse_element(p->object);
+          if (type == "uniform") return glm::vec3(float(get_float(s, "value", 1.0)));
+          if (type == "srgb") {
+            std::optional<glm::vec3> c = get_color(s, "color", use);
+            if (!c) fail(p->object, "<spectrum type=\"srgb\"> needs a 'color'");
+            return *c;
+          }
+          if (!s.objects.empty()) fail(s.objects[0], "a texture inside <spectrum type=\"d65\"> is not supported");
+          return float(get_float(s, "scale", 1.0)) * get_color(s, "color", use).value_or(glm::vec3(1.0f));
+        }
         warn(p->object, std::string(p->object.name()) + ":" + type,
              std::string(p->object.name()) + " '" + type + "' for '" + name +
                  "' is not supported yet; using the default value");
@@ -1192,15 +1222,67 @@ class MitsubaLoader {
         material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0], emitters.empty() ? pugi::xml_node() : emitters[0]);
     const glm::mat4 to_world = parent * get_transform(e, "to_world");
     const bool flip = get_bool(e, "flip_normals", false);
-    if (e.type == "sphere" && add_analytic_sphere(e, to_world, mat, flip)) return;
+    if (e.type == "sphere") {
+      if (std::optional<glm::mat4> unit = sphere_as_mitsuba3(e, to_world)) {
+        warn(e.node, "sphere:non-uniform",
+             "the sphere's to_world scales non-uniformly; drawn as Mitsuba 3 draws it, a sphere of the radius "
+             "along its first axis (not an ellipsoid)");
+        if (add_analytic_sphere(*unit, glm::vec3(0.0f), 1.0f, mat, flip)) return;
+        append_mesh(scene_, make_sphere(glm::vec3(0.0f), 1.0f), *unit, mat, flip, file_of(node).path, line_of(node));
+        return;
+      }
+      if (add_analytic_sphere(to_world, get_point(e, "center", glm::vec3(0.0f)), float(get_float(e, "radius", 1.0)),
+                              mat, flip))
+        return;
+    }
     append_mesh(scene_, mesh, to_world, mat, flip, file_of(node).path, line_of(node));
   }
 
-  // A sphere whose to_world is a rotation, uniform scale and translation (as
-  // Mitsuba 3 expects of its spheres) goes in as an analytic sphere, unless its
-  // material is alpha-tested (masks cut triangles only); otherwise the caller
-  // draws its tessellation (an ellipsoid for a non-uniform scale).
-  bool add_analytic_sphere(const Element& e, const glm::mat4& to_world, uint32_t mat, bool flip) {
+  // Mitsuba 3 keeps a sphere's to_world a similarity: it splits M = to_world *
+  // translate(center) * scale(radius) by the polar decomposition into a rotation
+  // Q and a symmetric stretch S (and M's translation T), warns where S is not a
+  // multiple of the identity, and draws the sphere of radius S[0][0] turned by Q
+  // about T. For a to_world that scales non-uniformly and does not mirror, that
+  // transform of the unit sphere at the origin; otherwise none (a similarity is
+  // drawn as it is; Mitsuba 3 draws a mirrored sphere black).
+  std::optional<glm::mat4> sphere_as_mitsuba3(const Element& e, const glm::mat4& to_world) const {
+    const glm::vec3 center = get_point(e, "center", glm::vec3(0.0f));
+    const float radius = float(get_float(e, "radius", 1.0));
+    const glm::mat4 m = to_world * glm::translate(glm::mat4(1.0f), center) * glm::scale(glm::mat4(1.0f), glm::vec3(radius));
+    const glm::dmat3 a = glm::dmat3(glm::mat3(m));
+    const double det = glm::determinant(a);
+    if (!(det > 0.0) || !std::isfinite(det)) return std::nullopt;
+    const double s = std::cbrt(det);
+    const glm::dmat3 qtq = glm::transpose(a / s) * (a / s);
+    bool similarity = true;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) similarity = similarity && std::fabs(qtq[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-4;
+    if (similarity) return std::nullopt;
+    // Higham's scaled Newton iteration for the orthogonal factor (as Dr.Jit's polar_decomp).
+    glm::dmat3 q = a;
+    for (int it = 0; it < 25; ++it) {
+      const glm::dmat3 qi = glm::transpose(glm::inverse(q));
+      double fq = 0, fi = 0;
+      for (int c = 0; c < 3; ++c) {
+        fq += glm::dot(q[c], q[c]);
+        fi += glm::dot(qi[c], qi[c]);
+      }
+      const double gamma = std::sqrt(std::sqrt(fi / fq));
+      q = 0.5 * (gamma * q + qi / gamma);
+    }
+    const glm::dmat3 stretch = glm::transpose(q) * a;
+    const double r = stretch[0][0];
+    if (!(r > 0.0) || !std::isfinite(r)) return std::nullopt;
+    glm::mat4 out(glm::mat3(q * r));
+    out[3] = m[3];
+    return out;
+  }
+
+  // A sphere (center, radius) whose to_world is a rotation, uniform scale and
+  // translation (as Mitsuba 3 expects of its spheres) goes in as an analytic
+  // sphere, unless its material is alpha-tested (masks cut triangles only);
+  // otherwise the caller draws its tessellation.
+  bool add_analytic_sphere(const glm::mat4& to_world, glm::vec3 center, float radius, uint32_t mat, bool flip) {
     if (mat < scene_.materials.size() && (scene_.materials[mat].flags & PSF_MATFLAG_MASKED)) return false;
     const glm::mat3 a(to_world);
     const float s = std::cbrt(glm::determinant(a));
@@ -1211,8 +1293,8 @@ class MitsubaLoader {
       for (int j = 0; j < 3; ++j)
         if (std::fabs(qtq[i][j] - (i == j ? 1.0f : 0.0f)) > 1e-4f) return false;
     SphereShape sp;
-    sp.center = glm::vec3(to_world * glm::vec4(get_point(e, "center", glm::vec3(0.0f)), 1.0f));
-    sp.radius = s * float(get_float(e, "radius", 1.0));
+    sp.center = glm::vec3(to_world * glm::vec4(center, 1.0f));
+    sp.radius = s * radius;
     sp.axis_x = glm::normalize(q[0]);
     sp.axis_y = glm::normalize(q[1] - sp.axis_x * glm::dot(sp.axis_x, q[1]));
     sp.flip = flip;

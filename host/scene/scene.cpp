@@ -41,8 +41,8 @@ Camera make_camera(const CameraDesc& desc, int image_width, int image_height) {
   const int height = desc.film_height > 0 ? desc.film_height : image_height;
   glm::vec3 forward = glm::normalize(desc.target - desc.origin);
   glm::vec3 right = glm::normalize(glm::cross(forward, desc.up));
-  if (desc.mirrored) right = -right;  // a reflecting to_world flips the image left-right
-  glm::vec3 down = glm::cross(forward, right);
+  const glm::vec3 down = glm::cross(forward, right);
+  if (desc.mirrored) right = -right;  // a reflecting to_world flips the image left-right, not up-down
   float aspect = float(width) / float(height);
   float tan_half = std::tan(glm::radians(desc.fov_degrees) * 0.5f);
   float half_w, half_h;
