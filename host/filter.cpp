@@ -112,12 +112,13 @@ void radix_sort(Runtime& rt, cl::Buffer& keys, cl::Buffer& values, cl::Buffer& t
   }
 }
 
-size_t PathSpaceFilter::bytes_per_tuple() {
+size_t PathSpaceFilter::bytes_per_tuple(int iterations) {
   // sorted tuples (PSF_SORTED_FIELDS arrays), keys and indices (2x each),
   // values (2x, as r, g, b arrays), counts, cell starts (a uint for each of up to
-  // 4 keys per tuple). The arrays' padding is per batch, not per tuple.
-  return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) +
-         sizeof(uint32_t) + 4 * sizeof(uint32_t);
+  // 4 keys per tuple), and for more than one pass the neighbour lists. The
+  // arrays' padding is per batch, not per tuple.
+  return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) + sizeof(uint32_t) +
+         4 * sizeof(uint32_t) + (iterations > 1 ? (PSF_FILTER_LIST + 1) * 2 * sizeof(uint32_t) : 0);
 }
 
 PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes, uint32_t filter_queries)
@@ -166,10 +167,18 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
              sorted_, values_a_);
 
   // Averaging, each iteration over the previous one's result (Fig. 2 of the paper);
-  // every iteration averages the same tuples, so the counts are those of any.
+  // every iteration averages the same tuples, so the counts are those of any, and
+  // the passes after the first average over the lists the first one recorded.
+  if (iterations > 1 && !lists_())
+    lists_ = rt_.buffer(CL_MEM_READ_WRITE, size_t(std::max(capacity_, 1u)) * (PSF_FILTER_LIST + 1) * 2 * sizeof(uint32_t));
+  const size_t items = (n + filter_queries_ - 1) / filter_queries_;
   for (int it = 0; it < std::max(iterations, 1); ++it) {
-    rt_.launch("filter", (n + filter_queries_ - 1) / filter_queries_, kLocal, p, stride_, filter_queries_, valid_,
-               sorted_, values_a_, starts_, values_b_, sorted_counts_);
+    if (iterations <= 1)
+      rt_.launch("filter", items, kLocal, p, stride_, filter_queries_, valid_, sorted_, values_a_, starts_, values_b_,
+                 sorted_counts_);
+    else
+      rt_.launch(it == 0 ? "filter_record" : "filter_lists", items, kLocal, p, stride_, filter_queries_, valid_,
+                 sorted_, values_a_, starts_, values_b_, sorted_counts_, lists_);
     std::swap(values_a_, values_b_);
   }
   rt_.zero(max_count_, sizeof(uint32_t));

@@ -90,6 +90,10 @@ class PathSpaceFilter {
   // Filters `params.count` tuples: `vertices` (PathVertex, path order) and their
   // values c (float4, path order) into `filtered` (c-bar, path order) and `counts`
   // (tuples averaged, path order), `iterations` times. Returns the largest count.
+  // With iterations > 1 the first pass records where each query's neighbours lie
+  // in cell order (up to PSF_FILTER_LIST vectors of candidates) and the later
+  // passes sum those again, bit for bit a search's sums; a query whose
+  // neighbours lie in more vectors searches its cells again.
   uint32_t run(const FilterParams& params, int iterations, const cl::Buffer& vertices, const cl::Buffer& values,
                const cl::Buffer& filtered, const cl::Buffer& counts);
 
@@ -100,8 +104,9 @@ class PathSpaceFilter {
   const cl::Buffer& cell_starts() const { return starts_; }
   const cl::Buffer& valid_count() const { return valid_; }   // uint: tuples with a vertex
 
-  // Bytes of device memory per tuple of capacity (for batch sizing).
-  static size_t bytes_per_tuple();
+  // Bytes of device memory per tuple of capacity (for batch sizing); with more
+  // than one iteration, the neighbour lists too.
+  static size_t bytes_per_tuple(int iterations = 1);
 
  private:
   Runtime& rt_;
@@ -112,6 +117,7 @@ class PathSpaceFilter {
   cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, starts_, max_count_, valid_;
+  cl::Buffer lists_;  // each query's records (PSF_FILTER_LIST + 1 uint2s), allocated by a run with iterations > 1
   RadixScratch sort_scratch_;
 };
 

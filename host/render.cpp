@@ -334,7 +334,7 @@ Renderer::~Renderer() = default;
 Runtime& Renderer::runtime() { return impl_->rt; }
 uint32_t Renderer::batch_size() const { return batch_ ? batch_->size : 0; }
 
-std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs) {
+std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs, int iterations) {
   std::vector<BufferNeed> needs = {
       {"path states", sizeof(PathState)}, {"filtering vertices", sizeof(PathVertex)},
       {"rays (two queues)", 2 * sizeof(Ray)}, {"hits", sizeof(Hit)},
@@ -345,7 +345,7 @@ std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs) {
   };
   if (filtering) {
     needs.push_back({"filtered values", sizeof(cl_float4)});
-    needs.push_back({"filter tuples, keys, sort and cell ranges", double(PathSpaceFilter::bytes_per_tuple())});
+    needs.push_back({"filter tuples, keys, sort and cell ranges", double(PathSpaceFilter::bytes_per_tuple(iterations))});
   }
   (void)aovs;  // AOV images are per pixel: fixed_bytes()
   return needs;
@@ -561,7 +561,7 @@ RenderResult Renderer::render(const RenderOptions& o) {
   const uint64_t pixels = uint64_t(scene.width) * scene.height;
   const uint64_t total = pixels * uint64_t(std::max(o.spp, 0));
   bool filtering = o.filter.enabled;
-  BatchPlan plan = plan_batch(batch_needs(filtering, o.aovs), fixed_bytes(), rt.device().global_mem,
+  BatchPlan plan = plan_batch(batch_needs(filtering, o.aovs, o.filter.iterations), fixed_bytes(), rt.device().global_mem,
                               rt.device().max_alloc, 0, o.batch_log2, std::min(o.batch_log2, 6));
   prepare(o, plan.log2);
   RenderResult r;

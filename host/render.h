@@ -126,7 +126,7 @@ class Renderer {
   // CL_MEM_OBJECT_ALLOCATION_FAILURE, when the device cannot hold them).
   void prepare(const RenderOptions& options, int batch_log2);
   // Device bytes per path of a batch, and bytes independent of the batch (scene, image).
-  static std::vector<BufferNeed> batch_needs(bool filtering, bool aovs);
+  static std::vector<BufferNeed> batch_needs(bool filtering, bool aovs, int iterations = 1);
   uint64_t fixed_bytes() const;
   // Traces batch `index` of a render of `total` paths (its paths are index * 2^m up
   // to the next multiple or total), filters it when `filtering`, and returns its sums.

@@ -287,7 +287,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
     global_mem = std::min(global_mem, d.global_mem);
     max_alloc = std::min(max_alloc, d.max_alloc);
   }
-  const auto needs = Renderer::batch_needs(ro.filter.enabled, ro.aovs);
+  const auto needs = Renderer::batch_needs(ro.filter.enabled, ro.aovs, ro.filter.iterations);
   BatchPlan plan;
   try {
     int most = o.resume.empty() ? o.max_batch_log2 : resumed.batch_log2;

@@ -31,6 +31,12 @@
 #ifndef PSF_FILTER_SKIP
 #define PSF_FILTER_SKIP 0
 #endif
+/* filter_queries' modes: search the cells (filter); search and record each
+ * query's neighbours (filter_record); average over the recorded lists, and
+ * search where one overflowed (filter_lists). */
+#define PSF_FILTER_SEARCH 0u
+#define PSF_FILTER_WRITE_LISTS 1u
+#define PSF_FILTER_READ_LISTS 2u
 #define PSF_CAT_(a, b) a##b
 #define PSF_CAT(a, b) PSF_CAT_(a, b)
 #define floatL PSF_CAT(float, PSF_FILTER_LANES)
@@ -84,6 +90,11 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
     sg += select((floatL)(0.0f), cg, take);                                                                        \
     sb += select((floatL)(0.0f), cb, take);                                                                        \
     taken -= take; /* take is -1 where true */                                                                     \
+    if (mode == PSF_FILTER_WRITE_LISTS) { /* record (j, lanes taken) where any is; past the end into the sink */ \
+      uint m = (uint)filter_lane_isum(take & ((intL)(1) << PSF_FILTER_LANE_INDEX));                                \
+      list[min(listed, PSF_FILTER_LIST)] = (uint2)(j, m);                                                          \
+      listed += m != 0u ? 1u : 0u;                                                                                 \
+    }                                                                                                              \
   }
 #if PSF_FILTER_SKIP
 #define PSF_FILTER_SKIP_TEST \
@@ -98,9 +109,12 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
  * consecutive tuples (in cell order) each work-item averages, 1 (GPUs) or
  * PSF_FILTER_QUERIES (CPUs); consecutive tuples mostly share a row of cells, and a
  * work-item keeps the last one's key parts for the next. */
-__kernel void filter(FilterParams p, uint stride, uint queries, __global const uint* valid,
-                     __global const float* sorted, __global const float* values, __global const uint* starts,
-                     __global float* filtered, __global uint* counts) {
+inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint stride, uint queries,
+                                                          __global const uint* valid, __global const float* sorted,
+                                                          __global const float* values,
+                                                          __global const uint* starts, __global float* filtered,
+                                                          __global uint* counts, const uint mode,
+                                                          __global uint2* lists) {
   const uint nvalid = *valid; /* tuples with a vertex come first in cell order (cell_ranges.cl) */
   const uint i0 = get_global_id(0) * queries;
   if (i0 >= nvalid) return;
@@ -128,6 +142,29 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
   bool cached = false;
   uint my[3], mz[3], by[3], bz[3];
   for (uint i = i0; i < i1; ++i) {
+    __global uint2* list = mode == PSF_FILTER_SEARCH ? lists : lists + (size_t)i * (PSF_FILTER_LIST + 1u);
+    if (mode == PSF_FILTER_READ_LISTS && list[PSF_FILTER_LIST].y <= PSF_FILTER_LIST) {
+      /* The vectors of candidates the first pass took any from, with the lanes
+       * it took (the ball, the weights and the finiteness tags do not change
+       * between passes): the same sums, lane by lane in the same order, as a
+       * search (the vectors it took none from only added zeros). */
+      const uint records = list[PSF_FILTER_LIST].y;
+      floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
+      for (uint k = 0u; k < records; ++k) {
+        const uint2 e = list[k];
+        const intL take = -(((intL)((int)e.y) >> PSF_FILTER_LANE_INDEX) & (intL)(1));
+        sr += select((floatL)(0.0f), vloadL(0, vr + e.x), take);
+        sg += select((floatL)(0.0f), vloadL(0, vg + e.x), take);
+        sb += select((floatL)(0.0f), vloadL(0, vb + e.x), take);
+      }
+      const float3 mean =
+          (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb)) / (float)counts[i];
+      filtered[i] = mean.x;
+      filtered[stride + i] = mean.y;
+      filtered[2 * stride + i] = mean.z;
+      continue;
+    }
+    uint listed = 0u;
     float r = sorted[PSF_SORTED_R * stride + i];
     float3 x = (float3)(xs[i], ys[i], zs[i]);
     float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
@@ -211,13 +248,42 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
     if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
       sum = (float3)(vr[i], vg[i], vb[i]);
       n = 1u;
+      listed = PSF_FILTER_LIST + 1u; /* the later passes search again */
     }
+    if (mode == PSF_FILTER_WRITE_LISTS) list[PSF_FILTER_LIST] = (uint2)(0u, listed);
     float3 mean = sum / (float)n;
     filtered[i] = mean.x;
     filtered[stride + i] = mean.y;
     filtered[2 * stride + i] = mean.z;
     counts[i] = n;
   }
+}
+
+/* One pass of the average (mode PSF_FILTER_SEARCH; the only pass), the first of
+ * several (filter_record: also records, for each query, PSF_FILTER_LIST + 1
+ * uint2s in lists: the first index and the lanes taken of each vector of
+ * candidates it took any from, then their number in the last's y), or a later
+ * one (filter_lists: sums those vectors' lanes again, bit for bit the search's
+ * sums, and searches again where the records overflowed). One body,
+ * specialised by the constant mode. */
+__kernel void filter(FilterParams p, uint stride, uint queries, __global const uint* valid,
+                     __global const float* sorted, __global const float* values, __global const uint* starts,
+                     __global float* filtered, __global uint* counts) {
+  filter_queries(p, stride, queries, valid, sorted, values, starts, filtered, counts, PSF_FILTER_SEARCH, 0);
+}
+
+__kernel void filter_record(FilterParams p, uint stride, uint queries, __global const uint* valid,
+                            __global const float* sorted, __global const float* values,
+                            __global const uint* starts, __global float* filtered, __global uint* counts,
+                            __global uint2* lists) {
+  filter_queries(p, stride, queries, valid, sorted, values, starts, filtered, counts, PSF_FILTER_WRITE_LISTS,
+                 lists);
+}
+
+__kernel void filter_lists(FilterParams p, uint stride, uint queries, __global const uint* valid,
+                           __global const float* sorted, __global const float* values, __global const uint* starts,
+                           __global float* filtered, __global uint* counts, __global uint2* lists) {
+  filter_queries(p, stride, queries, valid, sorted, values, starts, filtered, counts, PSF_FILTER_READ_LISTS, lists);
 }
 
 /* The largest count of the n tuples into *max_count (zero before the launch):

@@ -479,4 +479,12 @@ typedef struct {
 /* Queries per work-item of filter (filter.cl) on CPUs. */
 #define PSF_FILTER_QUERIES 16u
 
+/* Records a query's list holds (filter.cl filter_record): with --iterations > 1
+ * the first pass records, for each query, the vectors of candidates it took
+ * neighbours from (first index, lanes taken), and the later passes sum those
+ * again instead of searching; a query with more such vectors searches again. A
+ * list takes PSF_FILTER_LIST + 1 uint2s (the last holds the count, and is the
+ * sink of the branch-free appends). */
+#define PSF_FILTER_LIST 24u
+
 #endif /* PSF_SHARED_H */

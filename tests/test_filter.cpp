@@ -471,6 +471,25 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     auto c = random_values(2500, 30);
     check_same(brute_force(v, c, p, 2), run_filter(v, c, p, 2));
   }
+  SECTION("later iterations: the recorded neighbour lists, and a search again where a list overflowed") {
+    // A dense cluster (all in one cell: more neighbours than PSF_FILTER_LIST
+    // vectors of candidates hold, so those search again) beside spread tuples
+    // (a few neighbours: recorded); four passes over both.
+    auto v = random_tuples(2000, 47, 1.0f);
+    auto dense = random_tuples(2000, 48, 0.01f);
+    for (auto& t : dense) t.position.s[0] += 2.0f;
+    v.insert(v.end(), dense.begin(), dense.end());
+    auto c = random_values(v.size(), 49);
+    auto ref = brute_force(v, c, p, 4);
+    size_t overflowed = 0, recorded = 0;
+    for (uint32_t n : ref.counts) {
+      overflowed += n > PSF_FILTER_LIST * 8 ? 1 : 0;  // more vectors (of at most 8 lanes) than a list holds
+      recorded += n > 1 && n <= PSF_FILTER_LIST ? 1 : 0;               // at most one vector each
+    }
+    CHECK(overflowed > 150);
+    CHECK(recorded > 1000);
+    check_same(ref, run_filter(v, c, p, 4));
+  }
 }
 
 // The filter's variant that the test device does not use by default (Runtime:
