@@ -96,10 +96,32 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"index-out-of-range.gltf", "index-out-of-range.gltf:"},
       {"accessor-past-buffer.gltf", "accessor-past-buffer.gltf:"},
       {"missing-buffer.gltf", "missing.bin"},
+      // counts and offsets near 2^64, which wrapped around in the bounds check
+      {"accessor-count-wrap.gltf", "accessor-count-wrap.gltf: accessors[0]: 6148914691236517206 elements"},
+      {"accessor-offset-wrap.gltf", "accessor-offset-wrap.gltf: accessors[0]: 3 elements at byte offset"},
+      {"accessor-count-no-view.gltf", "accessor-count-no-view.gltf: accessors[0]: count 1000000000000 is too large"},
+      // a run-length encoded HDR cut short, on which stb_image loops forever
+      {"truncated-hdr-envmap.xml", "truncated-rle.hdr: cannot read environment map: truncated HDR image"},
+      {"hdr-image.gltf", "hdr-image.gltf: glTF parse error: images[0] is neither PNG nor JPEG"},
   };
   for (const auto& [file, where] : cases) {
     SECTION(file) { require_clear_error(render(bad(file)), where); }
   }
+}
+
+TEST_CASE("Bad input: nesting deep enough to exhaust the stack is refused", "[bad_input]") {
+  // 30,000 levels of XML elements, 20,000 of JSON arrays: the loaders (and the
+  // JSON parser) recurse once a level.
+  fs::path dir = temp_dir();
+  std::string open, close;
+  for (int i = 0; i < 30000; ++i) open += "<a>", close += "</a>";
+  const fs::path xml = dir / "deep.xml";
+  std::ofstream(xml) << "<scene version=\"3.0.0\">\n" << open << close << "</scene>\n";
+  require_clear_error(render(xml.string()), "deep.xml:2: elements nested deeper than 256 levels");
+  const fs::path gltf = dir / "deep.gltf";
+  std::ofstream(gltf) << "{\"asset\": {\"version\": \"2.0\"}, \"extras\": " << std::string(20000, '[')
+                      << std::string(20000, ']') << "}\n";
+  require_clear_error(render(gltf.string()), "deep.gltf:1: JSON nested deeper than 512 levels");
 }
 
 TEST_CASE("Bad input: a film of 100000x100000 pixels is refused before anything is allocated", "[bad_input]") {

@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <filesystem>
 #include <functional>
 #include <glm/gtc/matrix_transform.hpp>
@@ -37,6 +38,20 @@ std::string lower(std::string s) {
   return s;
 }
 
+// tinygltf's image decoder for PNG and JPEG only, glTF 2.0's image formats:
+// anything else is refused before stb_image sees it (the stb_image Debian ships
+// loops forever on some malformed HDR data, which a data: URI can hold).
+bool load_png_or_jpeg(tinygltf::Image* image, const int index, std::string* err, std::string* warn, int width,
+                      int height, const unsigned char* bytes, int size, void* user) {
+  const bool png = size >= 8 && std::memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
+  const bool jpeg = size >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF;
+  if (!png && !jpeg) {
+    if (err) *err += "images[" + std::to_string(index) + "] is neither PNG nor JPEG\n";
+    return false;
+  }
+  return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, user);
+}
+
 class GltfLoader {
  public:
   explicit GltfLoader(const std::string& path) : path_(path) {}
@@ -45,6 +60,8 @@ class GltfLoader {
     tinygltf::TinyGLTF loader;
     std::string err, warn;
     bool binary = lower(std::filesystem::path(path_).extension().string()) == ".glb";
+    check_json_depth(binary);
+    loader.SetImageLoader(load_png_or_jpeg, nullptr);
     bool ok = binary ? loader.LoadBinaryFromFile(&model_, &err, &warn, path_)
                      : loader.LoadASCIIFromFile(&model_, &err, &warn, path_);
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
@@ -149,6 +166,44 @@ class GltfLoader {
     stack.pop_back();
   }
 
+  // The JSON parser tinygltf uses recurses once per nested array or object: a
+  // file nested thousands deep would exhaust the stack. No glTF needs more than
+  // a few dozen levels; refuse more than kMaxJsonDepth before parsing. Counts
+  // brackets outside strings, in the whole file (a .glb's binary chunk only adds
+  // levels, so the JSON chunk within it is checked conservatively).
+  void check_json_depth(bool binary) const {
+    constexpr int kMaxJsonDepth = 512;
+    std::ifstream in(path_, std::ios::binary);
+    if (!in) return;  // tinygltf reports it
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    size_t begin = 0, end = text.size();
+    if (binary && text.size() >= 20) {  // header (12 bytes), then the JSON chunk's length and type
+      uint32_t length = 0;
+      std::memcpy(&length, text.data() + 12, 4);
+      begin = 20;
+      end = std::min(text.size(), size_t(20) + length);
+    }
+    int depth = 0, line = 1;
+    bool in_string = false, escaped = false;
+    for (size_t i = begin; i < end; ++i) {
+      const char c = text[i];
+      if (c == '\n') ++line;
+      if (in_string) {
+        if (escaped) escaped = false;
+        else if (c == '\\') escaped = true;
+        else if (c == '"') in_string = false;
+      } else if (c == '"') {
+        in_string = true;
+      } else if (c == '[' || c == '{') {
+        if (++depth > kMaxJsonDepth)
+          throw SceneError(path_, binary ? 0 : line,
+                           "JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+      } else if (c == ']' || c == '}') {
+        --depth;
+      }
+    }
+  }
+
   // --- buffers ------------------------------------------------------------------
 
   // The elements of accessor `index` as doubles, `components` per element
@@ -169,8 +224,11 @@ class GltfLoader {
       fail(where, "component type " + std::to_string(ct) + " is not supported for " + from);
     const size_t components = size_t(tinygltf::GetNumComponentsInType(uint32_t(type)));
     const size_t csize = size_t(tinygltf::GetComponentSizeInBytes(uint32_t(ct)));
-    std::vector<double> out(a.count * components, 0.0);
-    if (a.bufferView < 0) return out;  // no buffer view: all zeros (glTF 2.0, 3.6.2.3)
+    if (a.bufferView < 0) {  // no buffer view: all zeros (glTF 2.0, 3.6.2.3)
+      if (a.count > (size_t(1) << 28))
+        fail(where, "count " + std::to_string(a.count) + " is too large for an accessor without a bufferView");
+      return std::vector<double>(a.count * components, 0.0);
+    }
     if (size_t(a.bufferView) >= model_.bufferViews.size())
       fail(where, "bufferView " + std::to_string(a.bufferView) + " out of range");
     const tinygltf::BufferView& view = model_.bufferViews[size_t(a.bufferView)];
@@ -181,13 +239,18 @@ class GltfLoader {
     if (stride <= 0) fail(where, "invalid byte stride");
     const size_t element = components * csize;
     if (a.count > 0) {
-      // The last byte read must lie inside both the view and the buffer.
-      size_t last = a.byteOffset + size_t(stride) * (a.count - 1) + element;
-      if (view.byteOffset > buf.size() || view.byteLength > buf.size() - view.byteOffset || last > view.byteLength)
-        fail(where, std::to_string(a.count) + " elements do not fit in bufferView " + std::to_string(a.bufferView) +
-                        " (" + std::to_string(view.byteLength) + " bytes) or its buffer (" +
-                        std::to_string(buf.size()) + " bytes)");
+      // The last byte read must lie inside both the view and the buffer; compared
+      // without products or sums that could wrap around (a count or offset near 2^64).
+      const bool fits = view.byteOffset <= buf.size() && view.byteLength <= buf.size() - view.byteOffset &&
+                        a.byteOffset <= view.byteLength && element <= view.byteLength - a.byteOffset &&
+                        a.count - 1 <= (view.byteLength - a.byteOffset - element) / size_t(stride);
+      if (!fits)
+        fail(where, std::to_string(a.count) + " elements at byte offset " + std::to_string(a.byteOffset) +
+                        " do not fit in bufferView " + std::to_string(a.bufferView) + " (" +
+                        std::to_string(view.byteLength) + " bytes) or its buffer (" + std::to_string(buf.size()) +
+                        " bytes)");
     }
+    std::vector<double> out(a.count * components, 0.0);
     const unsigned char* base = buf.data() + view.byteOffset + a.byteOffset;
     for (size_t i = 0; i < a.count; ++i) {
       const unsigned char* p = base + size_t(stride) * i;

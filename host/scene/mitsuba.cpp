@@ -367,6 +367,19 @@ class MitsubaLoader {
     if (std::string(root.name()) != "scene")
       throw SceneError(path, file->line_of(root.offset_debug()),
                        std::string("the root element is <") + root.name() + ">, expected <scene>");
+    // The loader walks elements recursively: refuse a depth no scene needs (a
+    // scene nests a handful of levels) before that could exhaust the stack.
+    constexpr int kMaxDepth = 256;
+    std::vector<std::pair<pugi::xml_node, int>> stack = {{root, 1}};
+    while (!stack.empty()) {
+      auto [node, depth] = stack.back();
+      stack.pop_back();
+      if (depth > kMaxDepth)
+        throw SceneError(path, file->line_of(node.offset_debug()),
+                         "elements nested deeper than " + std::to_string(kMaxDepth) + " levels");
+      for (pugi::xml_node child : node.children())
+        if (child.type() == pugi::node_element) stack.emplace_back(child, depth + 1);
+    }
     roots_[file->doc.internal_object()] = file.get();
     files_.push_back(std::move(file));
     return *files_.back();

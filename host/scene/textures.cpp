@@ -10,7 +10,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 
@@ -57,10 +59,50 @@ Pixels load_exr(const std::string& path) {
   return p;
 }
 
+// Checks a Radiance HDR file's run-length encoded scanlines before stb_image
+// decodes them: the stb_image Debian ships loops forever on a run whose length
+// byte is 0, which is what it reads past the end of a truncated file. Throws on
+// a scanline that would not decode, or data cut short; flat (unencoded) files
+// and other formats pass unchecked.
+void check_hdr_runs(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string d((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  size_t at = d.find("\n\n");  // the header ends with an empty line
+  if (at == std::string::npos) return;
+  at += 2;
+  const size_t eol = d.find('\n', at);
+  if (eol == std::string::npos) return;
+  int height = 0, width = 0;
+  if (std::sscanf(d.substr(at, eol - at).c_str(), "-Y %d +X %d", &height, &width) != 2) return;  // stb refuses it
+  at = eol + 1;
+  if (width < 8 || width >= 32768 || height <= 0) return;  // never run-length encoded
+  auto byte = [&](size_t i) { return static_cast<unsigned char>(d[i]); };
+  for (int y = 0; y < height; ++y) {
+    if (at + 4 > d.size()) throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
+    if (byte(at) != 2 || byte(at + 1) != 2 || (byte(at + 2) & 0x80)) return;  // flat: stb reads it safely
+    if ((byte(at + 2) << 8 | byte(at + 3)) != width)
+      throw std::runtime_error("malformed HDR image: scanline " + std::to_string(y) + " has the wrong width");
+    at += 4;
+    for (int k = 0; k < 4; ++k)
+      for (int i = 0; i < width;) {
+        if (at >= d.size()) throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
+        int count = byte(at++);
+        const bool run = count > 128;
+        if (run) count -= 128;
+        if (count == 0 || count > width - i)
+          throw std::runtime_error("malformed HDR image: a bad run in scanline " + std::to_string(y));
+        at += run ? 1 : size_t(count);
+        if (at > d.size()) throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
+        i += count;
+      }
+  }
+}
+
 Pixels load_stb(const std::string& path, bool raw) {
   Pixels p;
   int comp = 0;
   bool hdr = stbi_is_hdr(path.c_str());
+  if (hdr) check_hdr_runs(path);
   bool wide = !hdr && stbi_is_16_bit(path.c_str());
   void* data = hdr ? static_cast<void*>(stbi_loadf(path.c_str(), &p.width, &p.height, &comp, 0))
                : wide ? static_cast<void*>(stbi_load_16(path.c_str(), &p.width, &p.height, &comp, 0))
