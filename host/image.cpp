@@ -16,6 +16,8 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
 #include <stdexcept>
 
@@ -24,15 +26,60 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// A temporary name in the target's folder, so the final rename is atomic.
+// An existing output that is neither a file nor a folder: a device or a pipe
+// (/dev/null), which the bytes go into rather than a rename replacing it.
+bool is_special(const fs::path& path) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);  // through symbolic links
+  return !ec && fs::exists(st) && !fs::is_regular_file(st) && !fs::is_directory(st);
+}
+
+// Where an output's bytes go: the file a symbolic link names (the link stays),
+// else the path itself.
+std::string output_target(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_symlink(fs::symlink_status(path, ec))) return path;
+  fs::path target = fs::weakly_canonical(path, ec);
+  return ec ? path : target.string();
+}
+
+// A temporary name in the target's folder, so the final rename is atomic (a
+// device's bytes are staged in the temporary folder instead).
 std::string temp_name(const std::string& path) {
   std::random_device rd;
   fs::path p(path);
-  return (p.parent_path() / ("." + p.filename().string() + ".tmp" + std::to_string(rd() % 1000000))).string();
+  fs::path dir = is_special(p) ? fs::temp_directory_path() : p.parent_path();
+  return (dir / ("." + p.filename().string() + ".tmp" + std::to_string(rd() % 1000000))).string();
 }
 
+// Writes all of `data` to the open descriptor `fd` and closes it; false on any error.
+bool write_all(int fd, const unsigned char* data, size_t size) {
+  bool ok = fd >= 0;
+  for (size_t done = 0; ok && done < size;) {
+    ssize_t n = ::write(fd, data + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    ok = n > 0;
+    if (ok) done += size_t(n);
+  }
+  if (fd >= 0 && ::close(fd) != 0) ok = false;
+  return ok;
+}
+
+// Replaces `path` by the finished temporary file `tmp` (a rename: readers see the
+// old file or the new one, never a part), or for a device copies the bytes into it.
 void commit(const std::string& tmp, const std::string& path) {
   std::error_code ec;
+  if (is_special(path)) {
+    std::ifstream in(tmp, std::ios::binary);
+    std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const int saved = [&] {
+      errno = 0;
+      return write_all(::open(path.c_str(), O_WRONLY), bytes.data(), bytes.size()) ? 0 : (errno ? errno : EIO);
+    }();
+    fs::remove(tmp, ec);
+    if (saved) throw std::runtime_error(path + ": cannot write: " + std::strerror(saved));
+    return;
+  }
   fs::rename(tmp, path, ec);
   if (ec) {
     fs::remove(tmp, ec);
@@ -63,8 +110,13 @@ Imath::Box2i data_window(const Imf::InputFile& file, int& width, int& height) {
 
 }  // namespace
 
-void check_writable(const std::string& path) {
+void check_writable(const std::string& path_in) {
+  const std::string path = output_target(path_in);
   fs::path p(path);
+  if (is_special(p)) {  // a device or pipe: written into, not replaced
+    if (access(path.c_str(), W_OK) != 0) throw std::invalid_argument(path_in + ": not writable");
+    return;
+  }
   if (p.filename().empty()) throw std::invalid_argument(path + ": output path names a folder, not a file");
   if (fs::is_directory(p)) throw std::invalid_argument(path + ": output path is a folder");
   fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
@@ -79,8 +131,9 @@ void check_writable(const std::string& path) {
   ::unlink(probe.c_str());
 }
 
-void write_exr(const std::string& path, const Image& image, const std::map<std::string, std::string>& attributes,
+void write_exr(const std::string& path_in, const Image& image, const std::map<std::string, std::string>& attributes,
                const std::vector<ExrLayer>& layers) {
+  const std::string path = output_target(path_in);
   std::string tmp = temp_name(path);
   try {
     Imf::Header header(image.width, image.height);
@@ -166,15 +219,28 @@ ExrFile read_exr_file(const std::string& path) {
   }
 }
 
-void write_png(const std::string& path, const Image& image, float exposure) {
+void write_png(const std::string& path_in, const Image& image, float exposure) {
+  const std::string path = output_target(path_in);
   std::vector<uint8_t> px(size_t(image.width) * image.height * 3);
   for (size_t i = 0; i < px.size(); ++i)
     px[i] = uint8_t(std::lround(255.0f * srgb_encode(image.rgb[i] * exposure)));
+  // Encoded in memory and written here, where every write and the close are
+  // checked (stbi_write_png ignores a full disk, and would leave a cut-off file).
+  std::vector<unsigned char> png;
+  auto append = [](void* context, void* data, int size) {
+    auto* out = static_cast<std::vector<unsigned char>*>(context);
+    out->insert(out->end(), static_cast<unsigned char*>(data), static_cast<unsigned char*>(data) + size);
+  };
+  if (!stbi_write_png_to_func(append, &png, image.width, image.height, 3, px.data(), image.width * 3))
+    throw std::runtime_error(path + ": cannot encode PNG image");
   std::string tmp = temp_name(path);
-  if (!stbi_write_png(tmp.c_str(), image.width, image.height, 3, px.data(), image.width * 3)) {
+  errno = 0;
+  const bool ok = write_all(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644), png.data(), png.size());
+  const int err = errno;
+  if (!ok) {
     std::error_code ec;
     fs::remove(tmp, ec);
-    throw std::runtime_error(path + ": cannot write PNG file");
+    throw std::runtime_error(path + ": cannot write PNG file: " + std::strerror(err ? err : EIO));
   }
   commit(tmp, path);
 }

@@ -164,6 +164,11 @@ int run_render(const RenderArgs& a) {
   }
   std::string out = a.output.empty() ? "out/" + fs::path(a.scene).stem().string() + ".exr" : a.output;
   std::string png = fs::path(out).replace_extension(".png").string();
+  if (!a.no_png && png == out) {  // the preview would overwrite the image
+    std::cerr << "psf: --output " << out << ": the output is the OpenEXR image, and its PNG preview goes beside it "
+              << "with the extension .png; name it .exr (or add --no-png)\n";
+    return kExitBadInput;
+  }
   if (a.output.empty()) fs::create_directories("out");
   try {
     psf::check_writable(out);

@@ -184,6 +184,7 @@ ResumeState load_state(const std::string& path, const std::string& hash, const s
     st.next_batch = std::stoull(attr("psf:state_batches"));
     st.filter_off_after = std::stoull(attr("psf:filter_off_after"));
     acc.paths = std::stoull(attr("psf:state_paths"));
+    st.shown_paths = std::stoull(attr("psf:paths"));
   } catch (const std::logic_error&) {
     throw std::invalid_argument("--resume " + path + ": malformed state attributes");
   }
@@ -276,8 +277,11 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   const std::string hash = hash_of(o, scene);
   if (!o.resume.empty()) {
     resumed = load_state(o.resume, hash, options_text(ro), acc);
-    if (acc.paths > total)
-      throw std::invalid_argument("--resume " + o.resume + ": it already holds " + std::to_string(acc.paths / pixels) +
+    // Its image may hold more paths than its state (a last batch cut short by
+    // --spp): a render to fewer would replace a better image by a worse one.
+    const uint64_t held = std::max(acc.paths, resumed.shown_paths);
+    if (held > total)
+      throw std::invalid_argument("--resume " + o.resume + ": it already holds " + std::to_string(held / pixels) +
                                   " spp, more than --spp " + std::to_string(spp));
   }
 

@@ -48,6 +48,7 @@ struct ResumeState {
   int batch_log2 = 0;         // batch size of the run
   uint64_t next_batch = 0;    // batches in the state
   uint64_t filter_off_after = 0;
+  uint64_t shown_paths = 0;   // paths in the file's image (more than in the state when its last batch was partial)
 };
 
 // Hash of the scene file's bytes, the parameters and the film size (hex).

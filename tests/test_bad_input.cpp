@@ -103,6 +103,14 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       // a run-length encoded HDR cut short, on which stb_image loops forever
       {"truncated-hdr-envmap.xml", "truncated-rle.hdr: cannot read environment map: truncated HDR image"},
       {"hdr-image.gltf", "hdr-image.gltf: glTF parse error: images[0] is neither PNG nor JPEG"},
+      // an index past 2^32 that tinyobjloader wrapped around to vertex 3, and
+      // numbers finite in double precision but not in single
+      {"index-wraps-around.obj", "index-wraps-around.obj:4: face index 4294967299 is out of range"},
+      {"float-overflow.obj", "float-overflow.obj:3: vertex position is not finite"},
+      {"float-overflow.xml", "float-overflow.xml:2: attribute 'value': '1e39' is not a number"},
+      // a folder where a file belongs
+      {"include-folder.xml", "bad/.' is a folder"},
+      {"mtllib-folder.obj", "mtllib-folder.obj:1: mtllib '.' is a folder"},
   };
   for (const auto& [file, where] : cases) {
     SECTION(file) { require_clear_error(render(bad(file)), where); }
@@ -212,10 +220,50 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     CHECK(r.status == 2);
     CHECK(contains(r.output, "/proc/psf-bad-input.exr"));
   }
+  SECTION("the scene is a folder") {
+    fs::create_directories(dir / "folder.obj");
+    Outcome f = render((dir / "folder.obj").string());
+    require_clear_error(f, "folder.obj: is a folder, not a scene file");
+  }
   SECTION("the output folder does not exist") {
     Run r = run("render " + bad("degenerate.obj") + " --spp 1 -o " + (dir / "nope" / "x.exr").string());
     CHECK(r.status == 2);
     CHECK(contains(r.output, "does not exist"));
+  }
+  SECTION("an output named .png: its preview would overwrite the image") {
+    Run r = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 -o " + (dir / "x.png").string());
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(contains(r.output, (dir / "x.png").string() + ": the output is the OpenEXR image"));
+    CHECK_FALSE(fs::exists(dir / "x.png"));
+  }
+  SECTION("a symbolic link or a device as the output: written through, not replaced") {
+    std::ofstream(dir / "target.exr") << "old";
+    fs::create_symlink("target.exr", dir / "link.exr");
+    Run r = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 -o " + (dir / "link.exr").string());
+    INFO(r.output);
+    CHECK(r.status == 0);
+    CHECK(fs::is_symlink(dir / "link.exr"));
+    CHECK(psf::read_exr((dir / "target.exr").string()).width == 8);
+    CHECK(fs::exists(dir / "link.png"));  // the preview beside the name given
+    Run null = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 --no-png -o /dev/null");
+    INFO(null.output);
+    CHECK(null.status == 0);
+    CHECK(fs::is_character_file("/dev/null"));
+  }
+  SECTION("--resume of a one-batch render to fewer spp than its image holds") {
+    // Its state holds no finished batch (the only one was cut short by --spp),
+    // but its image holds 4 spp: a render to 2 would replace it by a worse one.
+    fs::path out = dir / "r.exr";
+    Run first = run("render " + bad("degenerate.obj") + " --spp 4 --width 8 --height 8 --no-png -o " + out.string());
+    REQUIRE(first.status == 0);
+    const std::string before = read_file(out);
+    Run again = run("render " + bad("degenerate.obj") + " --spp 2 --width 8 --height 8 --no-png --resume " +
+                    out.string() + " -o " + out.string());
+    INFO(again.output);
+    CHECK(again.status == 2);
+    CHECK(contains(again.output, "it already holds 4 spp, more than --spp 2"));
+    CHECK(read_file(out) == before);
   }
   SECTION("--resume of a file that is not OpenEXR") {
     Outcome o = render(bad("degenerate.obj"), "--resume " + bad("not-an-exr.exr"));

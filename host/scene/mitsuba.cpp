@@ -159,13 +159,14 @@ std::string_view trim(std::string_view s) {
   return s;
 }
 
-// A finite decimal number spanning all of `s` (blanks around it allowed).
+// A decimal number spanning all of `s` (blanks around it allowed), finite as a
+// float too (scenes are rendered in single precision: 1e39 would be infinite).
 std::optional<double> parse_number(std::string_view s) {
   std::string t(trim(s));
   if (t.empty()) return std::nullopt;
   char* end = nullptr;
   double v = std::strtod(t.c_str(), &end);
-  if (end != t.c_str() + t.size() || !std::isfinite(v)) return std::nullopt;
+  if (end != t.c_str() + t.size() || !std::isfinite(v) || !std::isfinite(float(v))) return std::nullopt;
   return v;
 }
 
@@ -348,6 +349,10 @@ class MitsubaLoader {
   // --- files, locations, messages -----------------------------------------
 
   XmlFile& open(const std::string& path, pugi::xml_node from) {
+    if (fs::is_directory(path)) {
+      if (from) fail(from, "included file '" + path + "' is a folder");
+      throw SceneError(path, 0, "is a folder, not a scene file");
+    }
     std::ifstream in(path, std::ios::binary);
     if (!in) {
       if (from) fail(from, "cannot open included file '" + path + "'");
@@ -452,7 +457,8 @@ class MitsubaLoader {
     std::optional<std::string> v = attr(node, name);
     if (!v) return fallback;
     std::optional<double> x = parse_number(*v);
-    if (!x) fail(node, std::string("attribute '") + name + "': '" + *v + "' is not a number");
+    if (!x)
+      fail(node, std::string("attribute '") + name + "': '" + *v + "' is not a number (finite in single precision)");
     return *x;
   }
 
@@ -467,7 +473,9 @@ class MitsubaLoader {
     std::vector<double> out;
     for (const std::string& token : split_list(v)) {
       std::optional<double> x = parse_number(token);
-      if (!x) fail(node, std::string("attribute '") + name + "': '" + token + "' is not a number");
+      if (!x)
+        fail(node,
+             std::string("attribute '") + name + "': '" + token + "' is not a number (finite in single precision)");
       out.push_back(*x);
     }
     if (std::find(counts.begin(), counts.end(), out.size()) == counts.end()) {

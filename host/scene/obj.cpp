@@ -83,9 +83,43 @@ void check_finite_vertices(const std::string& text, const std::string& path) {
       char* next = nullptr;
       double x = std::strtod(c, &next);
       if (next == c) break;
-      if (!std::isfinite(x)) throw SceneError(path, line, "vertex position is not finite: v" + rest);
+      if (!std::isfinite(x) || !std::isfinite(float(x)))  // 1e39 is finite, but not as a float
+        throw SceneError(path, line, "vertex position is not finite: v" + rest);
       c = next;
     }
+    return true;
+  });
+}
+
+// Throws if a face's index (of a position, texture coordinate or normal) lies
+// outside the range of an int: tinyobjloader's parser wraps it around, so that
+// 4294967299 would be vertex 3.
+void check_face_index_range(const std::string& text, const std::string& path) {
+  for_each_keyword_line(text, "f", [&](int line, const char* b, const char* e) {
+    for (const char* c = b; c < e && *c != '#';) {
+      if (*c == '-' || (*c >= '0' && *c <= '9')) {
+        const char* start = c;
+        if (*c == '-') ++c;
+        while (c < e && *c == '0') ++c;  // leading zeros
+        const char* digits = c;
+        while (c < e && *c >= '0' && *c <= '9') ++c;
+        if (c - digits > 10 || (c - digits == 10 && std::string(digits, c) > "2147483647"))
+          throw SceneError(path, line, "face index " + std::string(start, c) + " is out of range");
+      } else {
+        ++c;
+      }
+    }
+    return true;
+  });
+}
+
+// Throws if an mtllib names a folder: reading one throws deep inside the reader.
+void check_mtllib_files(const std::string& text, const std::string& path, const std::string& base_dir) {
+  for_each_keyword_line(text, "mtllib", [&](int line, const char* b, const char* e) {
+    std::istringstream names(std::string(b, e));
+    for (std::string name; names >> name;)
+      if (std::filesystem::is_directory(std::filesystem::path(base_dir.empty() ? "." : base_dir) / name))
+        throw SceneError(path, line, "mtllib '" + name + "' is a folder, not an MTL file");
     return true;
   });
 }
@@ -116,6 +150,8 @@ ObjData read_obj(const std::string& path, bool with_materials) {
   std::string warn, err;
   std::istringstream stream(text);
   std::string base_dir = std::filesystem::path(path).parent_path().string();
+  check_face_index_range(text, path);
+  if (with_materials) check_mtllib_files(text, path, base_dir);
   tinyobj::MaterialFileReader mtl_reader(base_dir.empty() ? "." : base_dir);
   bool ok = tinyobj::LoadObj(&attrib, &shapes, &materials, &warn, &err, &stream, with_materials ? &mtl_reader : nullptr,
                              /*triangulate=*/false,

@@ -92,6 +92,7 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
+  if (std::filesystem::is_directory(path)) throw SceneError(path, 0, "is a folder, not a scene file");
   if (ext == ".xml") return detail::load_mitsuba(path, params);
   Scene scene;
   if (ext == ".obj") scene = detail::load_obj_scene(path);
