@@ -111,6 +111,7 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       // a folder where a file belongs
       {"include-folder.xml", "bad/.' is a folder"},
       {"mtllib-folder.obj", "mtllib-folder.obj:1: mtllib '.' is a folder"},
+      {"not-an-obj.obj", "not-an-obj.obj: no faces"},
   };
   for (const auto& [file, where] : cases) {
     SECTION(file) { require_clear_error(render(bad(file)), where); }

@@ -583,6 +583,9 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
 
 Scene load_obj_scene(const std::string& path) {
   ObjData obj = read_obj(path, true);
+  // A file given to render must draw something: a binary file, or a PLY named
+  // .obj, parses as an OBJ without faces.
+  if (obj.mesh.triangles.empty()) throw SceneError(path, 0, "no faces: nothing to render (is it an OBJ file?)");
   Scene scene;
   scene.warnings = obj.warnings;
   TextureStore store(scene);
