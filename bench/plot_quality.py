@@ -40,10 +40,11 @@ def main():
     import matplotlib.ticker
 
     os.makedirs(args.out, exist_ok=True)
-    labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations"}
+    labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations",
+              "psf4": "path space filtering, 4 iterations"}
     for scene, methods in curves.items():
         fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
-        for name in ("pt", "psf", "psf2"):
+        for name in ("pt", "psf", "psf2", "psf4"):
             pts = sorted(methods.get(name, []))
             if not pts:
                 continue

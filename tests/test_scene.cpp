@@ -7,13 +7,17 @@
 // curves (the loader uses an analytic fit of them).
 #include <unistd.h>
 
+#include <Imath/half.h>
+
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include "scene/loaders.h"
+#include "scene/materials.h"
 #include "scene/scene.h"
 #include "support.h"
 
@@ -1282,4 +1286,28 @@ TEST_CASE("Shared scenes load", "[scene]") {
     }
     for (const std::string& w : s->warnings) CHECK(w.find("scene.xml:") != std::string::npos);
   }
+}
+
+TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's range as 65504, with warnings", "[scene]") {
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  psf::detail::TextureDesc d;
+  d.path = "hdr-emission.exr";
+  const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> rgba = {std::nanf(""), 1.0f, -inf, 1.0f, 1e5f, 0.5f, -2e5f, 1.0f};
+  const uint32_t t = store.pixels(d, 2, 1, rgba);
+  const TextureInfo& info = scene.textures.at(t);
+  auto texel = [&](size_t i, int c) {
+    Imath::half h;
+    h.setBits(scene.texels.at((size_t(info.offset) + i) * 4 + size_t(c)));
+    return float(h);
+  };
+  CHECK(texel(0, 0) == 0.0f);
+  CHECK(texel(0, 1) == 1.0f);
+  CHECK(texel(0, 2) == 0.0f);
+  CHECK(texel(1, 0) == 65504.0f);
+  CHECK(texel(1, 1) == 0.5f);
+  CHECK(texel(1, 2) == -65504.0f);
+  CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values are NaN or infinite; read as 0") == 1);
+  CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values exceed 65504") == 1);
 }

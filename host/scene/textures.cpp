@@ -223,10 +223,31 @@ uint32_t TextureStore::append(const TextureDesc& d, int width, int height, const
   t.flags = (d.bilinear ? PSF_TEX_BILINEAR : 0u) | d.wrap;
   scene_.texels.reserve(scene_.texels.size() + n * 4);
   glm::dvec3 sum(0.0);
+  // Texels are halfs: a NaN or infinite value reads as 0 and one beyond the
+  // largest half (65504) as that, with a warning each, where the half would
+  // have been NaN or infinite and every path reading it lost.
+  size_t nonfinite = 0, clamped = 0;
   for (size_t i = 0; i < n; ++i) {
-    for (int c = 0; c < 4; ++c) scene_.texels.push_back(Imath::half(rgba[i * 4 + c]).bits());
-    sum += glm::dvec3(rgba[i * 4], rgba[i * 4 + 1], rgba[i * 4 + 2]);
+    float v[4];
+    for (int c = 0; c < 4; ++c) {
+      v[c] = rgba[i * 4 + c];
+      if (!std::isfinite(v[c])) {
+        v[c] = 0.0f;
+        ++nonfinite;
+      } else if (std::fabs(v[c]) > 65504.0f) {
+        v[c] = std::copysign(65504.0f, v[c]);
+        ++clamped;
+      }
+      scene_.texels.push_back(Imath::half(v[c]).bits());
+    }
+    sum += glm::dvec3(v[0], v[1], v[2]);
   }
+  const std::string name = d.path.empty() ? "a texture" : d.path;
+  if (nonfinite)
+    scene_.warnings.push_back(name + ": " + std::to_string(nonfinite) + " texel values are NaN or infinite; read as 0");
+  if (clamped)
+    scene_.warnings.push_back(name + ": " + std::to_string(clamped) +
+                              " texel values exceed 65504, the largest a half holds; read as 65504");
   uint32_t index = uint32_t(scene_.textures.size());
   scene_.textures.push_back(t);
   means_[index] = n ? glm::vec3(sum / double(n)) : glm::vec3(0.0f);
