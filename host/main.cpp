@@ -301,7 +301,15 @@ int run_render(const RenderArgs& a) {
 // box-filtered to the test's size when it is an integer multiple of it) and
 // block luminance statistics.
 int run_compare(const std::string& test_path, const std::string& ref_path, int blocks_x, int blocks_y) {
-  psf::Image test = psf::read_exr(test_path), ref = psf::read_exr(ref_path);
+  // An input that is not a readable OpenEXR image is bad input (exit 2), as for render.
+  auto read = [](const std::string& path) {
+    try {
+      return psf::read_exr(path);
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument(e.what());
+    }
+  };
+  psf::Image test = read(test_path), ref = read(ref_path);
   std::printf("test %s: %dx%d; reference %s: %dx%d\n", test_path.c_str(), test.width, test.height, ref_path.c_str(),
               ref.width, ref.height);
   psf::Image ref_at_test = ref;

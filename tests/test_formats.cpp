@@ -1089,6 +1089,10 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   CHECK(run("compare " + pa + " " + pb + " --blocks 4x2", out) == 0);
   CHECK(contains(out, "blocks 4x2"));
   CHECK(run("compare " + pa + " " + pb + " --blocks four", out) == 2);
+  // An input that is not OpenEXR: bad input, exit 2, naming it.
+  const std::string junk = dir.write("junk.exr", "not an image");
+  CHECK(run("compare " + junk + " " + pb, out) == 2);
+  CHECK(contains(out, "junk.exr"));
 }
 
 TEST_CASE("OBJ and PLY: vertex colours are read, and then are the default material's colour", "[formats]") {
