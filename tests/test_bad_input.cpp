@@ -112,6 +112,9 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"include-folder.xml", "bad/.' is a folder"},
       {"mtllib-folder.obj", "mtllib-folder.obj:1: mtllib '.' is a folder"},
       {"not-an-obj.obj", "not-an-obj.obj: no faces"},
+      // negative values glTF forbids, which were ignored without a word
+      {"negative-mesh-index.gltf", "negative-mesh-index.gltf: nodes[0]: mesh index -5 out of range"},
+      {"negative-light.gltf", "negative-light.gltf: KHR_lights_punctual.lights[0]: intensity and color must be"},
   };
   for (const auto& [file, where] : cases) {
     SECTION(file) { require_clear_error(render(bad(file)), where); }

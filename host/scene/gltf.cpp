@@ -156,6 +156,9 @@ class GltfLoader {
     glm::mat4 m = parent * local_transform(node, where);
     for (int k = 0; k < 16; ++k)
       if (!std::isfinite(glm::value_ptr(m)[k])) fail(where, "the transform is not finite");
+    // tinygltf marks an absent index -1; any other negative one is malformed.
+    if (node.mesh < -1) fail(where, "mesh index " + std::to_string(node.mesh) + " out of range");
+    if (node.camera < -1) fail(where, "camera index " + std::to_string(node.camera) + " out of range");
     if (node.mesh >= 0) add_mesh(node.mesh, m, where);
     if (node.camera >= 0) add_camera(node.camera, m, where);
     auto ext = node.extensions.find("KHR_lights_punctual");
@@ -299,6 +302,8 @@ class GltfLoader {
                "vertex position is not finite");
       }
       std::vector<uint32_t> idx;
+      if (prim.indices < -1) fail(where, "indices " + std::to_string(prim.indices) + " out of range");
+      if (prim.material < -1) fail(where, "material " + std::to_string(prim.material) + " out of range");
       if (prim.indices >= 0) {
         std::vector<double> raw = read_accessor(prim.indices, TINYGLTF_TYPE_SCALAR, where + ".indices", true, false);
         idx.resize(raw.size());
@@ -779,6 +784,8 @@ class GltfLoader {
     LightDesc l;
     glm::vec3 color(1.0f);
     if (g.color.size() == 3) color = glm::vec3(float(g.color[0]), float(g.color[1]), float(g.color[2]));
+    if (!(g.intensity >= 0.0) || !std::isfinite(g.intensity) || glm::any(glm::lessThan(color, glm::vec3(0.0f))))
+      fail(where, "intensity and color must be finite and not negative (KHR_lights_punctual)");
     l.color = glm::max(color * float(g.intensity), glm::vec3(0.0f));
     l.position = glm::vec3(m * glm::vec4(0, 0, 0, 1));
     glm::vec3 dir = glm::mat3(m) * glm::vec3(0, 0, -1);
