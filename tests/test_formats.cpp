@@ -840,7 +840,7 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     CHECK((d.flags & PSF_MATFLAG_ROUGH_TABLE2D) != 0u);
     CHECK(s.textures[d.tex_table].height == PSF_ROUGH_TABLE_ROWS);
   }
-  SECTION("KHR_texture_transform: u' = offset + R(rotation) S(scale) u") {
+  SECTION("KHR_texture_transform: u' = offset + R(rotation) S(scale) u, as its worked example") {
     const unsigned char px[] = {200, 100, 50};
     std::string json = replaced(gltf_json(embedded), "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]",
                                 "\"baseColorFactor\": [1, 1, 1, 1], \"baseColorTexture\": {\"index\": 0, "
@@ -851,14 +851,30 @@ TEST_CASE("glTF: malformed files and unsupported features", "[formats]") {
     const Material& m = s.materials[s.tri_material[0]];
     REQUIRE(m.tex_color != PSF_NO_TEXTURE);
     const TextureInfo& t = s.textures.at(m.tex_color);
-    // The extension's GLSL: columns (cos, sin), (-sin, cos) of the rotation.
+    // u' = cos(a) sx u + sin(a) sy v + ox, v' = -sin(a) sx u + cos(a) sy v + oy.
     const float c = std::cos(0.5f), sn = std::sin(0.5f);
     CHECK(t.uv_u.s[0] == Approx(2 * c));
-    CHECK(t.uv_u.s[1] == Approx(-3 * sn));
+    CHECK(t.uv_u.s[1] == Approx(3 * sn));
     CHECK(t.uv_u.s[2] == Approx(0.25f));
-    CHECK(t.uv_v.s[0] == Approx(2 * sn));
+    CHECK(t.uv_v.s[0] == Approx(-2 * sn));
     CHECK(t.uv_v.s[1] == Approx(3 * c));
     CHECK(t.uv_v.s[2] == Approx(-0.5f));
+    // The extension's worked example: offset [0, 1], rotation pi/2, scale 0.5
+    // "utilizes only the lower left quadrant of the source image" (u in [0, 0.5],
+    // v in [0.5, 1], v running down the image).
+    std::string example = replaced(gltf_json(embedded), "\"baseColorFactor\": [0.2, 0.4, 0.6, 1]",
+                                   "\"baseColorFactor\": [1, 1, 1, 1], \"baseColorTexture\": {\"index\": 0, "
+                                   "\"extensions\": {\"KHR_texture_transform\": {\"offset\": [0, 1], "
+                                   "\"rotation\": 1.57079632679, \"scale\": [0.5, 0.5]}}}");
+    psf::Scene e = psf::load_scene(dir.write("example.gltf", with_image(example, png_bytes(1, 1, 3, px))));
+    const TextureInfo& te = e.textures.at(e.materials[e.tri_material[0]].tex_color);
+    for (float u : {0.0f, 1.0f})
+      for (float v : {0.0f, 1.0f}) {
+        const float tu = te.uv_u.s[0] * u + te.uv_u.s[1] * v + te.uv_u.s[2];
+        const float tv = te.uv_v.s[0] * u + te.uv_v.s[1] * v + te.uv_v.s[2];
+        CHECK(tu == Approx(0.5f * v).margin(1e-6));
+        CHECK(tv == Approx(1.0f - 0.5f * u).margin(1e-6));
+      }
   }
   SECTION("KHR_materials_transmission and KHR_materials_ior: glass") {
     const std::string m0 = "\"metallicFactor\": 0}, \"doubleSided\": true";
@@ -1204,4 +1220,26 @@ TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its mater
   CHECK(line == 4);
   CHECK(contains(message, "m.mtl"));
   CHECK(contains(message, "material 'big': Ks is not a finite number"));
+}
+
+TEST_CASE("Mitsuba mask: a bitmap's opacity is its luminance (Mitsuba 3) or its alpha (0.5 files)", "[formats]") {
+  // Mitsuba 3 reads a bitmap's RGB only; Bitterli's 0.5 files cut their leaves
+  // out by the images' alpha, as Tungsten renders them.
+  TempDir dir;
+  const unsigned char px[] = {200, 100, 50, 64};
+  dir.write("leaf.png", png_bytes(1, 1, 4, px));
+  auto mask = [&](const std::string& version) {
+    psf::Scene s = psf::load_scene(dir.write(
+        "mask" + version + ".xml",
+        "<scene version=\"" + version +
+            "\"><shape type=\"rectangle\"><bsdf type=\"mask\"><texture type=\"bitmap\" name=\"opacity\">"
+            "<string name=\"filename\" value=\"leaf.png\"/></texture><bsdf type=\"diffuse\"/></bsdf></shape></scene>\n"));
+    const Material& m = s.materials.at(s.tri_material.at(0));
+    REQUIRE(m.tex_opacity != PSF_NO_TEXTURE);
+    return texel_x(s, m.tex_opacity, 0);
+  };
+  auto linear = [](double e) { return e <= 0.04045 ? e / 12.92 : std::pow((e + 0.055) / 1.055, 2.4); };
+  const double lum = 0.212671 * linear(200 / 255.0) + 0.715160 * linear(100 / 255.0) + 0.072169 * linear(50 / 255.0);
+  CHECK(mask("3.0.0") == Approx(lum).epsilon(2e-3));      // a half's precision
+  CHECK(mask("0.5.0") == Approx(64 / 255.0).epsilon(2e-3));
 }

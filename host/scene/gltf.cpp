@@ -702,8 +702,11 @@ class GltfLoader {
 
   // Filtering and wrapping of texture `index` from its sampler, and the uv
   // transform of KHR_texture_transform in the textureInfo's `extensions` (u' =
-  // T R S u: offset, rotation by +angle as the extension's GLSL, scale); `warn`:
-  // report what is not supported.
+  // T R S u: offset, rotation, scale), with u' = cos u + sin v and v' = -sin u +
+  // cos v for the rotation, as the extension's worked example (offset [0, 1],
+  // rotation pi/2, scale 0.5: the image's lower left quadrant) and the sample
+  // viewers read it (its GLSL listing has the opposite sign: glTF issue 1563);
+  // `warn`: report what is not supported.
   TextureDesc texture_desc(int index, const tinygltf::ExtensionMap& extensions, bool warn) {
     const tinygltf::Texture& tex = model_.textures[size_t(index)];
     TextureDesc desc;
@@ -722,8 +725,8 @@ class GltfLoader {
       const glm::dvec2 offset = pair("offset", 0.0), scale = pair("scale", 1.0);
       const double angle = t.Has("rotation") ? number(t.Get("rotation"), 0.0) : 0.0;
       const double c = std::cos(angle), sn = std::sin(angle);
-      desc.uv_u = glm::vec3(float(c * scale.x), float(-sn * scale.y), float(offset.x));
-      desc.uv_v = glm::vec3(float(sn * scale.x), float(c * scale.y), float(offset.y));
+      desc.uv_u = glm::vec3(float(c * scale.x), float(sn * scale.y), float(offset.x));
+      desc.uv_v = glm::vec3(float(-sn * scale.x), float(c * scale.y), float(offset.y));
       if (warn && t.Has("texCoord") && number(t.Get("texCoord"), 0.0) != 0.0)
         warn_once("KHR_texture_transform texCoord != 0: using TEXCOORD_0");
     }

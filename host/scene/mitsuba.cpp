@@ -2035,7 +2035,10 @@ class MitsubaLoader {
   // a height texture (luminance) times `scale` (Mitsuba 3; Mitsuba 0.5 scales
   // with a `scale` texture around the bitmap).
   Bsdf bsdf_bumpmap(const Element& e) {
-    check_properties(e, {"scale", "map", "texture"});
+    // The height texture may have any name (Mitsuba's own example calls it "arbitrary").
+    for (const auto& [name, p] : e.props)
+      if (name != "scale" && !(p.kind == Property::Kind::Object && std::string(p.object.name()) == "texture"))
+        warn(p.node, "bsdf:bumpmap:" + name, "property '" + name + "' of bsdf 'bumpmap' is not supported; ignored");
     Bsdf b = bsdf(nested_bsdf(e));
     std::vector<pugi::xml_node> textures = objects(e, "texture");
     if (textures.empty()) fail(e.node, "<bsdf type=\"bumpmap\"> needs a height texture");
@@ -2095,7 +2098,11 @@ class MitsubaLoader {
     uint32_t index = PSF_NO_TEXTURE;
     if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture") {
       opacity = 1.0f;
-      index = texture(p->object, TextureUse::Opacity, "opaque");
+      // Mitsuba 3 reads a bitmap's RGB only: the opacity is their luminance, and
+      // an alpha channel is ignored. For Mitsuba 0.5 files (Bitterli's scenes, whose
+      // leaves are RGBA images cut out by their alpha, as Tungsten renders them)
+      // the alpha channel where the image has one.
+      index = texture(p->object, version_major_ >= 2 ? TextureUse::Height : TextureUse::Opacity, "opaque");
     } else if (p) {
       glm::vec3 c = get_color(e, "opacity", ColorUse::Reflectance).value_or(glm::vec3(0.5f));
       if (c.x != c.y || c.y != c.z)
