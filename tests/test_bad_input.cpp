@@ -114,6 +114,7 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"not-an-obj.obj", "not-an-obj.obj: no faces"},
       // negative values glTF forbids, which were ignored without a word
       {"negative-mesh-index.gltf", "negative-mesh-index.gltf: nodes[0]: mesh index -5 out of range"},
+      {"sparse-index-out-of-range.gltf", "sparse-index-out-of-range.gltf: accessors[0].sparse.indices[0]: index 7"},
       {"negative-light.gltf", "negative-light.gltf: KHR_lights_punctual.lights[0]: intensity and color must be"},
   };
   for (const auto& [file, where] : cases) {

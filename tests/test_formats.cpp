@@ -1243,3 +1243,15 @@ TEST_CASE("Mitsuba mask: a bitmap's opacity is its luminance (Mitsuba 3) or its 
   CHECK(mask("3.0.0") == Approx(lum).epsilon(2e-3));      // a half's precision
   CHECK(mask("0.5.0") == Approx(64 / 255.0).epsilon(2e-3));
 }
+
+TEST_CASE("glTF: a sparse accessor's values replace the elements it names", "[formats]") {
+  // A quad at z = 0 whose POSITION accessor replaces vertex 2, (1, 1, 0), by
+  // (1, 1, -1) through one sparse substitution (unsigned short index 2).
+  psf::Scene s = psf::load_scene(psf::test::source_path("tests/data/gltf/sparse.gltf"));
+  CHECK(s.warnings.empty());
+  REQUIRE(s.positions.size() == 4);
+  CHECK(s.positions[0] == glm::vec3(-1, -1, 0));
+  CHECK(s.positions[1] == glm::vec3(1, -1, 0));
+  CHECK(s.positions[2] == glm::vec3(1, 1, -1));
+  CHECK(s.positions[3] == glm::vec3(-1, 1, 0));
+}

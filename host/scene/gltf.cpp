@@ -216,7 +216,6 @@ class GltfLoader {
     if (index < 0 || size_t(index) >= model_.accessors.size())
       fail(from, "accessor index " + std::to_string(index) + " out of range");
     const tinygltf::Accessor& a = model_.accessors[size_t(index)];
-    if (a.sparse.isSparse) fail(where, "sparse accessors are not supported");
     if (a.type != type) fail(where, "unexpected accessor type for " + from);
     const int ct = a.componentType;
     bool is_float = ct == TINYGLTF_COMPONENT_TYPE_FLOAT;
@@ -227,10 +226,24 @@ class GltfLoader {
       fail(where, "component type " + std::to_string(ct) + " is not supported for " + from);
     const size_t components = size_t(tinygltf::GetNumComponentsInType(uint32_t(type)));
     const size_t csize = size_t(tinygltf::GetComponentSizeInBytes(uint32_t(ct)));
-    if (a.bufferView < 0) {  // no buffer view: all zeros (glTF 2.0, 3.6.2.3)
+    // One component at q, as a double (normalised integers to [0, 1] or [-1, 1]).
+    auto decode = [&](const unsigned char* q) {
+      switch (ct) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); return double(f); }
+        case TINYGLTF_COMPONENT_TYPE_BYTE: { int8_t x; std::memcpy(&x, q, 1); return a.normalized ? std::max(x / 127.0, -1.0) : x; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: { uint8_t x; std::memcpy(&x, q, 1); return a.normalized ? x / 255.0 : x; }
+        case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t x; std::memcpy(&x, q, 2); return a.normalized ? std::max(x / 32767.0, -1.0) : x; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t x; std::memcpy(&x, q, 2); return a.normalized ? x / 65535.0 : x; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t x; std::memcpy(&x, q, 4); return double(x); }
+        default: return 0.0;
+      }
+    };
+    if (a.bufferView < 0) {  // no buffer view: all zeros (glTF 2.0, 3.6.2.3), then the sparse values
       if (a.count > (size_t(1) << 28))
         fail(where, "count " + std::to_string(a.count) + " is too large for an accessor without a bufferView");
-      return std::vector<double>(a.count * components, 0.0);
+      std::vector<double> zeros(a.count * components, 0.0);
+      apply_sparse(a, where, components, csize, decode, zeros);
+      return zeros;
     }
     if (size_t(a.bufferView) >= model_.bufferViews.size())
       fail(where, "bufferView " + std::to_string(a.bufferView) + " out of range");
@@ -257,22 +270,58 @@ class GltfLoader {
     const unsigned char* base = buf.data() + view.byteOffset + a.byteOffset;
     for (size_t i = 0; i < a.count; ++i) {
       const unsigned char* p = base + size_t(stride) * i;
-      for (size_t c = 0; c < components; ++c) {
-        const unsigned char* q = p + c * csize;
-        double v = 0.0;
-        switch (ct) {
-          case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); v = f; break; }
-          case TINYGLTF_COMPONENT_TYPE_BYTE: { int8_t x; std::memcpy(&x, q, 1); v = a.normalized ? std::max(x / 127.0, -1.0) : x; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: { uint8_t x; std::memcpy(&x, q, 1); v = a.normalized ? x / 255.0 : x; break; }
-          case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t x; std::memcpy(&x, q, 2); v = a.normalized ? std::max(x / 32767.0, -1.0) : x; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t x; std::memcpy(&x, q, 2); v = a.normalized ? x / 65535.0 : x; break; }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t x; std::memcpy(&x, q, 4); v = x; break; }
-          default: break;
-        }
-        out[i * components + c] = v;
-      }
+      for (size_t c = 0; c < components; ++c) out[i * components + c] = decode(p + c * csize);
     }
+    apply_sparse(a, where, components, csize, decode, out);
     return out;
+  }
+
+  // The bytes [offset, offset + count * size) of bufferView `index`, checked to
+  // lie inside it and its buffer (without sums or products that could wrap).
+  const unsigned char* view_bytes(int index, size_t offset, size_t count, size_t size, const std::string& where) const {
+    if (index < 0 || size_t(index) >= model_.bufferViews.size())
+      fail(where, "bufferView " + std::to_string(index) + " out of range");
+    const tinygltf::BufferView& view = model_.bufferViews[size_t(index)];
+    if (view.buffer < 0 || size_t(view.buffer) >= model_.buffers.size())
+      fail("bufferViews[" + std::to_string(index) + "]", "buffer " + std::to_string(view.buffer) + " out of range");
+    const std::vector<unsigned char>& buf = model_.buffers[size_t(view.buffer)].data;
+    const bool fits = view.byteOffset <= buf.size() && view.byteLength <= buf.size() - view.byteOffset &&
+                      offset <= view.byteLength && size != 0 && count <= (view.byteLength - offset) / size;
+    if (!fits)
+      fail(where, std::to_string(count) + " elements of " + std::to_string(size) + " bytes at byte offset " +
+                      std::to_string(offset) + " do not fit in bufferView " + std::to_string(index));
+    return buf.data() + view.byteOffset + offset;
+  }
+
+  // A sparse accessor's substitutions (glTF 2.0, 3.6.2.3): element indices[k]
+  // takes values[k], both arrays tightly packed in their buffer views.
+  template <typename Decode>
+  void apply_sparse(const tinygltf::Accessor& a, const std::string& where, size_t components, size_t csize,
+                    const Decode& decode, std::vector<double>& out) const {
+    if (!a.sparse.isSparse) return;
+    const std::string at = where + ".sparse";
+    if (a.sparse.count < 1 || size_t(a.sparse.count) > a.count)
+      fail(at, "count " + std::to_string(a.sparse.count) + " out of range");
+    const size_t n = size_t(a.sparse.count);
+    const int it = a.sparse.indices.componentType;
+    const size_t isize = it == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE    ? 1
+                         : it == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? 2
+                         : it == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT   ? 4
+                                                                        : 0;
+    if (isize == 0) fail(at + ".indices", "component type " + std::to_string(it) + " is not an unsigned integer");
+    if (a.sparse.indices.byteOffset < 0 || a.sparse.values.byteOffset < 0) fail(at, "negative byteOffset");
+    const unsigned char* indices =
+        view_bytes(a.sparse.indices.bufferView, size_t(a.sparse.indices.byteOffset), n, isize, at + ".indices");
+    const unsigned char* values = view_bytes(a.sparse.values.bufferView, size_t(a.sparse.values.byteOffset), n,
+                                             components * csize, at + ".values");
+    for (size_t k = 0; k < n; ++k) {
+      uint32_t i = 0;
+      if (isize == 1) i = indices[k];
+      if (isize == 2) { uint16_t x; std::memcpy(&x, indices + 2 * k, 2); i = x; }
+      if (isize == 4) std::memcpy(&i, indices + 4 * k, 4);
+      if (i >= a.count) fail(at + ".indices[" + std::to_string(k) + "]", "index " + std::to_string(i) + " out of range");
+      for (size_t c = 0; c < components; ++c) out[size_t(i) * components + c] = decode(values + (k * components + c) * csize);
+    }
   }
 
   // --- meshes and materials -------------------------------------------------------
