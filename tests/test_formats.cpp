@@ -1255,3 +1255,35 @@ TEST_CASE("glTF: a sparse accessor's values replace the elements it names", "[fo
   CHECK(s.positions[2] == glm::vec3(1, 1, -1));
   CHECK(s.positions[3] == glm::vec3(-1, 1, 0));
 }
+
+TEST_CASE("OBJ without vn: smoothing groups shade smooth within a group, flat elsewhere", "[formats]") {
+  // A roof: two triangles meeting at the ridge (0, 1, 0)-(0, 1, 1) at a right angle.
+  TempDir dir;
+  const std::string roof = "v -1 0 0\nv 0 1 0\nv 0 1 1\nv 1 0 0\nv -1 0 1\nv 1 0 1\n";
+  const std::string faces = "f 1 3 2\nf 2 3 4\n";
+  // s off (or no s): flat, no vertex normals, the ridge's vertices shared as before.
+  psf::Scene flat = psf::load_scene(dir.write("flat.obj", roof + "s off\n" + faces));
+  CHECK(flat.normals.empty());
+  CHECK(flat.positions.size() == 4);
+  // s 1: the ridge's two vertices are shared and their normal is the mean of the
+  // two faces' (straight up), the others keep their face's.
+  psf::Scene smooth = psf::load_scene(dir.write("smooth.obj", roof + "s 1\n" + faces));
+  REQUIRE(smooth.normals.size() == smooth.positions.size());
+  CHECK(smooth.positions.size() == 4);
+  int up = 0;
+  for (size_t i = 0; i < smooth.positions.size(); ++i) {
+    const glm::vec3 n = glm::normalize(smooth.normals[i]);
+    if (smooth.positions[i].y == 1.0f) {
+      CHECK(n.y == Approx(1.0f).margin(1e-5));
+      ++up;
+    } else {
+      CHECK(std::fabs(n.x) == Approx(std::sqrt(0.5f)).margin(1e-5));  // the face's own, at 45 degrees
+    }
+  }
+  CHECK(up == 2);
+  // Groups 1 and 2: nothing shared across the ridge, each face flat again.
+  psf::Scene split = psf::load_scene(dir.write("split.obj", roof + "s 1\nf 1 3 2\ns 2\nf 2 3 4\n"));
+  REQUIRE(split.normals.size() == split.positions.size());
+  CHECK(split.positions.size() == 6);
+  for (const glm::vec3& n : split.normals) CHECK(std::fabs(glm::normalize(n).x) == Approx(std::sqrt(0.5f)).margin(1e-5));
+}

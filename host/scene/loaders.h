@@ -97,6 +97,11 @@ struct ObjData {
   std::vector<int> tri_material;       // index into `materials` per triangle, -1 without usemtl
   std::vector<ObjMaterial> materials;  // from the MTL library (empty unless requested)
   std::vector<std::string> warnings;   // tinyobjloader's warnings, each "file: message"
+  // With `with_materials`, a file without vn whose faces have smoothing groups
+  // (`s 1`): vertices are shared only within a group (faces of `s off` share
+  // none), so that vertex normals computed from the faces shade each group smooth
+  // and the rest flat.
+  bool smoothing_groups = false;
 };
 
 // Reads an OBJ file with its vt (v flipped to Mitsuba's convention) and vn, a

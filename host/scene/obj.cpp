@@ -227,6 +227,9 @@ ObjData read_obj(const std::string& path, bool with_materials) {
                      std::string("face ") + what + " index " + given + " out of range (the file has " +
                          std::to_string(count) + " " + what + (count == 1 ? "" : "s") + ")");
   };
+  if (num_normals == 0 && with_materials)
+    for (const tinyobj::shape_t& shape : shapes)
+      for (unsigned group : shape.mesh.smoothing_group_ids) data.smoothing_groups = data.smoothing_groups || group != 0;
   size_t face_index = 0;
   for (const tinyobj::shape_t& shape : shapes) {
     const tinyobj::mesh_t& mesh = shape.mesh;
@@ -247,7 +250,13 @@ ObjData read_obj(const std::string& path, bool with_materials) {
         if (ni >= 0 && size_t(ni) >= num_normals) out_of_range(face_index, "normal", ni, num_normals);
         if (ti < -1) ti = -1;
         if (ni < -1) ni = -1;
-        auto [it, inserted] = remap.emplace(std::array<int, 3>{idx, ti, ni}, uint32_t(corners.size()));
+        int key_n = ni;  // the key's third part: the normal, or without any, the smoothing group
+        if (data.smoothing_groups) {
+          const unsigned group = f < mesh.smoothing_group_ids.size() ? mesh.smoothing_group_ids[f] : 0u;
+          key_n = group != 0 ? -2 - int(group & 0x1fffffffu)                           // shared within the group
+                             : std::numeric_limits<int>::min() + int(face_index & 0x3fffffffu);  // this face's own
+        }
+        auto [it, inserted] = remap.emplace(std::array<int, 3>{idx, ti, key_n}, uint32_t(corners.size()));
         if (inserted) corners.push_back(it->first);
         uint32_t v = it->second;
         // Fan triangulation: (0, k-1, k) for k >= 2.
@@ -621,7 +630,9 @@ Scene load_obj_scene(const std::string& path) {
     tri_material[t] = default_material;
   }
 
-  // Vertex normals and uvs as the file gives them (no vn: flat shading, as the file asks for no smoothing).
+  // Vertex normals and uvs as the file gives them; without vn, smooth within the
+  // smoothing groups the file names (`s 1`) and flat elsewhere (`s off`, or no `s`).
+  if (obj.smoothing_groups) compute_vertex_normals(obj.mesh);
   scene.positions = std::move(obj.mesh.positions);
   scene.triangles = std::move(obj.mesh.triangles);
   scene.normals = std::move(obj.mesh.normals);
