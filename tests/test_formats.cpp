@@ -1287,3 +1287,16 @@ TEST_CASE("OBJ without vn: smoothing groups shade smooth within a group, flat el
   CHECK(split.positions.size() == 6);
   for (const glm::vec3& n : split.normals) CHECK(std::fabs(glm::normalize(n).x) == Approx(std::sqrt(0.5f)).margin(1e-5));
 }
+
+TEST_CASE("PLY: data after the last element the header declares is reported", "[formats]") {
+  TempDir dir;
+  const std::string header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                             "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  psf::Scene clean = psf::load_scene(dir.write("clean.ply", header + body + "\n\n"));
+  CHECK(clean.warnings.empty());
+  psf::Scene extra = psf::load_scene(dir.write("extra.ply", header + body + "7 7 7\n"));
+  REQUIRE(extra.warnings.size() == 1);
+  CHECK(contains(extra.warnings[0], "extra.ply: PLY data not used: 3 characters after the last element"));
+  CHECK(extra.triangles.size() == 1);
+}

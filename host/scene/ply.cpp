@@ -103,6 +103,13 @@ class BodyReader {
   // Bytes left (binary); used to reject impossible element counts early.
   size_t remaining() const { return data_.size() - std::min(pos_, data_.size()); }
   bool binary() const { return format_ != Format::Ascii; }
+  // Bytes after the last element that are not blank (ASCII) or at all (binary).
+  size_t trailing() const {
+    if (format_ != Format::Ascii) return remaining();
+    size_t n = 0;
+    for (size_t i = pos_; i < data_.size(); ++i) n += std::isspace(static_cast<unsigned char>(data_[i])) ? 0 : 1;
+    return n;
+  }
 
   double read(PlyType t) { return format_ == Format::Ascii ? read_ascii(t) : read_binary(t); }
 
@@ -388,6 +395,9 @@ PlyMesh read_ply(const std::string& path) {
     }
   }
   if (short_faces) out.ignored.push_back(std::to_string(short_faces) + " faces with fewer than 3 vertices");
+  if (const size_t extra = body.trailing())
+    out.ignored.push_back(std::to_string(extra) + (body.binary() ? " bytes" : " characters") +
+                          " after the last element the header declares");
   return out;
 }
 
