@@ -21,6 +21,7 @@
 #include <fstream>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
@@ -60,10 +61,22 @@ class GltfLoader {
     tinygltf::TinyGLTF loader;
     std::string err, warn;
     bool binary = lower(std::filesystem::path(path_).extension().string()) == ".glb";
-    check_json_depth(binary);
+    // Read once: checked for nesting, then parsed from memory (buffers and
+    // images relative to the file's folder).
+    std::ifstream in(path_, std::ios::binary);
+    if (!in) throw SceneError(path_, 0, "glTF parse error: cannot read the file");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text.empty()) throw SceneError(path_, 0, "glTF parse error: Empty file.");
+    if (text.size() > size_t(std::numeric_limits<unsigned int>::max()))
+      throw SceneError(path_, 0, "glTF parse error: the file is too large");
+    check_json_depth(text, binary);
     loader.SetImageLoader(load_png_or_jpeg, nullptr);
-    bool ok = binary ? loader.LoadBinaryFromFile(&model_, &err, &warn, path_)
-                     : loader.LoadASCIIFromFile(&model_, &err, &warn, path_);
+    const std::string base = std::filesystem::path(path_).parent_path().string();
+    bool ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
+                                                   reinterpret_cast<const unsigned char*>(text.data()),
+                                                   static_cast<unsigned int>(text.size()), base)
+                     : loader.LoadASCIIFromString(&model_, &err, &warn, text.data(),
+                                                  static_cast<unsigned int>(text.size()), base);
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
     for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
 
@@ -172,13 +185,9 @@ class GltfLoader {
   // The JSON parser tinygltf uses recurses once per nested array or object: a
   // file nested thousands deep would exhaust the stack. No glTF needs more than
   // a few dozen levels; refuse more than kMaxJsonDepth before parsing. Counts
-  // brackets outside strings, in the whole file (a .glb's binary chunk only adds
-  // levels, so the JSON chunk within it is checked conservatively).
-  void check_json_depth(bool binary) const {
+  // brackets outside strings in the JSON (a .glb's JSON chunk).
+  void check_json_depth(const std::string& text, bool binary) const {
     constexpr int kMaxJsonDepth = 512;
-    std::ifstream in(path_, std::ios::binary);
-    if (!in) return;  // tinygltf reports it
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     size_t begin = 0, end = text.size();
     if (binary && text.size() >= 20) {  // header (12 bytes), then the JSON chunk's length and type
       uint32_t length = 0;
@@ -245,29 +254,11 @@ class GltfLoader {
       apply_sparse(a, where, components, csize, decode, zeros);
       return zeros;
     }
-    if (size_t(a.bufferView) >= model_.bufferViews.size())
-      fail(where, "bufferView " + std::to_string(a.bufferView) + " out of range");
-    const tinygltf::BufferView& view = model_.bufferViews[size_t(a.bufferView)];
-    if (view.buffer < 0 || size_t(view.buffer) >= model_.buffers.size())
-      fail("bufferViews[" + std::to_string(a.bufferView) + "]", "buffer " + std::to_string(view.buffer) + " out of range");
-    const std::vector<unsigned char>& buf = model_.buffers[size_t(view.buffer)].data;
-    int stride = a.ByteStride(view);
+    const int stride = a.ByteStride(buffer_view(a.bufferView, where));
     if (stride <= 0) fail(where, "invalid byte stride");
-    const size_t element = components * csize;
-    if (a.count > 0) {
-      // The last byte read must lie inside both the view and the buffer; compared
-      // without products or sums that could wrap around (a count or offset near 2^64).
-      const bool fits = view.byteOffset <= buf.size() && view.byteLength <= buf.size() - view.byteOffset &&
-                        a.byteOffset <= view.byteLength && element <= view.byteLength - a.byteOffset &&
-                        a.count - 1 <= (view.byteLength - a.byteOffset - element) / size_t(stride);
-      if (!fits)
-        fail(where, std::to_string(a.count) + " elements at byte offset " + std::to_string(a.byteOffset) +
-                        " do not fit in bufferView " + std::to_string(a.bufferView) + " (" +
-                        std::to_string(view.byteLength) + " bytes) or its buffer (" + std::to_string(buf.size()) +
-                        " bytes)");
-    }
+    const unsigned char* base =
+        view_bytes(a.bufferView, a.byteOffset, a.count, components * csize, size_t(stride), where);
     std::vector<double> out(a.count * components, 0.0);
-    const unsigned char* base = buf.data() + view.byteOffset + a.byteOffset;
     for (size_t i = 0; i < a.count; ++i) {
       const unsigned char* p = base + size_t(stride) * i;
       for (size_t c = 0; c < components; ++c) out[i * components + c] = decode(p + c * csize);
@@ -276,20 +267,32 @@ class GltfLoader {
     return out;
   }
 
-  // The bytes [offset, offset + count * size) of bufferView `index`, checked to
-  // lie inside it and its buffer (without sums or products that could wrap).
-  const unsigned char* view_bytes(int index, size_t offset, size_t count, size_t size, const std::string& where) const {
+  // bufferView `index`, checked to exist and to name a buffer that does.
+  const tinygltf::BufferView& buffer_view(int index, const std::string& where) const {
     if (index < 0 || size_t(index) >= model_.bufferViews.size())
       fail(where, "bufferView " + std::to_string(index) + " out of range");
     const tinygltf::BufferView& view = model_.bufferViews[size_t(index)];
     if (view.buffer < 0 || size_t(view.buffer) >= model_.buffers.size())
       fail("bufferViews[" + std::to_string(index) + "]", "buffer " + std::to_string(view.buffer) + " out of range");
+    return view;
+  }
+
+  // The first of `count` elements of `size` bytes, `stride` apart, from byte
+  // `offset` of bufferView `index` (null for none), checked to lie inside the view
+  // and its buffer, compared without sums or products that could wrap around (a
+  // count or an offset near 2^64).
+  const unsigned char* view_bytes(int index, size_t offset, size_t count, size_t size, size_t stride,
+                                  const std::string& where) const {
+    const tinygltf::BufferView& view = buffer_view(index, where);
     const std::vector<unsigned char>& buf = model_.buffers[size_t(view.buffer)].data;
+    if (count == 0) return nullptr;
     const bool fits = view.byteOffset <= buf.size() && view.byteLength <= buf.size() - view.byteOffset &&
-                      offset <= view.byteLength && size != 0 && count <= (view.byteLength - offset) / size;
+                      offset <= view.byteLength && size <= view.byteLength - offset && stride != 0 &&
+                      count - 1 <= (view.byteLength - offset - size) / stride;
     if (!fits)
-      fail(where, std::to_string(count) + " elements of " + std::to_string(size) + " bytes at byte offset " +
-                      std::to_string(offset) + " do not fit in bufferView " + std::to_string(index));
+      fail(where, std::to_string(count) + " elements at byte offset " + std::to_string(offset) +
+                      " do not fit in bufferView " + std::to_string(index) + " (" + std::to_string(view.byteLength) +
+                      " bytes) or its buffer (" + std::to_string(buf.size()) + " bytes)");
     return buf.data() + view.byteOffset + offset;
   }
 
@@ -310,17 +313,19 @@ class GltfLoader {
                                                                         : 0;
     if (isize == 0) fail(at + ".indices", "component type " + std::to_string(it) + " is not an unsigned integer");
     if (a.sparse.indices.byteOffset < 0 || a.sparse.values.byteOffset < 0) fail(at, "negative byteOffset");
-    const unsigned char* indices =
-        view_bytes(a.sparse.indices.bufferView, size_t(a.sparse.indices.byteOffset), n, isize, at + ".indices");
+    const unsigned char* indices = view_bytes(a.sparse.indices.bufferView, size_t(a.sparse.indices.byteOffset), n,
+                                              isize, isize, at + ".indices");
     const unsigned char* values = view_bytes(a.sparse.values.bufferView, size_t(a.sparse.values.byteOffset), n,
-                                             components * csize, at + ".values");
+                                             components * csize, components * csize, at + ".values");
     for (size_t k = 0; k < n; ++k) {
       uint32_t i = 0;
       if (isize == 1) i = indices[k];
       if (isize == 2) { uint16_t x; std::memcpy(&x, indices + 2 * k, 2); i = x; }
       if (isize == 4) std::memcpy(&i, indices + 4 * k, 4);
-      if (i >= a.count) fail(at + ".indices[" + std::to_string(k) + "]", "index " + std::to_string(i) + " out of range");
-      for (size_t c = 0; c < components; ++c) out[size_t(i) * components + c] = decode(values + (k * components + c) * csize);
+      if (i >= a.count)
+        fail(at + ".indices[" + std::to_string(k) + "]", "index " + std::to_string(i) + " out of range");
+      for (size_t c = 0; c < components; ++c)
+        out[size_t(i) * components + c] = decode(values + (k * components + c) * csize);
     }
   }
 

@@ -1272,13 +1272,7 @@ class MitsubaLoader {
     const glm::mat4 m = to_world * glm::translate(glm::mat4(1.0f), center) * glm::scale(glm::mat4(1.0f), glm::vec3(radius));
     const glm::dmat3 a = glm::dmat3(glm::mat3(m));
     const double det = glm::determinant(a);
-    if (!(det > 0.0) || !std::isfinite(det)) return std::nullopt;
-    const double s = std::cbrt(det);
-    const glm::dmat3 qtq = glm::transpose(a / s) * (a / s);
-    bool similarity = true;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) similarity = similarity && std::fabs(qtq[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-4;
-    if (similarity) return std::nullopt;
+    if (!(det > 0.0) || !std::isfinite(det) || is_similarity(a)) return std::nullopt;
     // Higham's scaled Newton iteration for the orthogonal factor (as Dr.Jit's polar_decomp).
     glm::dmat3 q = a;
     for (int it = 0; it < 25; ++it) {
@@ -1303,16 +1297,25 @@ class MitsubaLoader {
   // translation (as Mitsuba 3 expects of its spheres) goes in as an analytic
   // sphere, unless its material is alpha-tested (masks cut triangles only);
   // otherwise the caller draws its tessellation.
+  // Whether `a` is a rotation times a positive uniform scale: (a / cbrt(det a))
+  // times its transpose within 1e-4 of the identity.
+  template <typename T>
+  static bool is_similarity(const glm::mat<3, 3, T>& a) {
+    const T s = std::cbrt(glm::determinant(a));
+    if (!(s > T(0)) || !std::isfinite(s)) return false;
+    const glm::mat<3, 3, T> qtq = glm::transpose(a / s) * (a / s);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        if (std::fabs(qtq[i][j] - (i == j ? T(1) : T(0))) > T(1e-4)) return false;
+    return true;
+  }
+
   bool add_analytic_sphere(const glm::mat4& to_world, glm::vec3 center, float radius, uint32_t mat, bool flip) {
     if (mat < scene_.materials.size() && (scene_.materials[mat].flags & PSF_MATFLAG_MASKED)) return false;
     const glm::mat3 a(to_world);
+    if (!is_similarity(a)) return false;
     const float s = std::cbrt(glm::determinant(a));
-    if (!(s > 0.0f) || !std::isfinite(s)) return false;
-    const glm::mat3 q = a / s;  // a rotation if a is a similarity
-    const glm::mat3 qtq = glm::transpose(q) * q;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j)
-        if (std::fabs(qtq[i][j] - (i == j ? 1.0f : 0.0f)) > 1e-4f) return false;
+    const glm::mat3 q = a / s;  // the rotation
     SphereShape sp;
     sp.center = glm::vec3(to_world * glm::vec4(center, 1.0f));
     sp.radius = s * radius;

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -64,9 +65,7 @@ Pixels load_exr(const std::string& path) {
 // byte is 0, which is what it reads past the end of a truncated file. Throws on
 // a scanline that would not decode, or data cut short; flat (unencoded) files
 // and other formats pass unchecked.
-void check_hdr_runs(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::string d((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+void check_hdr_runs(const std::string& d) {
   size_t at = d.find("\n\n");  // the header ends with an empty line
   if (at == std::string::npos) return;
   at += 2;
@@ -101,12 +100,19 @@ void check_hdr_runs(const std::string& path) {
 Pixels load_stb(const std::string& path, bool raw) {
   Pixels p;
   int comp = 0;
-  bool hdr = stbi_is_hdr(path.c_str());
-  if (hdr) check_hdr_runs(path);
-  bool wide = !hdr && stbi_is_16_bit(path.c_str());
-  void* data = hdr ? static_cast<void*>(stbi_loadf(path.c_str(), &p.width, &p.height, &comp, 0))
-               : wide ? static_cast<void*>(stbi_load_16(path.c_str(), &p.width, &p.height, &comp, 0))
-                      : static_cast<void*>(stbi_load(path.c_str(), &p.width, &p.height, &comp, 0));
+  // The file read once, then decoded from memory (format probes, the HDR check and the decoder).
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot decode image: can't fopen");
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (bytes.size() > size_t(std::numeric_limits<int>::max())) throw std::runtime_error("the image file is too large");
+  const auto* b = reinterpret_cast<const stbi_uc*>(bytes.data());
+  const int len = int(bytes.size());
+  bool hdr = stbi_is_hdr_from_memory(b, len);
+  if (hdr) check_hdr_runs(bytes);
+  bool wide = !hdr && stbi_is_16_bit_from_memory(b, len);
+  void* data = hdr ? static_cast<void*>(stbi_loadf_from_memory(b, len, &p.width, &p.height, &comp, 0))
+               : wide ? static_cast<void*>(stbi_load_16_from_memory(b, len, &p.width, &p.height, &comp, 0))
+                      : static_cast<void*>(stbi_load_from_memory(b, len, &p.width, &p.height, &comp, 0));
   if (!data) throw std::runtime_error(std::string("cannot decode image: ") + stbi_failure_reason());
   p.has_alpha = comp == 2 || comp == 4;
   const size_t n = size_t(p.width) * p.height;
