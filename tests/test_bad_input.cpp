@@ -116,6 +116,11 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"negative-mesh-index.gltf", "negative-mesh-index.gltf: nodes[0]: mesh index -5 out of range"},
       {"sparse-index-out-of-range.gltf", "sparse-index-out-of-range.gltf: accessors[0].sparse.indices[0]: index 7"},
       {"negative-light.gltf", "negative-light.gltf: KHR_lights_punctual.lights[0]: intensity and color must be"},
+      // compressed meshes that do not decode, and an extension the file requires that psf lacks
+      {"draco-bad-attribute.gltf", "KHR_draco_mesh_compression.attributes.NORMAL: no attribute with this id"},
+      {"draco-truncated.gltf", "draco-truncated.gltf: meshes[0].primitives[0].extensions.KHR_draco_mesh_compression: Draco:"},
+      {"meshopt-corrupt.gltf", "meshopt-corrupt.gltf: bufferViews[0].extensions.EXT_meshopt_compression: the compressed"},
+      {"required-extension.gltf", "required-extension.gltf: extensionsRequired: the file requires extension"},
   };
   for (const auto& [file, where] : cases) {
     SECTION(file) { require_clear_error(render(bad(file)), where); }

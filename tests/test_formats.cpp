@@ -13,6 +13,7 @@
 #include <functional>
 #include <optional>
 
+#include <meshoptimizer.h>
 #include <stb_image_write.h>
 #include <zlib.h>
 
@@ -1299,4 +1300,154 @@ TEST_CASE("PLY: data after the last element the header declares is reported", "[
   REQUIRE(extra.warnings.size() == 1);
   CHECK(contains(extra.warnings[0], "extra.ply: PLY data not used: 3 characters after the last element"));
   CHECK(extra.triangles.size() == 1);
+}
+
+TEST_CASE("glTF: Draco-compressed primitives (KHR_draco_mesh_compression) are decoded", "[formats]") {
+  // tests/data/gltf/draco.gltf: draco_encoder (Debian's draco 1.5.5, default
+  // quantization: 11 bits for positions, 10 for uvs, 8 for normals) of a square
+  // [-1, 1]^2 at z = 0 fanned about its centre into 4 triangles, uv = ((x + 1) / 2,
+  // (y + 1) / 2), normals +z. Draco reorders the vertices: compare by position.
+  psf::Scene s = psf::load_scene(psf::test::source_path("tests/data/gltf/draco.gltf"));
+  INFO((s.warnings.empty() ? std::string() : s.warnings.front()));
+  CHECK(s.warnings.empty());
+  REQUIRE(s.positions.size() == 5);
+  REQUIRE(s.triangles.size() == 4);
+  REQUIRE(s.uvs.size() == 5);
+  REQUIRE(s.normals.size() == 5);
+  const float tol = 2.0f / 2047.0f;  // a quantization step of the 11-bit positions
+  int corners = 0, centres = 0;
+  for (size_t i = 0; i < 5; ++i) {
+    const glm::vec3 p = s.positions[i];
+    INFO("vertex " << i << " at " << p.x << ", " << p.y << ", " << p.z);
+    CHECK(std::abs(p.z) <= tol);
+    if (std::abs(std::abs(p.x) - 1) <= tol && std::abs(std::abs(p.y) - 1) <= tol) ++corners;
+    if (std::abs(p.x) <= tol && std::abs(p.y) <= tol) ++centres;
+    CHECK(std::abs(s.uvs[i].x - (p.x + 1) / 2) <= 2e-3f);
+    CHECK(std::abs(s.uvs[i].y - (p.y + 1) / 2) <= 2e-3f);
+    CHECK(glm::length(s.normals[i] - glm::vec3(0, 0, 1)) <= 1e-2f);
+  }
+  CHECK(corners == 4);
+  CHECK(centres == 1);
+  // Every triangle keeps its counter-clockwise winding (facing +z) and together
+  // they cover the square once.
+  float area = 0;
+  for (const glm::uvec3& t : s.triangles) {
+    const glm::vec3 n = glm::cross(s.positions[t[1]] - s.positions[t[0]], s.positions[t[2]] - s.positions[t[0]]);
+    CHECK(n.z > 0);
+    area += 0.5f * n.z;
+  }
+  CHECK(std::abs(area - 4) <= 1e-2f);
+}
+
+TEST_CASE("glTF: meshoptimizer-compressed buffer views (EXT_meshopt_compression) and quantized attributes",
+          "[formats]") {
+  // A 3 x 3 grid of vertices as gltfpack writes one: positions as 16-bit integers
+  // scaled by their node (KHR_mesh_quantization), normals as octahedral 8-bit
+  // (the OCTAHEDRAL filter), uvs as normalized 16-bit, indices as 16-bit
+  // triangles, each view compressed by meshoptimizer's encoders into buffer 0 of
+  // a .glb, with an uncompressed fallback buffer that holds no data.
+  const size_t n = 9;
+  std::vector<int16_t> pos(4 * n);  // x, y, z, padding
+  std::vector<float> normal(4 * n);
+  std::vector<uint16_t> uv(2 * n);
+  const glm::vec3 tilted = glm::normalize(glm::vec3(0.3f, -0.2f, 1.0f));
+  for (size_t i = 0; i < n; ++i) {
+    const int x = int(i % 3), y = int(i / 3);
+    pos[4 * i] = int16_t(1000 * (x - 1));
+    pos[4 * i + 1] = int16_t(1000 * (y - 1));
+    pos[4 * i + 2] = int16_t(250 * x * y);
+    const glm::vec3 nv = i == 4 ? tilted : glm::vec3(0, 0, 1);
+    normal[4 * i] = nv.x, normal[4 * i + 1] = nv.y, normal[4 * i + 2] = nv.z, normal[4 * i + 3] = 0;
+    uv[2 * i] = uint16_t(x * 65535 / 2);
+    uv[2 * i + 1] = uint16_t(y * 65535 / 2);
+  }
+  std::vector<uint32_t> indices;
+  for (uint32_t y = 0; y < 2; ++y)
+    for (uint32_t x = 0; x < 2; ++x) {
+      const uint32_t a = 3 * y + x;
+      for (uint32_t v : {a, a + 1, a + 4, a, a + 4, a + 3}) indices.push_back(v);
+    }
+  std::vector<int8_t> oct(4 * n);
+  meshopt_encodeFilterOct(oct.data(), n, 4, 8, normal.data());
+
+  std::string compressed, views, fallback_views;
+  size_t fallback = 0;
+  int view = 0;
+  auto add = [&](const std::vector<unsigned char>& encoded, size_t count, size_t stride, const char* mode,
+                 const char* filter, bool attribute) {
+    const size_t offset = compressed.size();
+    compressed.append(reinterpret_cast<const char*>(encoded.data()), encoded.size());
+    while (compressed.size() % 4) compressed += '\0';
+    views += std::string(view ? "," : "") + R"({"buffer": 1, "byteOffset": )" + std::to_string(fallback) +
+             R"(, "byteLength": )" + std::to_string(count * stride) +
+             (attribute ? R"(, "byteStride": )" + std::to_string(stride) : std::string()) +
+             R"(, "extensions": {"EXT_meshopt_compression": {"buffer": 0, "byteOffset": )" + std::to_string(offset) +
+             R"(, "byteLength": )" + std::to_string(encoded.size()) + R"(, "byteStride": )" + std::to_string(stride) +
+             R"(, "count": )" + std::to_string(count) + R"(, "mode": ")" + mode + R"(", "filter": ")" + filter +
+             "\"}}}";
+    fallback += (count * stride + 3) / 4 * 4;
+    ++view;
+  };
+  auto encode_vertices = [&](const void* data, size_t stride) {
+    std::vector<unsigned char> out(meshopt_encodeVertexBufferBound(n, stride));
+    out.resize(meshopt_encodeVertexBuffer(out.data(), out.size(), data, n, stride));
+    return out;
+  };
+  add(encode_vertices(pos.data(), 8), n, 8, "ATTRIBUTES", "NONE", true);
+  add(encode_vertices(oct.data(), 4), n, 4, "ATTRIBUTES", "OCTAHEDRAL", true);
+  add(encode_vertices(uv.data(), 4), n, 4, "ATTRIBUTES", "NONE", true);
+  std::vector<unsigned char> encoded_indices(meshopt_encodeIndexBufferBound(indices.size(), n));
+  encoded_indices.resize(
+      meshopt_encodeIndexBuffer(encoded_indices.data(), encoded_indices.size(), indices.data(), indices.size()));
+  add(encoded_indices, indices.size(), 2, "TRIANGLES", "NONE", false);
+  const std::string json = R"({"asset": {"version": "2.0"},
+  "extensionsUsed": ["EXT_meshopt_compression", "KHR_mesh_quantization"],
+  "extensionsRequired": ["EXT_meshopt_compression", "KHR_mesh_quantization"],
+  "buffers": [{"byteLength": )" + std::to_string(compressed.size()) + R"(},
+              {"byteLength": )" + std::to_string(fallback) +
+                           R"(, "extensions": {"EXT_meshopt_compression": {"fallback": true}}}],
+  "bufferViews": [)" + views + R"(],
+  "accessors": [
+    {"bufferView": 0, "componentType": 5122, "type": "VEC3", "count": 9, "min": [-1000, -1000, 0], "max": [1000, 1000, 1000]},
+    {"bufferView": 1, "componentType": 5120, "normalized": true, "type": "VEC3", "count": 9},
+    {"bufferView": 2, "componentType": 5123, "normalized": true, "type": "VEC2", "count": 9},
+    {"bufferView": 3, "componentType": 5123, "type": "SCALAR", "count": 24}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3}]}],
+  "nodes": [{"mesh": 0, "scale": [0.001, 0.001, 0.001]}],
+  "scenes": [{"nodes": [0]}], "scene": 0})";
+  TempDir dir;
+  psf::Scene s = psf::load_scene(dir.write("grid.glb", glb(json, compressed)));
+  INFO((s.warnings.empty() ? std::string() : s.warnings.front()));
+  REQUIRE(s.positions.size() == n);
+  REQUIRE(s.triangles.size() == 8);
+  REQUIRE(s.normals.size() == n);
+  REQUIRE(s.uvs.size() == n);
+  for (size_t i = 0; i < n; ++i) {
+    const float x = float(i % 3), y = float(i / 3);
+    INFO("vertex " << i);
+    CHECK(glm::length(s.positions[i] - glm::vec3(x - 1, y - 1, 0.25f * x * y)) <= 1e-6f);
+    CHECK(glm::length(s.normals[i] - (i == 4 ? tilted : glm::vec3(0, 0, 1))) <= 0.02f);  // 8-bit octahedral
+    CHECK(std::abs(s.uvs[i].x - x / 2) <= 1e-4f);
+    CHECK(std::abs(s.uvs[i].y - y / 2) <= 1e-4f);
+  }
+  // The index codec keeps each triangle and its winding, but may rotate its vertices.
+  for (size_t t = 0; t < 8; ++t) {
+    const glm::uvec3 want(indices[3 * t], indices[3 * t + 1], indices[3 * t + 2]), got = s.triangles[t];
+    INFO("triangle " << t);
+    CHECK((got == want || got == glm::uvec3(want.y, want.z, want.x) || got == glm::uvec3(want.z, want.x, want.y)));
+  }
+}
+
+TEST_CASE("glTF: a required extension psf does not support is an error", "[formats]") {
+  // glTF 2.0, 3.12: a client must not load an asset that requires an extension it lacks.
+  const std::string bin = gltf_buffer();
+  std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" + base64(bin) + "\"}");
+  json.insert(json.find("\"extensionsUsed\""), R"("extensionsRequired": ["KHR_texture_basisu"], )");
+  json.replace(json.find("\"KHR_materials_emissive_strength\"]"), 34,
+               "\"KHR_materials_emissive_strength\", \"KHR_texture_basisu\"]");
+  TempDir dir;
+  const std::string path = dir.write("basisu.gltf", json);
+  const auto [line, message] = error_of([&] { psf::load_scene(path); });
+  CHECK(contains(message, "basisu.gltf: extensionsRequired: the file requires extension KHR_texture_basisu, "
+                          "which is not supported"));
 }

@@ -13,6 +13,9 @@
 // +y up; KHR_lights_punctual lights shine along local -z. Light intensities are
 // taken as they are (candela for point and spot, lux for directional) as
 // radiometric W/sr and W/m^2.
+#include <draco/compression/decode.h>
+#include <meshoptimizer.h>
+#include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -70,21 +73,29 @@ class GltfLoader {
     if (text.size() > size_t(std::numeric_limits<unsigned int>::max()))
       throw SceneError(path_, 0, "glTF parse error: the file is too large");
     check_json_depth(text, binary);
+    const std::string prepared = prepare_compressed(text, binary);
     loader.SetImageLoader(load_png_or_jpeg, nullptr);
     const std::string base = std::filesystem::path(path_).parent_path().string();
     bool ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
-                                                   reinterpret_cast<const unsigned char*>(text.data()),
-                                                   static_cast<unsigned int>(text.size()), base)
-                     : loader.LoadASCIIFromString(&model_, &err, &warn, text.data(),
-                                                  static_cast<unsigned int>(text.size()), base);
+                                                   reinterpret_cast<const unsigned char*>(prepared.data()),
+                                                   static_cast<unsigned int>(prepared.size()), base)
+                     : loader.LoadASCIIFromString(&model_, &err, &warn, prepared.data(),
+                                                  static_cast<unsigned int>(prepared.size()), base);
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
     for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
 
     static const std::set<std::string> supported = {"KHR_lights_punctual", "KHR_materials_emissive_strength",
                                                     "KHR_materials_transmission", "KHR_materials_ior",
-                                                    "KHR_texture_transform"};
+                                                    "KHR_texture_transform", "KHR_mesh_quantization",
+                                                    "KHR_draco_mesh_compression", "EXT_meshopt_compression"};
+    // A file that requires an extension cannot be read without it (glTF 2.0,
+    // 3.12): its geometry or images are compressed, or its meaning changes.
+    for (const std::string& e : model_.extensionsRequired)
+      if (!supported.count(e)) fail("extensionsRequired", "the file requires extension " + e + ", which is not supported");
     for (const std::string& e : model_.extensionsUsed)
       if (!supported.count(e)) warn_once("extension " + e + " is not supported; ignored");
+    decode_meshopt();
+    quantized_ = std::count(model_.extensionsUsed.begin(), model_.extensionsUsed.end(), "KHR_mesh_quantization") > 0;
     if (!model_.animations.empty()) warn_once("animations are not supported; using the rest pose");
     if (!model_.skins.empty()) warn_once("skins are not supported; meshes are placed by their nodes only");
 
@@ -180,6 +191,82 @@ class GltfLoader {
     stack.push_back(index);
     for (int c : node.children) visit(c, m, stack, where + ".children");
     stack.pop_back();
+  }
+
+  // Debian's tinygltf is built without Draco and knows nothing of
+  // EXT_meshopt_compression, and refuses what the two extensions write: an
+  // indices accessor without a bufferView (a Draco primitive's: its data are in
+  // the compressed view) and a buffer without data (meshopt's fallback, whose
+  // views are decoded from another buffer). Before it parses the file, such an
+  // accessor gets its primitive's compressed bufferView (decode_draco gives it
+  // the decoded one) and such a buffer a one-byte data URI (decode_meshopt gives
+  // its views decoded data). Files that use neither are passed on as they are;
+  // malformed JSON is left for tinygltf to report.
+  std::string prepare_compressed(const std::string& text, bool binary) const {
+    if (text.find("KHR_draco_mesh_compression") == std::string::npos &&
+        text.find("EXT_meshopt_compression") == std::string::npos)
+      return text;
+    size_t end = text.size(), begin = 0;
+    if (binary) {  // header (12 bytes), the JSON chunk's length and type, its text, the other chunks
+      uint32_t length = 0;
+      if (text.size() < 20) return text;
+      std::memcpy(&length, text.data() + 12, 4);
+      if (length > text.size() - 20) return text;
+      begin = 20;
+      end = 20 + size_t(length);
+    }
+    nlohmann::json j = nlohmann::json::parse(text.begin() + std::ptrdiff_t(begin),
+                                             text.begin() + std::ptrdiff_t(end), nullptr, false);
+    if (j.is_discarded() || !j.is_object()) return text;
+    auto array = [](nlohmann::json& o, const char* key) -> nlohmann::json* {
+      auto it = o.find(key);
+      return it != o.end() && it->is_array() ? &*it : nullptr;
+    };
+    auto object = [](nlohmann::json& o, const char* key) -> nlohmann::json* {
+      auto it = o.find(key);
+      return it != o.end() && it->is_object() ? &*it : nullptr;
+    };
+    bool changed = false;
+    nlohmann::json* accessors = array(j, "accessors");
+    if (nlohmann::json* meshes = array(j, "meshes"); meshes && accessors)
+      for (nlohmann::json& mesh : *meshes) {
+        nlohmann::json* prims = mesh.is_object() ? array(mesh, "primitives") : nullptr;
+        for (size_t k = 0; prims && k < prims->size(); ++k) {
+          nlohmann::json& prim = (*prims)[k];
+          nlohmann::json* ext = prim.is_object() ? object(prim, "extensions") : nullptr;
+          nlohmann::json* draco = ext ? object(*ext, "KHR_draco_mesh_compression") : nullptr;
+          auto view = draco ? draco->find("bufferView") : nlohmann::json::iterator();
+          auto indices = draco ? prim.find("indices") : nlohmann::json::iterator();
+          if (!draco || view == draco->end() || !view->is_number_unsigned() || indices == prim.end() ||
+              !indices->is_number_unsigned() || indices->get<uint64_t>() >= accessors->size())
+            continue;
+          nlohmann::json& a = (*accessors)[indices->get<size_t>()];
+          if (a.is_object() && !a.contains("bufferView")) {
+            a["bufferView"] = *view;
+            changed = true;
+          }
+        }
+      }
+    if (nlohmann::json* buffers = array(j, "buffers"))
+      for (nlohmann::json& b : *buffers) {
+        nlohmann::json* ext = b.is_object() && !b.contains("uri") ? object(b, "extensions") : nullptr;
+        nlohmann::json* meshopt = ext ? object(*ext, "EXT_meshopt_compression") : nullptr;
+        if (meshopt && meshopt->value("fallback", false)) {
+          b["uri"] = "data:application/octet-stream;base64,AA==";  // one byte: tinygltf refuses none
+          b["byteLength"] = 1;
+          changed = true;
+        }
+      }
+    if (!changed) return text;
+    std::string json = j.dump();
+    if (!binary) return json;
+    while (json.size() % 4) json += ' ';
+    const std::string rest = text.substr(end);
+    std::string out = text.substr(0, 20);
+    const uint32_t total = uint32_t(20 + json.size() + rest.size()), length = uint32_t(json.size());
+    std::memcpy(&out[8], &total, 4);
+    std::memcpy(&out[12], &length, 4);
+    return out + json + rest;
   }
 
   // The JSON parser tinygltf uses recurses once per nested array or object: a
@@ -296,6 +383,174 @@ class GltfLoader {
     return buf.data() + view.byteOffset + offset;
   }
 
+  // EXT_meshopt_compression: every buffer view compressed with meshoptimizer's
+  // codecs gets a buffer of its own holding the decoded bytes (libmeshoptimizer:
+  // vertex attributes, then the extension's filter; triangle or sequence indices).
+  void decode_meshopt() {
+    const size_t views = model_.bufferViews.size();
+    for (size_t vi = 0; vi < views; ++vi) {
+      auto ext = model_.bufferViews[vi].extensions.find("EXT_meshopt_compression");
+      if (ext == model_.bufferViews[vi].extensions.end()) continue;
+      const std::string at = "bufferViews[" + std::to_string(vi) + "].extensions.EXT_meshopt_compression";
+      const tinygltf::Value& e = ext->second;
+      auto integer = [&](const char* key, bool required) -> size_t {
+        const tinygltf::Value& v = e.Get(key);
+        if (!v.IsInt() && !(v.IsNumber() && v.GetNumberAsDouble() == std::floor(v.GetNumberAsDouble()))) {
+          if (!required && v.Type() == tinygltf::NULL_TYPE) return 0;
+          fail(at, std::string("'") + key + "' must be a non-negative integer");
+        }
+        const double d = v.GetNumberAsDouble();
+        if (!(d >= 0 && d < 9.0e15)) fail(at, std::string("'") + key + "' must be a non-negative integer");
+        return size_t(d);
+      };
+      if (!e.IsObject()) fail(at, "must be an object");
+      const size_t buffer = integer("buffer", true), offset = integer("byteOffset", false),
+                   length = integer("byteLength", true), stride = integer("byteStride", true),
+                   count = integer("count", true);
+      const std::string mode = e.Get("mode").IsString() ? e.Get("mode").Get<std::string>() : "";
+      const std::string filter = e.Get("filter").IsString() ? e.Get("filter").Get<std::string>() : "NONE";
+      if (buffer >= model_.buffers.size()) fail(at, "buffer " + std::to_string(buffer) + " out of range");
+      const std::vector<unsigned char>& src = model_.buffers[buffer].data;
+      if (offset > src.size() || length > src.size() - offset)
+        fail(at, std::to_string(length) + " bytes at byte offset " + std::to_string(offset) +
+                     " do not fit in buffer " + std::to_string(buffer) + " (" + std::to_string(src.size()) +
+                     " bytes)");
+      if (stride == 0 || stride > 256 || count > (size_t(1) << 32) / stride)
+        fail(at, "byteStride " + std::to_string(stride) + " or count " + std::to_string(count) + " out of range");
+      tinygltf::Buffer out;
+      out.data.resize(count * stride);
+      const unsigned char* in = src.data() + offset;
+      int status = -1;
+      if (mode == "ATTRIBUTES") {
+        if (stride % 4 != 0) fail(at, "ATTRIBUTES need a byteStride that is a multiple of 4");
+        status = meshopt_decodeVertexBuffer(out.data.data(), count, stride, in, length);
+        if (status == 0 && filter == "OCTAHEDRAL" && (stride == 4 || stride == 8))
+          meshopt_decodeFilterOct(out.data.data(), count, stride);
+        else if (status == 0 && filter == "QUATERNION" && stride == 8)
+          meshopt_decodeFilterQuat(out.data.data(), count, stride);
+        else if (status == 0 && filter == "EXPONENTIAL")
+          meshopt_decodeFilterExp(out.data.data(), count, stride);
+        else if (status == 0 && filter != "NONE")
+          fail(at, "filter " + filter + " with byteStride " + std::to_string(stride) + " is not supported");
+      } else if (mode == "TRIANGLES" || mode == "INDICES") {
+        if (stride != 2 && stride != 4) fail(at, "indices need a byteStride of 2 or 4");
+        if (mode == "TRIANGLES" && count % 3 != 0) fail(at, "TRIANGLES need a count that is a multiple of 3");
+        status = mode == "TRIANGLES" ? meshopt_decodeIndexBuffer(out.data.data(), count, stride, in, length)
+                                     : meshopt_decodeIndexSequence(out.data.data(), count, stride, in, length);
+      } else {
+        fail(at, "mode '" + mode + "' is not ATTRIBUTES, TRIANGLES or INDICES");
+      }
+      if (status != 0) fail(at, "the compressed data do not decode (meshoptimizer status " + std::to_string(status) + ")");
+      tinygltf::BufferView& view = model_.bufferViews[vi];
+      view.buffer = int(model_.buffers.size());
+      view.byteOffset = 0;
+      view.byteLength = out.data.size();
+      model_.buffers.push_back(std::move(out));
+    }
+  }
+
+  // KHR_draco_mesh_compression: decodes the primitive's compressed buffer view
+  // (libdraco) and gives the accessors it replaces (its attributes and indices)
+  // buffer views of the decoded values, in the accessors' own component types,
+  // so that read_accessor reads them as any others. Once per primitive.
+  void decode_draco(const tinygltf::Primitive& prim, const std::string& where) {
+    auto ext = prim.extensions.find("KHR_draco_mesh_compression");
+    if (ext == prim.extensions.end() || !draco_decoded_.insert(&prim).second) return;
+    const std::string at = where + ".extensions.KHR_draco_mesh_compression";
+    const tinygltf::Value& e = ext->second;
+    if (!e.IsObject() || !e.Get("bufferView").IsInt() || !e.Get("attributes").IsObject())
+      fail(at, "needs a bufferView and an attributes object");
+    if (prim.indices < 0) fail(at, "a compressed primitive needs an indices accessor");
+    const int view_index = e.Get("bufferView").GetNumberAsInt();
+    const size_t length = buffer_view(view_index, at).byteLength;
+    if (length == 0) fail(at, "bufferView " + std::to_string(view_index) + " is empty");
+    const unsigned char* bytes = view_bytes(view_index, 0, 1, length, length, at);
+    draco::DecoderBuffer in;
+    in.Init(reinterpret_cast<const char*>(bytes), length);
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodeMeshFromBuffer(&in);
+    if (!decoded.ok()) fail(at, "Draco: " + decoded.status().error_msg_string());
+    const std::unique_ptr<draco::Mesh> mesh = std::move(decoded).value();
+
+    // The decoded arrays go to a buffer of their own, a buffer view each.
+    tinygltf::Buffer out;
+    const int buffer_index = int(model_.buffers.size());
+    auto add_view = [&](size_t size) {
+      tinygltf::BufferView v;
+      v.buffer = buffer_index;
+      v.byteOffset = out.data.size();
+      v.byteLength = size;
+      out.data.resize((out.data.size() + size + 3) / 4 * 4);
+      model_.bufferViews.push_back(v);
+      return int(model_.bufferViews.size() - 1);
+    };
+    auto accessor = [&](int index, const std::string& name) -> tinygltf::Accessor& {
+      if (index < 0 || size_t(index) >= model_.accessors.size())
+        fail(where + "." + name, "accessor index " + std::to_string(index) + " out of range");
+      return model_.accessors[size_t(index)];
+    };
+    const size_t points = mesh->num_points();
+    const tinygltf::Value& attributes = e.Get("attributes");
+    for (const std::string& name : attributes.Keys()) {
+      auto semantic = prim.attributes.find(name);
+      if (semantic == prim.attributes.end()) continue;  // not an attribute of the primitive: not used
+      const tinygltf::Value& id = attributes.Get(name);
+      const draco::PointAttribute* att = id.IsInt() && id.GetNumberAsInt() >= 0
+                                             ? mesh->GetAttributeByUniqueId(uint32_t(id.GetNumberAsInt()))
+                                             : nullptr;
+      if (!att) fail(at + ".attributes." + name, "no attribute with this id in the compressed mesh");
+      tinygltf::Accessor& a = accessor(semantic->second, name);
+      const int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+      const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(a.componentType));
+      if (components <= 0 || csize <= 0) fail(at + ".attributes." + name, "unsupported accessor type");
+      const size_t stride = size_t(components) * size_t(csize);
+      const int view = add_view(points * stride);
+      unsigned char* dst = out.data.data() + model_.bufferViews[size_t(view)].byteOffset;
+      bool ok = true;
+      for (size_t i = 0; i < points && ok; ++i) {
+        const draco::AttributeValueIndex v = att->mapped_index(draco::PointIndex(uint32_t(i)));
+        unsigned char* d = dst + i * stride;
+        auto convert = [&](auto sample) {
+          using T = decltype(sample);
+          T value[4] = {};
+          ok = att->ConvertValue<T>(v, int8_t(components), value);
+          std::memcpy(d, value, stride);
+        };
+        switch (a.componentType) {
+          case TINYGLTF_COMPONENT_TYPE_FLOAT: convert(float()); break;
+          case TINYGLTF_COMPONENT_TYPE_BYTE: convert(int8_t()); break;
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: convert(uint8_t()); break;
+          case TINYGLTF_COMPONENT_TYPE_SHORT: convert(int16_t()); break;
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: convert(uint16_t()); break;
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: convert(uint32_t()); break;
+          default: ok = false;
+        }
+      }
+      if (!ok) fail(at + ".attributes." + name, "the compressed values do not convert to the accessor's type");
+      a.bufferView = view;
+      a.byteOffset = 0;
+      a.count = points;
+      a.sparse.isSparse = false;
+    }
+    tinygltf::Accessor& indices = accessor(prim.indices, "indices");
+    const size_t faces = mesh->num_faces();
+    const int view = add_view(faces * 3 * sizeof(uint32_t));
+    unsigned char* dst = out.data.data() + model_.bufferViews[size_t(view)].byteOffset;
+    for (size_t f = 0; f < faces; ++f) {
+      const draco::Mesh::Face& face = mesh->face(draco::FaceIndex(uint32_t(f)));
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t index = face[k].value();
+        std::memcpy(dst + (3 * f + size_t(k)) * sizeof(uint32_t), &index, sizeof(index));
+      }
+    }
+    indices.bufferView = view;
+    indices.byteOffset = 0;
+    indices.count = 3 * faces;
+    indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    indices.sparse.isSparse = false;
+    model_.buffers.push_back(std::move(out));
+  }
+
   // A sparse accessor's substitutions (glTF 2.0, 3.6.2.3): element indices[k]
   // takes values[k], both arrays tightly packed in their buffer views.
   template <typename Decode>
@@ -343,9 +598,10 @@ class GltfLoader {
         continue;
       }
       if (!prim.targets.empty()) warn_once(where + ": morph targets are not supported; using the base shape");
+      decode_draco(prim, where);
       auto pos_attr = prim.attributes.find("POSITION");
       if (pos_attr == prim.attributes.end()) fail(where, "the primitive has no POSITION attribute");
-      std::vector<double> p = read_accessor(pos_attr->second, TINYGLTF_TYPE_VEC3, where + ".POSITION", false, true);
+      std::vector<double> p = read_accessor(pos_attr->second, TINYGLTF_TYPE_VEC3, where + ".POSITION", quantized_, true);
       TriMesh tm;
       const size_t nv = p.size() / 3;
       tm.positions.resize(nv);
@@ -394,7 +650,7 @@ class GltfLoader {
       }
       auto uv_attr = prim.attributes.find("TEXCOORD_0");
       if (uv_attr != prim.attributes.end()) {
-        std::vector<double> t = read_accessor(uv_attr->second, TINYGLTF_TYPE_VEC2, where + ".TEXCOORD_0", false, true);
+        std::vector<double> t = read_accessor(uv_attr->second, TINYGLTF_TYPE_VEC2, where + ".TEXCOORD_0", quantized_, true);
         if (t.size() != 2 * nv) fail(where, "TEXCOORD_0 and POSITION have different counts");
         tm.uvs.resize(nv);
         for (size_t i = 0; i < nv; ++i) tm.uvs[i] = glm::vec2(float(t[2 * i]), float(t[2 * i + 1]));
@@ -872,6 +1128,8 @@ class GltfLoader {
   uint32_t default_material_ = uint32_t(-1);  // for primitives without a material
   uint32_t default_coloured_material_ = uint32_t(-1);  // the same, white, for primitives with COLOR_0
   bool has_camera_ = false;
+  std::set<const tinygltf::Primitive*> draco_decoded_;  // primitives whose compressed data are decoded
+  bool quantized_ = false;  // KHR_mesh_quantization: integer positions and uvs (the nodes' transforms scale them)
   std::set<std::string> ignored_attributes_;   // vertex attributes other than POSITION
   std::string attribute_warning_;
 };
