@@ -268,6 +268,11 @@ typedef struct {
   psf_uint blend;
   float blend_weight;
   psf_uint tex_blend;       /* texture (x channel) multiplying blend_weight, or PSF_NO_TEXTURE */
+  /* The absorbing medium inside the shape (Mitsuba's interior homogeneous
+   * medium, glTF's KHR_materials_volume): xyz its extinction coefficient sigma_t
+   * per scene unit, w 1 where there is one (the surface bounds it: a path that
+   * leaves on its back side is inside), else 0. */
+  psf_float4 interior;
 } Material;
 
 /* TriAttrib.flags */
@@ -378,6 +383,9 @@ typedef struct {
 #define PSF_PATH_SPECULAR 2u  /* the last bounce was a delta lobe (no MIS) */
 #define PSF_PATH_VERTEX 4u    /* the path has its filtering vertex; contributions go to c */
 #define PSF_PATH_VERTEX_NEW 8u /* the filtering vertex was made at this bounce */
+/* Bits from PSF_PATH_MEDIUM_SHIFT up of PathState.flags: 1 + the material whose
+ * interior medium the path is in (Material.interior), 0 outside every medium. */
+#define PSF_PATH_MEDIUM_SHIFT 8u
 
 /* The state of one path of the wavefront between kernel stages. */
 typedef struct {

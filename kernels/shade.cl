@@ -189,6 +189,22 @@ inline void add_radiance(PathState* st, float3 c) {
   else st->radiance.xyz += c;
 }
 
+/* The medium (PathState.flags' upper bits) of a path that leaves a surface on
+ * its front (geometric normal's) side or its back: a surface bounding an
+ * interior medium (Material.interior) leads out of it on the front and into it on
+ * the back; any other keeps the path's medium. Nested media are not tracked. */
+inline uint medium_after(uint current, float4 interior, uint material, bool leaves_front) {
+  return interior.w > 0.0f ? (leaves_front ? 0u : material + 1u) : current;
+}
+
+/* Transmittance exp(-sigma_t d) of `dist` through medium `medium` (1 outside
+ * every medium; 0 over an infinite distance through one that absorbs). */
+inline float3 medium_transmittance(__global const Material* materials, uint medium, float dist) {
+  if (medium == 0u) return (float3)(1.0f);
+  const float3 sigma = materials[medium - 1u].interior.xyz;
+  return select(exp(-sigma * dist), (float3)(1.0f), sigma <= (float3)(0.0f));
+}
+
 /* A ray origin off the surface, on the side of `n`. */
 inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * fmax(1.0f, max3(fabs(p))); }
 
@@ -214,9 +230,12 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   st.flags &= ~PSF_PATH_VERTEX_NEW;
   Ray ray = rays_in[k];
   Hit hit = hits[k];
+  const uint medium = st.flags >> PSF_PATH_MEDIUM_SHIFT;
   if (hit.prim == PSF_NO_HIT) {
     /* An escaped ray sees the environment, MIS-weighted against its light samples
-     * unless it left the camera or a delta lobe (emitter.cl). */
+     * unless it left the camera or a delta lobe (emitter.cl); through an
+     * absorbing medium, nothing. */
+    st.throughput.xyz *= medium_transmittance(materials, medium, INFINITY);
     if (env.present && !(st.depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT))) {
       float3 d = normalize(ray.dir.xyz);
       float w = 1.0f, pdf;
@@ -246,7 +265,10 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   }
   float dist = hit.t * ray_len;
   st.prev_pos.w += dist;
-  Material m = materials[tri_material[hit.prim]];
+  st.throughput.xyz *= medium_transmittance(materials, medium, dist); /* the segment just travelled */
+  const uint hit_material = tri_material[hit.prim];
+  Material m = materials[hit_material];
+  const float4 interior = m.interior; /* the shape's, whatever BSDF a blend picks */
   bool front = dot(ng, wo) > 0.0f;
   float3 beta = st.throughput.xyz;
 
@@ -318,7 +340,9 @@ inline __attribute__((always_inline)) bool shade_path_inline(
     float cos_s = fabs(dot(frame.n, ls.wi)); /* the BSDF decides which side scatters */
     if (ls.pdf > 0.0f && cos_s > 0.0f && max3(f) > 0.0f) {
       float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf); /* delta lights: no MIS */
-      st.pending.xyz = beta * f * cos_s * ls.radiance * (w / ls.pdf);
+      const uint shadow_medium = medium_after(medium, interior, hit_material, dot(ls.wi, ng) >= 0.0f);
+      st.pending.xyz = beta * f * cos_s * ls.radiance * (w / ls.pdf) *
+                       medium_transmittance(materials, shadow_medium, ls.dist);
       shadow.org = (float4)(offset_origin(pos, dot(ls.wi, ng) >= 0.0f ? ng : -ng), 0.0f);
       if (isinf(ls.dist)) {
         shadow.dir = (float4)(ls.wi, INFINITY); /* directional light or environment */
@@ -350,6 +374,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
       if (bs.flags & BSDF_DELTA) st.flags |= PSF_PATH_SPECULAR;
       else st.flags &= ~PSF_PATH_SPECULAR;
       float3 side = dot(bs.wi, ng) >= 0.0f ? ng : -ng; /* the geometric side wi leaves on */
+      st.flags = (st.flags & ((1u << PSF_PATH_MEDIUM_SHIFT) - 1u)) |
+                 (medium_after(medium, interior, hit_material, dot(bs.wi, ng) >= 0.0f) << PSF_PATH_MEDIUM_SHIFT);
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
       st.depth += 1u;

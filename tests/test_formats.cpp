@@ -1451,3 +1451,32 @@ TEST_CASE("glTF: a required extension psf does not support is an error", "[forma
   CHECK(contains(message, "basisu.gltf: extensionsRequired: the file requires extension KHR_texture_basisu, "
                           "which is not supported"));
 }
+
+TEST_CASE("glTF: KHR_materials_volume gives a transmitting material an absorbing interior", "[formats]") {
+  // sigma = -ln(attenuationColor) / attenuationDistance; thicknessFactor 0 (the
+  // default) is a thin wall without a volume, and so is a surface that does not transmit.
+  const std::string bin = gltf_buffer();
+  auto load = [&](const std::string& material_extensions) {
+    std::string json = gltf_json(R"({"byteLength": 176, "uri": "data:application/octet-stream;base64,)" +
+                                 base64(bin) + "\"}");
+    const std::string from = R"("metallicFactor": 0}, "doubleSided": true})";
+    json.replace(json.find(from), from.size(),
+                 R"("metallicFactor": 0}, "doubleSided": true, "extensions": {)" + material_extensions + "}}");
+    TempDir dir;
+    psf::Scene s = psf::load_scene(dir.write("volume.gltf", json));
+    INFO((s.warnings.empty() ? std::string() : s.warnings.front()));
+    CHECK(s.warnings.empty());
+    const auto& in = s.materials[s.tri_material[0]].interior;
+    return glm::vec4(in.s[0], in.s[1], in.s[2], in.s[3]);
+  };
+  const std::string glass = R"("KHR_materials_transmission": {"transmissionFactor": 1}, )";
+  const glm::vec4 v = load(glass + R"("KHR_materials_volume": {"thicknessFactor": 0.5, "attenuationDistance": 2,
+                                       "attenuationColor": [0.5, 0.25, 1]})");
+  CHECK(glm::length(v - glm::vec4(std::log(2.0f) / 2, std::log(4.0f) / 2, 0.0f, 1.0f)) < 1e-6f);
+  CHECK(load(glass + R"("KHR_materials_volume": {"attenuationDistance": 2, "attenuationColor": [0.5, 0.5, 0.5]})") ==
+        glm::vec4(0.0f));
+  CHECK(load(R"("KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 2,
+                 "attenuationColor": [0.5, 0.5, 0.5]})") == glm::vec4(0.0f));
+  // Without an attenuationDistance the volume is clear: a medium that does not absorb.
+  CHECK(load(glass + R"("KHR_materials_volume": {"thicknessFactor": 1})") == glm::vec4(0, 0, 0, 1));
+}

@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <fstream>
 #include <random>
 
 #include "render.h"
@@ -168,4 +169,39 @@ TEST_CASE("Render: the accumulator's threads add each pixel's paths in path orde
     CHECK(acc.bad_filtered == bad_f);
     CHECK(acc.aov == aov);
   }
+}
+
+TEST_CASE("Render: an absorbing interior medium attenuates by exp(-sigma_t d) (Beer's law)", "[render]") {
+  // A dielectric cube [-1, 1]^3 of index 1 in air (1.000277: it reflects 2e-8 at
+  // normal incidence) holding a medium that only absorbs, seen along -z by an
+  // orthographic camera against a constant white sky: every ray crosses the cube
+  // straight through, 2 units of the medium, so every pixel reads exp(-2 sigma_t).
+  const std::string dir = psf::test::temp_dir("medium");
+  const std::string path = dir + "/absorb.xml";
+  std::ofstream(path) << R"(<scene version="3.0.0">
+  <sensor type="orthographic">
+    <transform name="to_world"><scale value="0.5"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+  <shape type="cube">
+    <bsdf type="dielectric"><float name="int_ior" value="1"/></bsdf>
+    <medium type="homogeneous" name="interior">
+      <rgb name="sigma_t" value="0.1, 0.5, 1"/><float name="albedo" value="0"/>
+    </medium>
+  </shape>
+</scene>
+)";
+  psf::Scene s = psf::load_scene(path);
+  CHECK(s.warnings.empty());
+  psf::Renderer r(psf::test::runtime(), s);
+  psf::RenderOptions o;
+  o.filter.enabled = false;
+  o.spp = 4;
+  const psf::Image img = r.render(o).image;
+  REQUIRE(img.rgb.size() == 8 * 8 * 3);
+  const float want[3] = {std::exp(-0.2f), std::exp(-1.0f), std::exp(-2.0f)};
+  // Each crossing starts its ray PSF_RAY_EPS (relative) off the surface: the
+  // path inside is short by about 1e-4, exp(-sigma_t d) off by sigma_t 1e-4.
+  for (size_t i = 0; i < img.rgb.size(); ++i) REQUIRE(img.rgb[i] == Approx(want[i % 3]).epsilon(3e-4));
 }

@@ -1311,3 +1311,52 @@ TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's r
   CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values are NaN or infinite; read as 0") == 1);
   CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values exceed 65504") == 1);
 }
+
+TEST_CASE("Media: a shape's homogeneous interior medium is its material's extinction; others warn", "[scene]") {
+  psf::Scene s = load_text(
+      "<sensor type=\"perspective\"><ref name=\"exterior\" id=\"fog\"/></sensor>\n"
+      "<medium type=\"homogeneous\" id=\"ink\"><rgb name=\"sigma_t\" value=\"0.1, 0.5, 1\"/>"
+      "<float name=\"scale\" value=\"2\"/><float name=\"albedo\" value=\"0\"/></medium>\n"
+      "<medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.3\"/></medium>\n"
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"interior\" id=\"ink\"/></shape>\n"
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"interior\" id=\"fog\"/></shape>\n"
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"exterior\" id=\"ink\"/></shape>\n"
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><medium type=\"heterogeneous\" name=\"interior\"/></shape>\n");
+  INFO([&] {
+    std::string all;
+    for (const auto& w : s.warnings) all += w + "\n";
+    return all;
+  }());
+  // Mitsuba 3's albedo defaults to 0.75: the fog scatters, which is not rendered.
+  CHECK(count_warnings(s, ":4: the medium scatters") == 1);
+  CHECK(count_warnings(s, ":7: a shape's exterior medium is not rendered") == 1);
+  CHECK(count_warnings(s, ":8: medium 'heterogeneous' is not supported") == 1);
+  CHECK(count_warnings(s, ":2: a medium around the camera is not rendered") == 1);
+  std::vector<glm::vec4> interiors;  // each cube's (12 triangles each)
+  REQUIRE(s.tri_material.size() == 48);
+  for (size_t t = 0; t < 48; t += 12) {
+    const auto& in = s.materials[s.tri_material[t]].interior;
+    interiors.emplace_back(in.s[0], in.s[1], in.s[2], in.s[3]);
+  }
+  CHECK(glm::length(interiors[0] - glm::vec4(0.2f, 1.0f, 2.0f, 1.0f)) < 1e-6f);  // scale x sigma_t
+  CHECK(interiors[1] == glm::vec4(0.3f, 0.3f, 0.3f, 1.0f));                       // its extinction all the same
+  CHECK(interiors[2] == glm::vec4(0.0f));                                          // an exterior: none
+  CHECK(interiors[3] == glm::vec4(0.0f));                                          // an unsupported type: none
+
+  // A null BSDF lets every ray through, so no path could enter: refused with a warning.
+  psf::Scene null = load_text(
+      "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
+  CHECK(count_warnings(null, ":2: a medium bounded by a null BSDF is not rendered") == 1);
+  REQUIRE(!null.tri_material.empty());
+  CHECK(null.materials[null.tri_material[0]].interior.s[3] == 0.0f);
+
+  // Mitsuba 0.5: sigmaA and sigmaS, their sum the extinction.
+  psf::Scene old = load_text(
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><medium type=\"homogeneous\" name=\"interior\">"
+      "<rgb name=\"sigmaA\" value=\"0.5, 1, 2\"/><rgb name=\"sigmaS\" value=\"0, 0, 0\"/></medium></shape>\n",
+      {}, "0.5.0");
+  REQUIRE(!old.tri_material.empty());
+  const auto& in = old.materials[old.tri_material[0]].interior;
+  CHECK((in.s[0] == 0.5f && in.s[1] == 1.0f && in.s[2] == 2.0f && in.s[3] == 1.0f));
+  CHECK(count_warnings(old, "medium") == 0);
+}

@@ -84,10 +84,10 @@ class GltfLoader {
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
     for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
 
-    static const std::set<std::string> supported = {"KHR_lights_punctual", "KHR_materials_emissive_strength",
-                                                    "KHR_materials_transmission", "KHR_materials_ior",
-                                                    "KHR_texture_transform", "KHR_mesh_quantization",
-                                                    "KHR_draco_mesh_compression", "EXT_meshopt_compression"};
+    static const std::set<std::string> supported = {
+        "KHR_lights_punctual",   "KHR_materials_emissive_strength", "KHR_materials_transmission",
+        "KHR_materials_ior",     "KHR_materials_volume",            "KHR_texture_transform",
+        "KHR_mesh_quantization", "KHR_draco_mesh_compression",      "EXT_meshopt_compression"};
     // A file that requires an extension cannot be read without it (glTF 2.0,
     // 3.12): its geometry or images are compressed, or its meaning changes.
     for (const std::string& e : model_.extensionsRequired)
@@ -807,6 +807,27 @@ class GltfLoader {
     const float transmission =
         std::clamp(ext_number("KHR_materials_transmission", "transmissionFactor", 0.0f), 0.0f, 1.0f);
     const bool transmits = !metal_only && transmission > 0.0f;
+    // KHR_materials_volume: the volume a transmitting surface encloses absorbs,
+    // sigma = -ln(attenuationColor) / attenuationDistance per world unit (Beer's
+    // law, as the extension defines it; Material.interior). A thicknessFactor of
+    // 0 (the default) makes the surface a thin wall without a volume; the
+    // thickness itself is for rasterisers: a path tracer has the geometry.
+    glm::vec4 interior(0.0f);
+    if (auto vol = g.extensions.find("KHR_materials_volume"); transmits && vol != g.extensions.end()) {
+      const float thickness = ext_number("KHR_materials_volume", "thicknessFactor", 0.0f);
+      const float distance = ext_number("KHR_materials_volume", "attenuationDistance", INFINITY);
+      glm::vec3 color(1.0f);
+      const tinygltf::Value& c = vol->second.Get("attenuationColor");
+      if (c.IsArray() && c.ArrayLen() == 3)
+        for (int i = 0; i < 3; ++i)
+          if (c.Get(i).IsNumber() || c.Get(i).IsInt()) color[i] = float(c.Get(i).GetNumberAsDouble());
+      if (thickness > 0.0f) {
+        glm::vec3 sigma(0.0f);
+        if (distance > 0.0f && std::isfinite(distance))
+          for (int i = 0; i < 3; ++i) sigma[i] = -std::log(std::clamp(color[i], 1e-6f, 1.0f)) / distance;
+        interior = glm::vec4(sigma, 1.0f);
+      }
+    }
     if (transmits && texture != PSF_NO_TEXTURE)  // a dielectric's texture would tint its reflection
       left_out.push_back("baseColorTexture on a transmitting material (using its mean as the transmittance)");
     // The texture's roughness (green) per hit, for every part (roughconductor,
@@ -824,7 +845,7 @@ class GltfLoader {
     if (g.alphaMode != "OPAQUE" && !masked && !blended) left_out.push_back("alphaMode " + g.alphaMode);
     for (const auto& e : g.extensions)
       if (e.first != "KHR_materials_emissive_strength" && e.first != "KHR_materials_transmission" &&
-          e.first != "KHR_materials_ior")
+          e.first != "KHR_materials_ior" && e.first != "KHR_materials_volume")
         left_out.push_back(e.first);
     if (!left_out.empty()) {
       std::string list;
@@ -859,6 +880,7 @@ class GltfLoader {
       m.emission = {{std::max(emission.x, 0.0f), std::max(emission.y, 0.0f), std::max(emission.z, 0.0f), 0}};
       m.tex_emission = emission_map;
       m.two_sided = g.doubleSided ? 1u : 0u;
+      m.interior = {{interior.x, interior.y, interior.z, interior.w}};
       return m;
     };
     // The metal: the base colour is the reflectance at normal incidence, eta and k

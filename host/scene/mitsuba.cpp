@@ -26,6 +26,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <limits>
 #include <map>
+#include <tuple>
 #include <memory>
 #include <optional>
 #include <pugixml.hpp>
@@ -324,7 +325,7 @@ class MitsubaLoader {
         {"integrator", &MitsubaLoader::load_integrator}, {"sensor", &MitsubaLoader::load_sensor},
         {"shape", &MitsubaLoader::load_shape},           {"bsdf", &MitsubaLoader::load_top_bsdf},
         {"emitter", &MitsubaLoader::load_top_emitter},   {"texture", &MitsubaLoader::skip},
-        {"alias", &MitsubaLoader::skip},
+        {"alias", &MitsubaLoader::skip},         {"medium", &MitsubaLoader::skip},  // used where a shape refers to it
     };
     for (pugi::xml_node node : top) {
       auto it = handlers.find(node.name());
@@ -892,9 +893,10 @@ class MitsubaLoader {
     const bool direct = e.type == "direct";
     // The volumetric path tracers (Mitsuba 3's volpath, volpathmis, prbvolpath,
     // Mitsuba 0.5's volpath, volpath_simple) and the path replay ones (prb,
-    // prb_basic) render what path does where there are no media, which psf does
-    // not render (a <medium> warns on its own): their estimates have the same
-    // expectation, and they take the same max_depth and rr_depth.
+    // prb_basic) render what path does where there are no media (psf renders a
+    // shape's interior medium's absorption in every integrator, and warns about
+    // the rest of a medium): their estimates have the same expectation, and they
+    // take the same max_depth and rr_depth.
     static const std::set<std::string> like_path = {"path", "volpath", "volpathmis", "volpath_simple",
                                                     "prbvolpath", "prb", "prb_basic"};
     // An integrator that wraps another (Mitsuba 3's aov, moment and stokes,
@@ -1044,6 +1046,9 @@ class MitsubaLoader {
     scene_.height = 576;
     for (pugi::xml_node film : objects(e, "film")) load_film(film);
     for (pugi::xml_node sampler : objects(e, "sampler")) load_sampler(sampler);
+    for (const auto& [name, p] : e.props)
+      if (p.kind == Property::Kind::Object && std::string(p.object.name()) == "medium")
+        warn(p.node, "medium:sensor", "a medium around the camera is not rendered; ignored");
   }
 
   void load_film(pugi::xml_node node) {
@@ -1237,10 +1242,22 @@ class MitsubaLoader {
     if (emitters.size() > 1) fail(emitters[1], "a shape can have only one emitter");
     for (pugi::xml_node o : e.objects) {
       std::string tag = o.name();
-      if (tag != "bsdf" && tag != "emitter") warn(o, tag, "<" + tag + "> in a <shape> is not supported yet; ignored");
+      if (tag != "bsdf" && tag != "emitter" && tag != "medium")
+        warn(o, tag, "<" + tag + "> in a <shape> is not supported yet; ignored");
     }
-    uint32_t mat =
-        material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0], emitters.empty() ? pugi::xml_node() : emitters[0]);
+    // Media: the shape's interior is rendered (absorption only), its exterior not.
+    pugi::xml_node interior;
+    size_t named_media = 0;
+    for (const auto& [name, p] : e.props) {
+      if (p.kind != Property::Kind::Object || std::string(p.object.name()) != "medium") continue;
+      ++named_media;
+      if (name == "interior") interior = p.object;
+      else warn(p.node, "medium:" + name, "a shape's " + name + " medium is not rendered (only its interior); ignored");
+    }
+    if (objects(e, "medium").size() > named_media)
+      warn(e.node, "medium:unnamed", "a <medium> in a <shape> needs name=\"interior\" or \"exterior\"; ignored");
+    uint32_t mat = material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0],
+                            emitters.empty() ? pugi::xml_node() : emitters[0], interior);
     const glm::mat4 to_world = parent * get_transform(e, "to_world");
     const bool flip = get_bool(e, "flip_normals", false);
     if (e.type == "sphere") {
@@ -1396,11 +1413,52 @@ class MitsubaLoader {
 
   // --- materials, BSDFs, textures -------------------------------------------
 
-  // The material of a shape with this BSDF and emitter (either may be null), shared between shapes.
-  uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node) {
-    auto key = std::make_pair(bsdf_node.internal_object(), emitter_node.internal_object());
+  // The extinction coefficient sigma_t of a homogeneous medium, which psf renders
+  // as absorption alone (Material.interior): Mitsuba 3's sigma_t, albedo and
+  // scale, or 0.5's sigmaA and sigmaS (or sigmaT and albedo) and scale. A medium
+  // that scatters warns: its in-scattered light is missing. None for other types.
+  std::optional<glm::vec3> medium_sigma_t(pugi::xml_node node) {
+    const Element m = parse_element(node);
+    if (m.type != "homogeneous") {
+      warn(node, "medium:" + m.type, "medium '" + m.type + "' is not supported; the shape's interior is left empty");
+      return std::nullopt;
+    }
+    ignored_properties(m, "medium", {"sigma_t", "albedo", "scale", "sigma_a", "sigma_s", "density_multiplier",
+                                     "sample_emitters", "has_spectral_extinction"});
+    if (find(m, "material"))
+      warn(node, "medium:material", "named media (material) are not supported; using sigma_t and albedo");
+    glm::vec3 sigma_t, albedo;
+    if (find(m, "sigma_a") || find(m, "sigma_s")) {
+      const glm::vec3 a = get_color(m, "sigma_a", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
+      const glm::vec3 sc = get_color(m, "sigma_s", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
+      sigma_t = a + sc;
+      for (int i = 0; i < 3; ++i) albedo[i] = sc[i] > 0 ? sc[i] / sigma_t[i] : 0.0f;
+    } else {
+      sigma_t = get_color(m, "sigma_t", ColorUse::Unbounded).value_or(glm::vec3(1.0f));
+      albedo = get_color(m, "albedo", ColorUse::Reflectance).value_or(glm::vec3(0.75f));
+    }
+    const float scale = float(get_float(m, "scale", 1.0) * get_float(m, "density_multiplier", 1.0));
+    sigma_t *= scale;
+    if (!(glm::all(glm::greaterThanEqual(sigma_t, glm::vec3(0.0f))) && std::isfinite(sigma_t.x) &&
+          std::isfinite(sigma_t.y) && std::isfinite(sigma_t.z)))
+      fail(node, "the medium's sigma_t must be finite and >= 0");
+    if (glm::any(glm::greaterThan(albedo * sigma_t, glm::vec3(0.0f))))
+      warn(node, "medium:scattering",
+           "the medium scatters (albedo > 0): psf renders only its extinction exp(-sigma_t d), without the light it "
+           "scatters into a path (darker than Mitsuba's volpath)");
+    return sigma_t;
+  }
+
+  // The material of a shape with this BSDF, emitter and interior medium (any may
+  // be null), shared between shapes.
+  uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node, pugi::xml_node medium_node = {}) {
+    auto key = std::make_tuple(bsdf_node.internal_object(), emitter_node.internal_object(),
+                               medium_node.internal_object());
     auto it = materials_.find(key);
     if (it != materials_.end()) return it->second;
+    glm::vec4 interior(0.0f);
+    if (medium_node)
+      if (std::optional<glm::vec3> sigma_t = medium_sigma_t(medium_node)) interior = glm::vec4(*sigma_t, 1.0f);
 
     Bsdf b;
     b.name = "default";
@@ -1408,6 +1466,11 @@ class MitsubaLoader {
     // Without a BSDF Mitsuba (3 and 0.5) gives a shape a diffuse one of
     // reflectance 0.5, but an emitter's shape a black one: a light reflects nothing.
     else if (emitter_node) b.m = diffuse_material(glm::vec3(0.0f));
+    if (b.null && interior.w > 0.0f) {
+      // psf's null surfaces are skipped by every ray, so no path would enter.
+      warn(medium_node, "medium:null", "a medium bounded by a null BSDF is not rendered; use a dielectric boundary");
+      interior = glm::vec4(0.0f);
+    }
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
     bool emits = glm::any(glm::greaterThan(radiance, glm::vec3(0.0f)));
@@ -1426,6 +1489,7 @@ class MitsubaLoader {
       m.tex_emission = emission.texture;
       // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
       m.two_sided = from.two_sided && !emits ? 1u : 0u;
+      m.interior = {{interior.x, interior.y, interior.z, interior.w}};
       return m;
     };
     std::string name = b.name;
@@ -2463,7 +2527,7 @@ class MitsubaLoader {
   std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
   bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
-  std::map<std::pair<const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter) -> material
+  std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
   bool has_environment_ = false;                                       // an envmap or constant emitter was loaded
