@@ -42,6 +42,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Material, blend);
   out[i++] = PSF_OFFSET(Material, tex_blend);
   out[i++] = PSF_OFFSET(Material, interior);
+  out[i++] = PSF_OFFSET(Material, interior_albedo);
   out[i++] = sizeof(TextureInfo);
   out[i++] = PSF_OFFSET(TextureInfo, uv_v);
   out[i++] = PSF_OFFSET(TextureInfo, offset);

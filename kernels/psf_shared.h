@@ -268,11 +268,13 @@ typedef struct {
   psf_uint blend;
   float blend_weight;
   psf_uint tex_blend;       /* texture (x channel) multiplying blend_weight, or PSF_NO_TEXTURE */
-  /* The absorbing medium inside the shape (Mitsuba's interior homogeneous
-   * medium, glTF's KHR_materials_volume): xyz its extinction coefficient sigma_t
-   * per scene unit, w 1 where there is one (the surface bounds it: a path that
-   * leaves on its back side is inside), else 0. */
+  /* The homogeneous medium inside the shape (Mitsuba's interior medium, glTF's
+   * KHR_materials_volume): xyz its extinction coefficient sigma_t per scene
+   * unit, w 1 where there is one (the surface bounds it: a path that leaves on
+   * its back side is inside), else 0. */
   psf_float4 interior;
+  psf_float4 interior_albedo; /* xyz the medium's single-scattering albedo (0: it only absorbs), w its
+                                 Henyey-Greenstein g (0: isotropic) */
 } Material;
 
 /* TriAttrib.flags */

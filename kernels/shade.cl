@@ -205,6 +205,55 @@ inline float3 medium_transmittance(__global const Material* materials, uint medi
   return select(exp(-sigma * dist), (float3)(1.0f), sigma <= (float3)(0.0f));
 }
 
+/* Free-flight sampling in the medium the path is in over a segment of length
+ * `dist` (INFINITY where the ray escapes). Returns the distance t < dist of a
+ * scattering event, with the throughput weighted by sigma_s T(t) / p(t), or
+ * `dist`, with it weighted by T(dist) / P(dist): spectral MIS over the three
+ * channels, as Mitsuba 3's volpath in RGB (a channel chosen uniformly, t drawn
+ * by its sigma_t, the pdfs the channels' mean). A medium that only absorbs has
+ * no events: T(dist) exactly. The two numbers are hashes of the path and
+ * bounce, as a blend's choice (surface.cl): Sobol dimensions of the bounce
+ * would be correlated with the surface's, which it uses where there is no event. */
+inline float medium_sample(__global const Material* materials, uint medium, float dist, uint key, PathState* st) {
+  if (medium == 0u) return dist;
+  const float3 sigma_t = materials[medium - 1u].interior.xyz;
+  const float3 albedo = materials[medium - 1u].interior_albedo.xyz;
+  if (!(max3(albedo) > 0.0f)) {
+    st->throughput.xyz *= medium_transmittance(materials, medium, dist);
+    return dist;
+  }
+  const uint h = psf_hash_combine(psf_hash_combine(psf_hash_combine(key, st->sample), st->depth), 0x6d656469u);
+  const float u = bits_to_float(h), u2 = bits_to_float(psf_hash(h ^ 0x9e3779b9u));
+  const int c = min((int)(u * 3.0f), 2);
+  const float s = c == 0 ? sigma_t.x : c == 1 ? sigma_t.y : sigma_t.z;
+  const float t = s > 0.0f ? -log1p(-u2) / s : INFINITY;
+  if (t < dist) {
+    const float3 tr = exp(-sigma_t * t);
+    const float pdf = (sigma_t.x * tr.x + sigma_t.y * tr.y + sigma_t.z * tr.z) / 3.0f;
+    st->throughput.xyz *= albedo * sigma_t * tr / pdf;
+    return t;
+  }
+  const float3 tr = select(exp(-sigma_t * dist), (float3)(1.0f), sigma_t <= (float3)(0.0f));
+  const float p = (tr.x + tr.y + tr.z) / 3.0f;
+  st->throughput.xyz *= p > 0.0f ? tr / p : (float3)(0.0f);
+  return dist;
+}
+
+/* A direction scattered from `d` (unit, the direction of travel) by the
+ * Henyey-Greenstein phase function of asymmetry g (> 0 forwards), sampled
+ * exactly, so that the sample's weight is 1. */
+inline float3 sample_henyey_greenstein(float3 d, float g, float u1, float u2) {
+  float c = 1.0f - 2.0f * u1;
+  if (fabs(g) >= 1e-3f) {
+    const float sq = (1.0f - g * g) / (1.0f - g + 2.0f * g * u1);
+    c = (1.0f + g * g - sq * sq) / (2.0f * g);
+  }
+  c = clamp(c, -1.0f, 1.0f);
+  float cos_phi;
+  const float sin_phi = psf_sincos(2.0f * M_PI_F * u2, &cos_phi), sin_theta = sqrt(fmax(0.0f, 1.0f - c * c));
+  return frame_to_world(frame_from_normal(d), (float3)(sin_theta * cos_phi, sin_theta * sin_phi, c));
+}
+
 /* A ray origin off the surface, on the side of `n`. */
 inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * fmax(1.0f, max3(fabs(p))); }
 
@@ -231,11 +280,47 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   Ray ray = rays_in[k];
   Hit hit = hits[k];
   const uint medium = st.flags >> PSF_PATH_MEDIUM_SHIFT;
+  const float ray_len = length(ray.dir.xyz);
+  const float segment = hit.prim == PSF_NO_HIT ? INFINITY : hit.t * ray_len;
+  const float t_medium = medium_sample(materials, medium, segment, key, &st);
+  if (t_medium < segment) {
+    /* A scattering event in the medium: no light sample (the medium's boundary,
+     * a dielectric, stops shadow rays), a direction from the phase function,
+     * whose next emitter hit then counts in full, as after a delta lobe. */
+    const float3 d = ray.dir.xyz / ray_len, p = ray.org.xyz + d * t_medium;
+    const uint segments = st.depth + 1u;
+    bool go = depth_allows(params, segments + 1u);
+    st.prev_pos.w += t_medium;
+    if (go) {
+      const float8 samples = bounce_samples(params, sobol, key, st);
+      float3 beta = st.throughput.xyz;
+      if (segments >= params.rr_depth) { /* Russian roulette, as at a surface */
+        const float q = fmin(max3(beta), 0.95f);
+        if (bounce_sample(samples, PSF_DIM_RR) >= q) go = false;
+        else beta /= q;
+      }
+      if (go) {
+        ray.org = (float4)(p, 0.0f);
+        ray.dir = (float4)(sample_henyey_greenstein(d, materials[medium - 1u].interior_albedo.w,
+                                                    bounce_sample(samples, PSF_DIM_BSDF_UV),
+                                                    bounce_sample(samples, PSF_DIM_BSDF_UV + 1u)),
+                           INFINITY);
+        st.throughput = (float4)(beta, 0.0f);
+        st.prev_pos.xyz = p;
+        st.flags |= PSF_PATH_SPECULAR;
+        st.depth += 1u;
+        *next = ray;
+      }
+    }
+    if (!go) st.flags &= ~PSF_PATH_ALIVE;
+    shadow_rays[k] = shadow;
+    states[j] = st;
+    return go;
+  }
   if (hit.prim == PSF_NO_HIT) {
     /* An escaped ray sees the environment, MIS-weighted against its light samples
-     * unless it left the camera or a delta lobe (emitter.cl); through an
-     * absorbing medium, nothing. */
-    st.throughput.xyz *= medium_transmittance(materials, medium, INFINITY);
+     * unless it left the camera or a delta lobe (emitter.cl); through a medium
+     * that absorbs, nothing (medium_sample). */
     if (env.present && !(st.depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT))) {
       float3 d = normalize(ray.dir.xyz);
       float w = 1.0f, pdf;
@@ -249,7 +334,6 @@ inline __attribute__((always_inline)) bool shade_path_inline(
     states[j] = st;
     return false;
   }
-  float ray_len = length(ray.dir.xyz);
   float3 wo = -ray.dir.xyz / ray_len;
   float3 pos = ray.org.xyz + hit.t * ray.dir.xyz;
   float3 p0, p1, p2, ng;
@@ -263,9 +347,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
     float area2 = length(ng);
     ng = area2 > 0.0f ? ng / area2 : (float3)(0.0f, 0.0f, 1.0f);
   }
-  float dist = hit.t * ray_len;
+  float dist = segment;
   st.prev_pos.w += dist;
-  st.throughput.xyz *= medium_transmittance(materials, medium, dist); /* the segment just travelled */
   const uint hit_material = tri_material[hit.prim];
   Material m = materials[hit_material];
   const float4 interior = m.interior; /* the shape's, whatever BSDF a blend picks */

@@ -1312,12 +1312,13 @@ TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's r
   CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values exceed 65504") == 1);
 }
 
-TEST_CASE("Media: a shape's homogeneous interior medium is its material's extinction; others warn", "[scene]") {
+TEST_CASE("Media: a shape's homogeneous interior medium is its material's; others warn", "[scene]") {
   psf::Scene s = load_text(
       "<sensor type=\"perspective\"><ref name=\"exterior\" id=\"fog\"/></sensor>\n"
       "<medium type=\"homogeneous\" id=\"ink\"><rgb name=\"sigma_t\" value=\"0.1, 0.5, 1\"/>"
       "<float name=\"scale\" value=\"2\"/><float name=\"albedo\" value=\"0\"/></medium>\n"
-      "<medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.3\"/></medium>\n"
+      "<medium type=\"homogeneous\" id=\"fog\"><float name=\"sigma_t\" value=\"0.3\"/>"
+      "<phase type=\"hg\"><float name=\"g\" value=\"0.4\"/></phase></medium>\n"
       "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"interior\" id=\"ink\"/></shape>\n"
       "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"interior\" id=\"fog\"/></shape>\n"
       "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"exterior\" id=\"ink\"/></shape>\n"
@@ -1327,8 +1328,6 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's extinc
     for (const auto& w : s.warnings) all += w + "\n";
     return all;
   }());
-  // Mitsuba 3's albedo defaults to 0.75: the fog scatters, which is not rendered.
-  CHECK(count_warnings(s, ":4: the medium scatters") == 1);
   CHECK(count_warnings(s, ":7: a shape's exterior medium is not rendered") == 1);
   CHECK(count_warnings(s, ":8: medium 'heterogeneous' is not supported") == 1);
   CHECK(count_warnings(s, ":2: a medium around the camera is not rendered") == 1);
@@ -1342,6 +1341,12 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's extinc
   CHECK(interiors[1] == glm::vec4(0.3f, 0.3f, 0.3f, 1.0f));                       // its extinction all the same
   CHECK(interiors[2] == glm::vec4(0.0f));                                          // an exterior: none
   CHECK(interiors[3] == glm::vec4(0.0f));                                          // an unsupported type: none
+  CHECK(s.warnings.size() == 3);
+  // The single-scattering albedo (Mitsuba 3's default 0.75) and the phase function's g.
+  const auto& ink = s.materials[s.tri_material[0]].interior_albedo;
+  const auto& fog = s.materials[s.tri_material[12]].interior_albedo;
+  CHECK((ink.s[0] == 0.0f && ink.s[1] == 0.0f && ink.s[2] == 0.0f && ink.s[3] == 0.0f));
+  CHECK((fog.s[0] == 0.75f && fog.s[1] == 0.75f && fog.s[2] == 0.75f && fog.s[3] == 0.4f));
 
   // A null BSDF lets every ray through, so no path could enter: refused with a warning.
   psf::Scene null = load_text(
@@ -1358,5 +1363,6 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's extinc
   REQUIRE(!old.tri_material.empty());
   const auto& in = old.materials[old.tri_material[0]].interior;
   CHECK((in.s[0] == 0.5f && in.s[1] == 1.0f && in.s[2] == 2.0f && in.s[3] == 1.0f));
+  CHECK(old.materials[old.tri_material[0]].interior_albedo.s[0] == 0.0f);  // sigmaS / sigmaT
   CHECK(count_warnings(old, "medium") == 0);
 }

@@ -894,9 +894,9 @@ class MitsubaLoader {
     // The volumetric path tracers (Mitsuba 3's volpath, volpathmis, prbvolpath,
     // Mitsuba 0.5's volpath, volpath_simple) and the path replay ones (prb,
     // prb_basic) render what path does where there are no media (psf renders a
-    // shape's interior medium's absorption in every integrator, and warns about
-    // the rest of a medium): their estimates have the same expectation, and they
-    // take the same max_depth and rr_depth.
+    // shape's interior medium in every integrator, and warns about other media):
+    // their estimates have the same expectation, and they take the same
+    // max_depth and rr_depth.
     static const std::set<std::string> like_path = {"path", "volpath", "volpathmis", "volpath_simple",
                                                     "prbvolpath", "prb", "prb_basic"};
     // An integrator that wraps another (Mitsuba 3's aov, moment and stokes,
@@ -1413,40 +1413,48 @@ class MitsubaLoader {
 
   // --- materials, BSDFs, textures -------------------------------------------
 
-  // The extinction coefficient sigma_t of a homogeneous medium, which psf renders
-  // as absorption alone (Material.interior): Mitsuba 3's sigma_t, albedo and
-  // scale, or 0.5's sigmaA and sigmaS (or sigmaT and albedo) and scale. A medium
-  // that scatters warns: its in-scattered light is missing. None for other types.
-  std::optional<glm::vec3> medium_sigma_t(pugi::xml_node node) {
-    const Element m = parse_element(node);
-    if (m.type != "homogeneous") {
-      warn(node, "medium:" + m.type, "medium '" + m.type + "' is not supported; the shape's interior is left empty");
+  // A homogeneous medium: its extinction sigma_t, single-scattering albedo and
+  // Henyey-Greenstein g (Material.interior, interior_albedo). Mitsuba 3's sigma_t,
+  // albedo, scale and phase (isotropic or hg), or 0.5's sigmaA and sigmaS (or
+  // sigmaT and albedo) and scale. None for other medium types.
+  struct Medium {
+    glm::vec3 sigma_t{1.0f}, albedo{0.75f};
+    float g = 0.0f;
+  };
+  std::optional<Medium> medium(pugi::xml_node node) {
+    const Element e = parse_element(node);
+    if (e.type != "homogeneous") {
+      warn(node, "medium:" + e.type, "medium '" + e.type + "' is not supported; the shape's interior is left empty");
       return std::nullopt;
     }
-    ignored_properties(m, "medium", {"sigma_t", "albedo", "scale", "sigma_a", "sigma_s", "density_multiplier",
+    ignored_properties(e, "medium", {"sigma_t", "albedo", "scale", "sigma_a", "sigma_s", "density_multiplier",
                                      "sample_emitters", "has_spectral_extinction"});
-    if (find(m, "material"))
+    if (find(e, "material"))
       warn(node, "medium:material", "named media (material) are not supported; using sigma_t and albedo");
-    glm::vec3 sigma_t, albedo;
-    if (find(m, "sigma_a") || find(m, "sigma_s")) {
-      const glm::vec3 a = get_color(m, "sigma_a", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
-      const glm::vec3 sc = get_color(m, "sigma_s", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
-      sigma_t = a + sc;
-      for (int i = 0; i < 3; ++i) albedo[i] = sc[i] > 0 ? sc[i] / sigma_t[i] : 0.0f;
+    Medium m;
+    if (find(e, "sigma_a") || find(e, "sigma_s")) {
+      const glm::vec3 a = get_color(e, "sigma_a", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
+      const glm::vec3 sc = get_color(e, "sigma_s", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
+      m.sigma_t = a + sc;
+      for (int i = 0; i < 3; ++i) m.albedo[i] = sc[i] > 0 ? sc[i] / m.sigma_t[i] : 0.0f;
     } else {
-      sigma_t = get_color(m, "sigma_t", ColorUse::Unbounded).value_or(glm::vec3(1.0f));
-      albedo = get_color(m, "albedo", ColorUse::Reflectance).value_or(glm::vec3(0.75f));
+      m.sigma_t = get_color(e, "sigma_t", ColorUse::Unbounded).value_or(glm::vec3(1.0f));
+      m.albedo = get_color(e, "albedo", ColorUse::Reflectance).value_or(glm::vec3(0.75f));
     }
-    const float scale = float(get_float(m, "scale", 1.0) * get_float(m, "density_multiplier", 1.0));
-    sigma_t *= scale;
-    if (!(glm::all(glm::greaterThanEqual(sigma_t, glm::vec3(0.0f))) && std::isfinite(sigma_t.x) &&
-          std::isfinite(sigma_t.y) && std::isfinite(sigma_t.z)))
+    m.sigma_t *= float(get_float(e, "scale", 1.0) * get_float(e, "density_multiplier", 1.0));
+    if (!(glm::all(glm::greaterThanEqual(m.sigma_t, glm::vec3(0.0f))) && std::isfinite(m.sigma_t.x) &&
+          std::isfinite(m.sigma_t.y) && std::isfinite(m.sigma_t.z)))
       fail(node, "the medium's sigma_t must be finite and >= 0");
-    if (glm::any(glm::greaterThan(albedo * sigma_t, glm::vec3(0.0f))))
-      warn(node, "medium:scattering",
-           "the medium scatters (albedo > 0): psf renders only its extinction exp(-sigma_t d), without the light it "
-           "scatters into a path (darker than Mitsuba's volpath)");
-    return sigma_t;
+    for (pugi::xml_node phase : objects(e, "phase")) {
+      const Element ph = parse_element(phase);
+      if (ph.type == "hg") {
+        m.g = float(get_float(ph, "g", 0.8));  // Mitsuba's default
+        if (!(m.g > -1.0f && m.g < 1.0f)) fail(phase, "the Henyey-Greenstein g must lie in (-1, 1)");
+      } else if (ph.type != "isotropic") {
+        warn(phase, "phase:" + ph.type, "phase function '" + ph.type + "' is not supported; isotropic instead");
+      }
+    }
+    return m;
   }
 
   // The material of a shape with this BSDF, emitter and interior medium (any may
@@ -1456,9 +1464,12 @@ class MitsubaLoader {
                                medium_node.internal_object());
     auto it = materials_.find(key);
     if (it != materials_.end()) return it->second;
-    glm::vec4 interior(0.0f);
+    glm::vec4 interior(0.0f), interior_albedo(0.0f);
     if (medium_node)
-      if (std::optional<glm::vec3> sigma_t = medium_sigma_t(medium_node)) interior = glm::vec4(*sigma_t, 1.0f);
+      if (std::optional<Medium> md = medium(medium_node)) {
+        interior = glm::vec4(md->sigma_t, 1.0f);
+        interior_albedo = glm::vec4(md->albedo, md->g);
+      }
 
     Bsdf b;
     b.name = "default";
@@ -1490,6 +1501,7 @@ class MitsubaLoader {
       // Mitsuba's area emitters emit from the front side only, whatever the BSDF.
       m.two_sided = from.two_sided && !emits ? 1u : 0u;
       m.interior = {{interior.x, interior.y, interior.z, interior.w}};
+      m.interior_albedo = {{interior_albedo.x, interior_albedo.y, interior_albedo.z, interior_albedo.w}};
       return m;
     };
     std::string name = b.name;
