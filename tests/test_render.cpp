@@ -41,6 +41,21 @@ double mean(const psf::Image& img) {
   return sum / double(img.rgb.size());
 }
 
+// Renders the Mitsuba scene `xml` (written to a file `name`) with plain path
+// tracing at `spp`, `max_depth` segments (-1 unbounded); it must load without warnings.
+psf::RenderResult render_xml(const std::string& name, const std::string& xml, int spp, int max_depth) {
+  const std::string path = psf::test::temp_dir("render-xml") + "/" + name;
+  std::ofstream(path) << xml;
+  psf::Scene s = psf::load_scene(path);
+  CHECK(s.warnings.empty());
+  psf::Renderer r(psf::test::runtime(), s);
+  psf::RenderOptions o;
+  o.filter.enabled = false;
+  o.spp = spp;
+  o.max_depth = max_depth;
+  return r.render(o);
+}
+
 }  // namespace
 
 TEST_CASE("Render: inward normals of the furnace box face its centre", "[render]") {
@@ -176,9 +191,7 @@ TEST_CASE("Render: an absorbing interior medium attenuates by exp(-sigma_t d) (B
   // normal incidence) holding a medium that only absorbs, seen along -z by an
   // orthographic camera against a constant white sky: every ray crosses the cube
   // straight through, 2 units of the medium, so every pixel reads exp(-2 sigma_t).
-  const std::string dir = psf::test::temp_dir("medium");
-  const std::string path = dir + "/absorb.xml";
-  std::ofstream(path) << R"(<scene version="3.0.0">
+  const psf::Image img = render_xml("absorb.xml", R"(<scene version="3.0.0">
   <sensor type="orthographic">
     <transform name="to_world"><scale value="0.5"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
@@ -191,14 +204,7 @@ TEST_CASE("Render: an absorbing interior medium attenuates by exp(-sigma_t d) (B
     </medium>
   </shape>
 </scene>
-)";
-  psf::Scene s = psf::load_scene(path);
-  CHECK(s.warnings.empty());
-  psf::Renderer r(psf::test::runtime(), s);
-  psf::RenderOptions o;
-  o.filter.enabled = false;
-  o.spp = 4;
-  const psf::Image img = r.render(o).image;
+)", 4, -1).image;
   REQUIRE(img.rgb.size() == 8 * 8 * 3);
   const float want[3] = {std::exp(-0.2f), std::exp(-1.0f), std::exp(-2.0f)};
   // Each crossing starts its ray PSF_RAY_EPS (relative) off the surface: the
@@ -216,13 +222,9 @@ TEST_CASE("Render: a medium that scatters without absorbing leaves a furnace as 
   // Russian roulette's 1/q: the mean of 16,384 paths lies within 2 %. A medium
   // whose events were not sampled by their pdfs, or a phase function that lost
   // energy, would not.
-  auto& rt = psf::test::runtime();
   for (const char* boundary : {"<float name=\"int_ior\" value=\"1.5\"/>", "<float name=\"int_ior\" value=\"1\"/>"}) {
     const bool glass = std::string(boundary).find("1.5") != std::string::npos;
-    const std::string dir = psf::test::temp_dir("furnace-medium");
-    const std::string path = dir + (glass ? "/glass.xml" : "/matched.xml");
-    std::ofstream(path) << std::string(R"(<scene version="3.0.0">
-  <integrator type="volpath"><integer name="max_depth" value="-1"/></integrator>
+    const psf::RenderResult res = render_xml(glass ? "glass.xml" : "matched.xml", std::string(R"(<scene version="3.0.0">
   <sensor type="perspective"><float name="fov" value="60"/>
     <transform name="to_world"><lookat origin="0.3, 0.5, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
@@ -232,20 +234,11 @@ TEST_CASE("Render: a medium that scatters without absorbing leaves a furnace as 
     <bsdf type="dielectric">)") + boundary + R"(</bsdf>
     <medium type="homogeneous" name="interior">
       <float name="sigma_t" value="2"/><float name="albedo" value="1"/>)" +
-                                std::string(glass ? R"(<phase type="hg"><float name="g" value="0.5"/></phase>)" : "") +
-                                R"(
+        std::string(glass ? R"(<phase type="hg"><float name="g" value="0.5"/></phase>)" : "") + R"(
     </medium>
   </shape>
 </scene>
-)";
-    psf::Scene s = psf::load_scene(path);
-    CHECK(s.warnings.empty());
-    psf::Renderer r(rt, s);
-    psf::RenderOptions o;
-    o.filter.enabled = false;
-    o.spp = 64;
-    o.max_depth = -1;
-    const psf::RenderResult res = r.render(o);
+)", 64, -1);
     INFO((glass ? "glass" : "index-matched"));
     CHECK(res.nonfinite == 0);
     CHECK(mean(res.image) == Approx(1.0).epsilon(0.02));
