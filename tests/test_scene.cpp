@@ -1348,12 +1348,17 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
   CHECK((ink.s[0] == 0.0f && ink.s[1] == 0.0f && ink.s[2] == 0.0f && ink.s[3] == 0.0f));
   CHECK((fog.s[0] == 0.75f && fog.s[1] == 0.75f && fog.s[2] == 0.75f && fog.s[3] == 0.4f));
 
-  // A null BSDF lets every ray through, so no path could enter: refused with a warning.
+  // A null boundary (which rays skip) becomes a dielectric of relative index 1:
+  // no reflection, no bending, but a hit that takes the path into the medium.
   psf::Scene null = load_text(
       "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
-  CHECK(count_warnings(null, ":2: a medium bounded by a null BSDF is not rendered") == 1);
+  CHECK(null.warnings.size() == 1);  // no sensor
   REQUIRE(!null.tri_material.empty());
-  CHECK(null.materials[null.tri_material[0]].interior.s[3] == 0.0f);
+  const Material& boundary = null.materials[null.tri_material[0]];
+  CHECK(boundary.interior.s[3] == 1.0f);
+  CHECK(boundary.type == PSF_MATERIAL_DIELECTRIC);
+  CHECK(boundary.eta.s[0] == 1.0f);
+  CHECK((boundary.flags & PSF_MATFLAG_MASKED) == 0u);
 
   // Mitsuba 0.5: sigmaA and sigmaS, their sum the extinction.
   psf::Scene old = load_text(

@@ -1478,9 +1478,16 @@ class MitsubaLoader {
     // reflectance 0.5, but an emitter's shape a black one: a light reflects nothing.
     else if (emitter_node) b.m = diffuse_material(glm::vec3(0.0f));
     if (b.null && interior.w > 0.0f) {
-      // psf's null surfaces are skipped by every ray, so no path would enter.
-      warn(medium_node, "medium:null", "a medium bounded by a null BSDF is not rendered; use a dielectric boundary");
-      interior = glm::vec4(0.0f);
+      // psf's null surfaces are skipped by every ray, so no path would enter the
+      // medium: its boundary becomes a smooth dielectric of relative index 1,
+      // which reflects nothing and lets every path through unbent, but is a hit
+      // that moves the path into the medium or out (its light samples stop there).
+      b.m = Material{};
+      b.m.type = PSF_MATERIAL_DIELECTRIC;
+      b.m.eta = {{1.0f, 1.0f, 0.0f, 0.0f}};
+      b.m.specular = {{1.0f, 1.0f, 1.0f, 0.0f}};
+      b.m.transmittance = {{1.0f, 1.0f, 1.0f, 0.0f}};
+      b.null = false;
     }
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
