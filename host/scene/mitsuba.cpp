@@ -338,6 +338,17 @@ class MitsubaLoader {
       }
     }
 
+    // A medium's scattering events take no light samples (shade.cl): point,
+    // spot and directional lights, which only light samples find, never light it.
+    if (scattering_medium_) {
+      size_t delta = 0;
+      for (const LightDesc& l : scene_.lights)
+        delta += l.type == LightType::Point || l.type == LightType::Spot || l.type == LightType::Directional;
+      if (delta > 0)
+        warn(scattering_medium_, "medium:delta-lights",
+             "point, spot and directional lights do not light a medium's scattering in psf (its scattering events "
+             "take no light samples); the medium is darker than Mitsuba's");
+    }
     if (!has_sensor_) {
       scene_.camera = camera_framing(scene_.positions);
       scene_.camera.pixel_filter = "gaussian";
@@ -1445,6 +1456,8 @@ class MitsubaLoader {
     if (!(glm::all(glm::greaterThanEqual(m.sigma_t, glm::vec3(0.0f))) && std::isfinite(m.sigma_t.x) &&
           std::isfinite(m.sigma_t.y) && std::isfinite(m.sigma_t.z)))
       fail(node, "the medium's sigma_t must be finite and >= 0");
+    if (glm::any(glm::greaterThan(m.albedo * m.sigma_t, glm::vec3(0.0f))) && !scattering_medium_)
+      scattering_medium_ = node;
     for (pugi::xml_node phase : objects(e, "phase")) {
       const Element ph = parse_element(phase);
       if (ph.type == "hg") {
@@ -2546,6 +2559,7 @@ class MitsubaLoader {
   std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
   bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
+  pugi::xml_node scattering_medium_;  // the first medium used that scatters (albedo > 0), for its warning
   std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
