@@ -239,6 +239,41 @@ inline float medium_sample(__global const Material* materials, uint medium, floa
   return dist;
 }
 
+/* The light sample of slot k's bounce from `pos`: one point on one emitter,
+ * chosen by power, with the bounce's light dimensions; the environment's drawn
+ * ahead by shade_env_samples with the same numbers where it was presampled. */
+inline LightSample next_event_sample(uint k, FrameParams params, __global const Emitter* emitters,
+                                     __global const float* emitter_cdf, Environment env,
+                                     __global const float* env_data, float3 pos, float8 samples,
+                                     __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
+                                     __global const half* texels, uint env_presampled,
+                                     __global const float4* env_samples) {
+  LightSample ls;
+  if (env_presampled && env_samples[PSF_ENV_RECORD * k + 1u].w != 0.0f) {
+    float4 a = env_samples[PSF_ENV_RECORD * k], b = env_samples[PSF_ENV_RECORD * k + 1u];
+    ls.wi = a.xyz;
+    ls.pdf = a.w;
+    ls.radiance = b.xyz;
+    ls.dist = INFINITY;
+    ls.delta = 0u;
+    return ls;
+  }
+  ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
+                      bounce_sample(samples, PSF_DIM_LIGHT_SELECT), bounce_sample(samples, PSF_DIM_LIGHT_UV),
+                      bounce_sample(samples, PSF_DIM_LIGHT_UV + 1u));
+  if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
+    ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
+  return ls;
+}
+
+/* The Henyey-Greenstein phase function of asymmetry g for directions whose
+ * cosine, from the direction of travel, is cos_theta: also the solid-angle pdf
+ * of sample_henyey_greenstein. */
+inline float henyey_greenstein(float g, float cos_theta) {
+  const float d = 1.0f + g * g - 2.0f * g * cos_theta;
+  return (1.0f - g * g) / (4.0f * M_PI_F * d * sqrt(d));
+}
+
 /* A direction scattered from `d` (unit, the direction of travel) by the
  * Henyey-Greenstein phase function of asymmetry g (> 0 forwards), sampled
  * exactly, so that the sample's weight is 1. */
@@ -284,30 +319,43 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   const float segment = hit.prim == PSF_NO_HIT ? INFINITY : hit.t * ray_len;
   const float t_medium = medium_sample(materials, medium, segment, key, &st);
   if (t_medium < segment) {
-    /* A scattering event in the medium: no light sample (the medium's boundary,
-     * a dielectric, stops shadow rays), a direction from the phase function,
-     * whose next emitter hit then counts in full, as after a delta lobe. */
+    /* A scattering event in the medium: a light sample weighted by the phase
+     * function and the medium's transmittance up to the light (a boundary on the
+     * way, a dielectric, stops it), then a direction from the phase function,
+     * MIS-weighted against light samples where it hits an emitter. */
     const float3 d = ray.dir.xyz / ray_len, p = ray.org.xyz + d * t_medium;
     const uint segments = st.depth + 1u;
     bool go = depth_allows(params, segments + 1u);
     st.prev_pos.w += t_medium;
     if (go) {
       const float8 samples = bounce_samples(params, sobol, key, st);
+      const float g = materials[medium - 1u].interior_albedo.w;
       float3 beta = st.throughput.xyz;
+      if (params.num_emitters > 0u) {
+        const LightSample ls = next_event_sample(k, params, emitters, emitter_cdf, env, env_data, p, samples,
+                                                 tri_attribs, textures, texels, env_presampled, env_samples);
+        if (ls.pdf > 0.0f) {
+          const float f = henyey_greenstein(g, dot(d, ls.wi));
+          const float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, f);
+          st.pending.xyz =
+              beta * f * ls.radiance * (w / ls.pdf) * medium_transmittance(materials, medium, ls.dist);
+          shadow.org = (float4)(p, 0.0f);
+          shadow.dir = isinf(ls.dist) ? (float4)(ls.wi, INFINITY) : (float4)(ls.wi * ls.dist, 1.0f - PSF_RAY_EPS);
+        }
+      }
       if (segments >= params.rr_depth) { /* Russian roulette, as at a surface */
         const float q = fmin(max3(beta), 0.95f);
         if (bounce_sample(samples, PSF_DIM_RR) >= q) go = false;
         else beta /= q;
       }
       if (go) {
+        const float3 wi = sample_henyey_greenstein(d, g, bounce_sample(samples, PSF_DIM_BSDF_UV),
+                                                   bounce_sample(samples, PSF_DIM_BSDF_UV + 1u));
         ray.org = (float4)(p, 0.0f);
-        ray.dir = (float4)(sample_henyey_greenstein(d, materials[medium - 1u].interior_albedo.w,
-                                                    bounce_sample(samples, PSF_DIM_BSDF_UV),
-                                                    bounce_sample(samples, PSF_DIM_BSDF_UV + 1u)),
-                           INFINITY);
-        st.throughput = (float4)(beta, 0.0f);
+        ray.dir = (float4)(wi, INFINITY);
+        st.throughput = (float4)(beta, henyey_greenstein(g, dot(d, wi)));
         st.prev_pos.xyz = p;
-        st.flags |= PSF_PATH_SPECULAR;
+        st.flags &= ~PSF_PATH_SPECULAR;
         st.depth += 1u;
         *next = ray;
       }
@@ -399,23 +447,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
 
   /* Next-event estimation: one point on one emitter, chosen by power. */
   if (scatter && params.num_emitters > 0u) {
-    LightSample ls;
-    if (env_presampled && env_samples[PSF_ENV_RECORD * k + 1u].w != 0.0f) {
-      /* The environment, drawn by shade_env_samples with the same numbers. */
-      float4 a = env_samples[PSF_ENV_RECORD * k], b = env_samples[PSF_ENV_RECORD * k + 1u];
-      ls.wi = a.xyz;
-      ls.pdf = a.w;
-      ls.radiance = b.xyz;
-      ls.dist = INFINITY;
-      ls.delta = 0u;
-    } else {
-      ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
-                          bounce_sample(samples, PSF_DIM_LIGHT_SELECT),
-                          bounce_sample(samples, PSF_DIM_LIGHT_UV),
-                          bounce_sample(samples, PSF_DIM_LIGHT_UV + 1u));
-      if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
-        ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
-    }
+    const LightSample ls = next_event_sample(k, params, emitters, emitter_cdf, env, env_data, pos, samples,
+                                             tri_attribs, textures, texels, env_presampled, env_samples);
     float bsdf_pdf;
     float3 f = ls.pdf > 0.0f && surface_side_agrees(&m, frame, n_unperturbed, ls.wi)
                    ? bsdf_eval(m, table, frame, wo, ls.wi, &bsdf_pdf)

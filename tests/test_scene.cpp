@@ -1348,11 +1348,11 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
   CHECK((ink.s[0] == 0.0f && ink.s[1] == 0.0f && ink.s[2] == 0.0f && ink.s[3] == 0.0f));
   CHECK((fog.s[0] == 0.75f && fog.s[1] == 0.75f && fog.s[2] == 0.75f && fog.s[3] == 0.4f));
 
-  // Scattering takes no light samples: a point light would never light the fog.
+  // Light samples stop at a null boundary: a point light lights nothing across it.
   psf::Scene lit = load_text(
       "<emitter type=\"point\"><point name=\"position\" x=\"0\" y=\"3\" z=\"0\"/></emitter>\n"
       "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
-  CHECK(count_warnings(lit, ":3: point, spot and directional lights do not light a medium's scattering") == 1);
+  CHECK(count_warnings(lit, ":3: point, spot and directional lights light nothing across a medium's null") == 1);
 
   // A null boundary (which rays skip) becomes a dielectric of relative index 1:
   // no reflection, no bending, but a hit that takes the path into the medium.

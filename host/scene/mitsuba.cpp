@@ -338,16 +338,18 @@ class MitsubaLoader {
       }
     }
 
-    // A medium's scattering events take no light samples (shade.cl): point,
-    // spot and directional lights, which only light samples find, never light it.
-    if (scattering_medium_) {
+    // Light samples stop at a medium's null boundary (an index-matched
+    // dielectric here), where Mitsuba's pass through it: point, spot and
+    // directional lights, which only light samples find, light nothing across it.
+    if (null_boundary_) {
       size_t delta = 0;
       for (const LightDesc& l : scene_.lights)
         delta += l.type == LightType::Point || l.type == LightType::Spot || l.type == LightType::Directional;
       if (delta > 0)
-        warn(scattering_medium_, "medium:delta-lights",
-             "point, spot and directional lights do not light a medium's scattering in psf (its scattering events "
-             "take no light samples); the medium is darker than Mitsuba's");
+        warn(null_boundary_, "medium:delta-lights",
+             "point, spot and directional lights light nothing across a medium's null boundary in psf, in "
+             "either direction (light samples stop there; Mitsuba's pass through it): darker than Mitsuba's where "
+             "they would");
     }
     if (!has_sensor_) {
       scene_.camera = camera_framing(scene_.positions);
@@ -1456,8 +1458,6 @@ class MitsubaLoader {
     if (!(glm::all(glm::greaterThanEqual(m.sigma_t, glm::vec3(0.0f))) && std::isfinite(m.sigma_t.x) &&
           std::isfinite(m.sigma_t.y) && std::isfinite(m.sigma_t.z)))
       fail(node, "the medium's sigma_t must be finite and >= 0");
-    if (glm::any(glm::greaterThan(m.albedo * m.sigma_t, glm::vec3(0.0f))) && !scattering_medium_)
-      scattering_medium_ = node;
     for (pugi::xml_node phase : objects(e, "phase")) {
       const Element ph = parse_element(phase);
       if (ph.type == "hg") {
@@ -1490,7 +1490,8 @@ class MitsubaLoader {
     // Without a BSDF Mitsuba (3 and 0.5) gives a shape a diffuse one of
     // reflectance 0.5, but an emitter's shape a black one: a light reflects nothing.
     else if (emitter_node) b.m = diffuse_material(glm::vec3(0.0f));
-    if (b.null && interior.w > 0.0f) {
+    const bool null_boundary = b.null && interior.w > 0.0f;
+    if (null_boundary) {
       // psf's null surfaces are skipped by every ray, so no path would enter the
       // medium: its boundary becomes a smooth dielectric of relative index 1,
       // which reflects nothing and lets every path through unbent, but is a hit
@@ -1501,6 +1502,7 @@ class MitsubaLoader {
       b.m.specular = {{1.0f, 1.0f, 1.0f, 0.0f}};
       b.m.transmittance = {{1.0f, 1.0f, 1.0f, 0.0f}};
       b.null = false;
+      if (!null_boundary_) null_boundary_ = medium_node;
     }
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
@@ -2559,7 +2561,7 @@ class MitsubaLoader {
   std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
   bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
-  pugi::xml_node scattering_medium_;  // the first medium used that scatters (albedo > 0), for its warning
+  pugi::xml_node null_boundary_;  // the first medium behind a null BSDF, for a warning
   std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
