@@ -472,7 +472,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     int in = 0;
     const uint64_t tail = o.tail_paths >= 0 ? uint64_t(o.tail_paths)
                           : rt.device().type == "GPU" ? uint64_t(b.size / 16) : 0;
-    for (int depth = 0; n_live > 0 && (o.max_depth < 0 || depth < o.max_depth); ++depth) {
+    // Rounds until no path is left: shade ends each path at the maximum depth,
+    // and a medium's null boundary, crossed without counting, takes a round too.
+    for (int depth = 0; n_live > 0; ++depth) {
       s.caster->closest(b.rays[in], hits, n_live);
       rt.zero(alive, sizeof(uint32_t));
       if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
@@ -493,7 +495,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
       // The last few live paths: the rest of each in one launch (trace_paths
       // over the queue) instead of a round of launches and a read of the count
       // per bounce.
-      if (n_live > 0 && n_live <= tail && (o.max_depth < 0 || depth + 1 < o.max_depth)) {
+      if (n_live > 0 && n_live <= tail) {
         rt.launch("trace_paths", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
                   s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
                   cl_uint(s.caster->masked() ? 1 : 0), b.rays[in], hits, states, vertices, shadow_rays, shadow_hits,

@@ -227,6 +227,10 @@ typedef struct {
 /* Dielectrics: tex_color is the specular transmittance (Mitsuba's textured
  * specular_transmittance) instead of the specular reflectance. */
 #define PSF_MATFLAG_TEX_TRANSMITTANCE 1024u
+/* The boundary of a medium behind Mitsuba's null BSDF: a smooth dielectric of
+ * relative index 1 (nothing reflected, nothing bent) whose crossing, as a null
+ * interaction in Mitsuba, counts neither towards the depth nor for Russian roulette. */
+#define PSF_MATFLAG_NULL_BOUNDARY 2048u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 

@@ -222,7 +222,10 @@ inline float medium_sample(__global const Material* materials, uint medium, floa
     st->throughput.xyz *= medium_transmittance(materials, medium, dist);
     return dist;
   }
-  const uint h = psf_hash_combine(psf_hash_combine(psf_hash_combine(key, st->sample), st->depth), 0x6d656469u);
+  /* The path length so far tells this segment from others of the same depth
+   * (a null boundary's crossing keeps the depth). */
+  const uint h = psf_hash_combine(psf_hash_combine(psf_hash_combine(key, st->sample), st->depth),
+                                  as_uint(st->prev_pos.w) ^ 0x6d656469u);
   const float u = bits_to_float(h), u2 = bits_to_float(psf_hash(h ^ 0x9e3779b9u));
   const int c = min((int)(u * 3.0f), 2);
   const float s = c == 0 ? sigma_t.x : c == 1 ? sigma_t.y : sigma_t.z;
@@ -270,6 +273,7 @@ inline LightSample next_event_sample(uint k, FrameParams params, __global const 
  * cosine, from the direction of travel, is cos_theta: also the solid-angle pdf
  * of sample_henyey_greenstein. */
 inline float henyey_greenstein(float g, float cos_theta) {
+  if (fabs(g) < 1e-3f) return 1.0f / (4.0f * M_PI_F); /* sampled as isotropic there */
   const float d = 1.0f + g * g - 2.0f * g * cos_theta;
   return (1.0f - g * g) / (4.0f * M_PI_F * d * sqrt(d));
 }
@@ -428,7 +432,12 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   float3 n = dot(frame.n, wo) >= 0.0f ? frame.n : -frame.n; /* shading normal on the camera side */
   __global const half* table = surface_table(m, textures, texels);
   uint segments = st.depth + 1u; /* segments of the path up to this vertex */
-  bool scatter = depth_allows(params, segments + 1u) && bsdf_scatters(m);
+  /* A medium's null boundary (PSF_MATFLAG_NULL_BOUNDARY) lets the path through
+   * without counting towards its depth or Russian roulette, as Mitsuba's null
+   * interactions; its crossing draws no number (its Fresnel reflectance is 0),
+   * so the next vertex may use the same dimensions. */
+  const bool null_boundary = (m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0u;
+  bool scatter = (null_boundary || depth_allows(params, segments + 1u)) && bsdf_scatters(m);
 
   /* The filtering vertex: the first diffuse one. From here on the throughput
    * and the gathered radiance are relative to it. */
@@ -477,7 +486,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
                                 bsdf_chooses_lobe(m) ? bounce_sample(samples, PSF_DIM_BSDF_LOBE) : 0.5f);
     if (!surface_side_agrees(&m, frame, n_unperturbed, bs.wi)) bs.weight = (float3)(0.0f);
     beta *= bs.weight;
-    if (segments >= params.rr_depth) {
+    if (segments >= params.rr_depth && !null_boundary) {
       /* Survival by the throughput since the filtering vertex: any probability
        * keeps the estimate unbiased, and this one does not depend on alpha. */
       float q = fmin(max3(beta), 0.95f);
@@ -494,7 +503,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
                  (medium_after(medium, interior, hit_material, dot(bs.wi, ng) >= 0.0f) << PSF_PATH_MEDIUM_SHIFT);
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
-      st.depth += 1u;
+      st.depth += null_boundary ? 0u : 1u;
       *next = ray;
     } else {
       scatter = false;
@@ -604,7 +613,10 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
   uint j = queue[k];
   AlphaScene as = {tri_material, materials, tri_attribs, textures, texels};
   const AlphaScene* alpha = masked ? &as : 0;
-  for (uint depth = depth0; (int)params.max_depth < 0 || depth < params.max_depth; ++depth) {
+  /* Until the path ends: shade_path_inline ends it at the maximum depth (a
+   * medium's null boundary is crossed without counting, so the rounds may
+   * outnumber the depth). */
+  for (uint round = depth0;; ++round) {
     hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
     if (env_presampled) {
       env_row_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);

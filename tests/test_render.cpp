@@ -41,11 +41,31 @@ double mean(const psf::Image& img) {
   return sum / double(img.rgb.size());
 }
 
+// A Mitsuba scene: the cube [-1, 1]^3 with `inside` (its BSDF and medium) under a
+// constant white sky, seen along -z by an orthographic camera of size x size
+// pixels that sees only the cube's middle, [-0.5, 0.5]^2.
+std::string cube_under_sky(int size, const std::string& inside) {
+  const std::string n = std::to_string(size);
+  return R"(<scene version="3.0.0">
+  <sensor type="orthographic">
+    <transform name="to_world"><scale value="0.5"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm">
+      <integer name="width" value=")" + n + R"("/><integer name="height" value=")" + n + R"("/>
+    </film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+  <shape type="cube">
+    )" + inside + R"(
+  </shape>
+</scene>
+)";
+}
+
 // Renders the Mitsuba scene `xml` (written to a file `name`) with plain path
 // tracing at `spp`, `max_depth` segments (-1 unbounded); it must load with
 // `warnings` warnings.
 psf::RenderResult render_xml(const std::string& name, const std::string& xml, int spp, int max_depth,
-                             size_t warnings = 0) {
+                             size_t warnings = 0, int per_path = -1) {
   const std::string path = psf::test::temp_dir("render-xml") + "/" + name;
   std::ofstream(path) << xml;
   psf::Scene s = psf::load_scene(path);
@@ -55,6 +75,7 @@ psf::RenderResult render_xml(const std::string& name, const std::string& xml, in
   o.filter.enabled = false;
   o.spp = spp;
   o.max_depth = max_depth;
+  o.per_path = per_path;
   return r.render(o);
 }
 
@@ -193,20 +214,11 @@ TEST_CASE("Render: an absorbing interior medium attenuates by exp(-sigma_t d) (B
   // normal incidence) holding a medium that only absorbs, seen along -z by an
   // orthographic camera against a constant white sky: every ray crosses the cube
   // straight through, 2 units of the medium, so every pixel reads exp(-2 sigma_t).
-  const psf::Image img = render_xml("absorb.xml", R"(<scene version="3.0.0">
-  <sensor type="orthographic">
-    <transform name="to_world"><scale value="0.5"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
-  </sensor>
-  <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
-  <shape type="cube">
+  const psf::Image img = render_xml("absorb.xml", cube_under_sky(8, R"(
     <bsdf type="dielectric"><float name="int_ior" value="1"/></bsdf>
     <medium type="homogeneous" name="interior">
       <rgb name="sigma_t" value="0.1, 0.5, 1"/><float name="albedo" value="0"/>
-    </medium>
-  </shape>
-</scene>
-)", 4, -1).image;
+    </medium>)"), 4, -1).image;
   REQUIRE(img.rgb.size() == 8 * 8 * 3);
   const float want[3] = {std::exp(-0.2f), std::exp(-1.0f), std::exp(-2.0f)};
   // Each crossing starts its ray PSF_RAY_EPS (relative) off the surface: the
@@ -251,8 +263,9 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
   // A cube [-1, 1]^3 of fog (sigma_t 0.8, albedo 0.7, isotropic) behind a null
   // boundary, a point light of intensity 1 at its centre, no other light, seen
   // along -z by an orthographic camera whose 4 x 4 pixels all look near (x0, y0).
-  // With 3 segments at most (camera to the boundary, to a scattering event, a
-  // light sample from there) the image is single scattering alone:
+  // With 2 segments at most (camera to a scattering event, a light sample from
+  // there; crossing the null boundary counts for nothing, as in Mitsuba) the
+  // image is single scattering alone:
   //   L = integral over z in [-1, 1] of albedo sigma_t exp(-sigma_t (1 - z))
   //       (1 / 4 pi) exp(-sigma_t r) / r^2 dz,   r = |(x0, y0, z)|,
   // which a midpoint rule gives. Each pixel's paths sample where they scatter
@@ -260,16 +273,20 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
   const float x0 = 0.5f, y0 = 0.3f, sigma = 0.8f, albedo = 0.7f;
   const psf::Image img = render_xml("single.xml", R"(<scene version="3.0.0">
   <sensor type="orthographic">
-    <transform name="to_world"><scale value="0.02"/><lookat origin="0.5, 0.3, 5" target="0.5, 0.3, 0" up="0, 1, 0"/></transform>
+    <transform name="to_world">
+      <scale value="0.02"/><lookat origin="0.5, 0.3, 5" target="0.5, 0.3, 0" up="0, 1, 0"/>
+    </transform>
     <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film>
   </sensor>
   <emitter type="point"><point name="position" x="0" y="0" z="0"/><rgb name="intensity" value="1, 1, 1"/></emitter>
   <shape type="cube">
     <bsdf type="null"/>
-    <medium type="homogeneous" name="interior"><float name="sigma_t" value="0.8"/><float name="albedo" value="0.7"/></medium>
+    <medium type="homogeneous" name="interior">
+      <float name="sigma_t" value="0.8"/><float name="albedo" value="0.7"/>
+    </medium>
   </shape>
 </scene>
-)", 1024, 3, 1).image;  // the warning: point lights light nothing across the null boundary
+)", 1024, 2, 1).image;  // the warning: point lights light nothing across the null boundary
   double want = 0.0;
   const int steps = 100000;
   for (int i = 0; i < steps; ++i) {
@@ -278,4 +295,21 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
   }
   want *= 2.0 / steps;
   CHECK(mean(img) == Approx(want).epsilon(0.03));
+}
+
+TEST_CASE("Render: a medium's null boundary costs no depth, in either path kernel", "[render]") {
+  // A cube of absorbing fog behind a null boundary before a white sky, at a
+  // maximum depth of 1 (only what the camera sees directly): as in Mitsuba, the
+  // boundary's two crossings are null interactions, so the sky shows through the
+  // fog, exp(-2 sigma_t), in the per-path kernel and in the wavefront alike
+  // (whose rounds, one per crossing, outnumber the depth).
+  for (int per_path : {1, 0}) {
+    INFO("per_path " << per_path);
+    const psf::Image img = render_xml("null-depth.xml", cube_under_sky(4, R"(<bsdf type="null"/>
+    <medium type="homogeneous" name="interior">
+      <float name="sigma_t" value="0.5"/><float name="albedo" value="0"/>
+    </medium>)"),
+                                      4, 1, 0, per_path).image;
+    for (float v : img.rgb) REQUIRE(v == Approx(std::exp(-1.0f)).epsilon(1e-3));
+  }
 }

@@ -417,6 +417,12 @@ class GltfLoader {
                      " bytes)");
       if (stride == 0 || stride > 256 || count > (size_t(1) << 32) / stride)
         fail(at, "byteStride " + std::to_string(stride) + " or count " + std::to_string(count) + " out of range");
+      // Every 64 bytes of decoded vertices take at least one compressed byte (2
+      // header bits per group of 16), every index or triangle at least one: a
+      // count beyond that is refused before its output is allocated.
+      if (count * stride > 64 * length + 4096)
+        fail(at, "byteLength " + std::to_string(length) + " is too short for " + std::to_string(count) +
+                     " elements of " + std::to_string(stride) + " bytes");
       tinygltf::Buffer out;
       out.data.resize(count * stride);
       const unsigned char* in = src.data() + offset;
@@ -502,7 +508,8 @@ class GltfLoader {
       tinygltf::Accessor& a = accessor(semantic->second, name);
       const int components = tinygltf::GetNumComponentsInType(uint32_t(a.type));
       const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(a.componentType));
-      if (components <= 0 || csize <= 0) fail(at + ".attributes." + name, "unsupported accessor type");
+      if (components <= 0 || components > 16 || csize <= 0)
+        fail(at + ".attributes." + name, "unsupported accessor type");
       const size_t stride = size_t(components) * size_t(csize);
       const int view = add_view(points * stride);
       unsigned char* dst = out.data.data() + model_.bufferViews[size_t(view)].byteOffset;
@@ -512,7 +519,7 @@ class GltfLoader {
         unsigned char* d = dst + i * stride;
         auto convert = [&](auto sample) {
           using T = decltype(sample);
-          T value[4] = {};
+          T value[16] = {};  // up to a MAT4 (libdraco writes every component asked for)
           ok = att->ConvertValue<T>(v, int8_t(components), value);
           std::memcpy(d, value, stride);
         };

@@ -1501,6 +1501,7 @@ class MitsubaLoader {
       b.m.eta = {{1.0f, 1.0f, 0.0f, 0.0f}};
       b.m.specular = {{1.0f, 1.0f, 1.0f, 0.0f}};
       b.m.transmittance = {{1.0f, 1.0f, 1.0f, 0.0f}};
+      b.m.flags = PSF_MATFLAG_NULL_BOUNDARY;
       b.null = false;
       if (!null_boundary_) null_boundary_ = medium_node;
     }
