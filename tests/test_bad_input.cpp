@@ -120,6 +120,8 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"draco-bad-attribute.gltf", "KHR_draco_mesh_compression.attributes.NORMAL: no attribute with this id"},
       {"draco-truncated.gltf", "draco-truncated.gltf: meshes[0].primitives[0].extensions.KHR_draco_mesh_compression: Draco:"},
       {"meshopt-corrupt.gltf", "meshopt-corrupt.gltf: bufferViews[0].extensions.EXT_meshopt_compression: the compressed"},
+      // 4 GiB of output claimed from 16 compressed bytes: refused before it is allocated
+      {"meshopt-huge-count.gltf", "meshopt-huge-count.gltf: bufferViews[0].extensions.EXT_meshopt_compression: byteLength"},
       {"required-extension.gltf", "required-extension.gltf: extensionsRequired: the file requires extension"},
   };
   for (const auto& [file, where] : cases) {
