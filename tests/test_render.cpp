@@ -47,6 +47,7 @@ double mean(const psf::Image& img) {
 std::string cube_under_sky(int size, const std::string& inside) {
   const std::string n = std::to_string(size);
   return R"(<scene version="3.0.0">
+  <integrator type="volpath"/>
   <sensor type="orthographic">
     <transform name="to_world"><scale value="0.5"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm">
@@ -239,6 +240,7 @@ TEST_CASE("Render: a medium that scatters without absorbing leaves a furnace as 
   for (const char* boundary : {"<float name=\"int_ior\" value=\"1.5\"/>", "<float name=\"int_ior\" value=\"1\"/>"}) {
     const bool glass = std::string(boundary).find("1.5") != std::string::npos;
     const psf::RenderResult res = render_xml(glass ? "glass.xml" : "matched.xml", std::string(R"(<scene version="3.0.0">
+  <integrator type="volpath"/>
   <sensor type="perspective"><float name="fov" value="60"/>
     <transform name="to_world"><lookat origin="0.3, 0.5, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
@@ -272,6 +274,7 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
   // (free flight) and take a light sample there: 16 x 1024 paths, 3 %.
   const float x0 = 0.5f, y0 = 0.3f, sigma = 0.8f, albedo = 0.7f;
   const psf::Image img = render_xml("single.xml", R"(<scene version="3.0.0">
+  <integrator type="volpath"/>
   <sensor type="orthographic">
     <transform name="to_world">
       <scale value="0.02"/><lookat origin="0.5, 0.3, 5" target="0.5, 0.3, 0" up="0, 1, 0"/>

@@ -1314,6 +1314,7 @@ TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's r
 
 TEST_CASE("Media: a shape's homogeneous interior medium is its material's; others warn", "[scene]") {
   psf::Scene s = load_text(
+      "<integrator type=\"volpath\"/>\n"
       "<sensor type=\"perspective\"><ref name=\"exterior\" id=\"fog\"/></sensor>\n"
       "<medium type=\"homogeneous\" id=\"ink\"><rgb name=\"sigma_t\" value=\"0.1, 0.5, 1\"/>"
       "<float name=\"scale\" value=\"2\"/><float name=\"albedo\" value=\"0\"/></medium>\n"
@@ -1328,9 +1329,9 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
     for (const auto& w : s.warnings) all += w + "\n";
     return all;
   }());
-  CHECK(count_warnings(s, ":7: a shape's exterior medium is not rendered") == 1);
-  CHECK(count_warnings(s, ":8: medium 'heterogeneous' is not supported") == 1);
-  CHECK(count_warnings(s, ":2: a medium around the camera is not rendered") == 1);
+  CHECK(count_warnings(s, ":8: a shape's exterior medium is not rendered") == 1);
+  CHECK(count_warnings(s, ":9: medium 'heterogeneous' is not supported") == 1);
+  CHECK(count_warnings(s, ":3: a medium around the camera is not rendered") == 1);
   std::vector<glm::vec4> interiors;  // each cube's (12 triangles each)
   REQUIRE(s.tri_material.size() == 48);
   for (size_t t = 0; t < 48; t += 12) {
@@ -1350,13 +1351,15 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
 
   // Light samples stop at a null boundary: a point light lights nothing across it.
   psf::Scene lit = load_text(
+      "<integrator type=\"volpath\"/>\n"
       "<emitter type=\"point\"><point name=\"position\" x=\"0\" y=\"3\" z=\"0\"/></emitter>\n"
       "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
-  CHECK(count_warnings(lit, ":3: point, spot and directional lights light nothing across a medium's null") == 1);
+  CHECK(count_warnings(lit, ":4: point, spot and directional lights light nothing across a medium's null") == 1);
 
   // A null boundary (which rays skip) becomes a dielectric of relative index 1:
   // no reflection, no bending, but a hit that takes the path into the medium.
   psf::Scene null = load_text(
+      "<integrator type=\"volpath\"/>\n"
       "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
   CHECK(null.warnings.size() == 1);  // no sensor
   REQUIRE(!null.tri_material.empty());
@@ -1368,6 +1371,7 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
 
   // Mitsuba 0.5: sigmaA and sigmaS, their sum the extinction.
   psf::Scene old = load_text(
+      "<integrator type=\"volpath\"/>\n"
       "<shape type=\"cube\"><bsdf type=\"dielectric\"/><medium type=\"homogeneous\" name=\"interior\">"
       "<rgb name=\"sigmaA\" value=\"0.5, 1, 2\"/><rgb name=\"sigmaS\" value=\"0, 0, 0\"/></medium></shape>\n",
       {}, "0.5.0");
@@ -1376,4 +1380,12 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
   CHECK((in.s[0] == 0.5f && in.s[1] == 1.0f && in.s[2] == 2.0f && in.s[3] == 1.0f));
   CHECK(old.materials[old.tri_material[0]].interior_albedo.s[0] == 0.0f);  // sigmaS / sigmaT
   CHECK(count_warnings(old, "medium") == 0);
+
+  // Mitsuba's path tracer (its default integrator too) leaves media out, and so does psf then.
+  for (const std::string integrator : {"", "<integrator type=\"path\"/>\n"}) {
+    psf::Scene plain = load_text(integrator + "<shape type=\"cube\"><bsdf type=\"dielectric\"/>"
+                                              "<medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
+    CHECK(count_warnings(plain, "leaves media out, as Mitsuba's does") == 1);
+    CHECK(plain.materials[plain.tri_material[0]].interior.s[3] == 0.0f);
+  }
 }

@@ -319,6 +319,21 @@ class MitsubaLoader {
     collect(root, top, include_stack);
     for (pugi::xml_node node : top) index_ids(node);
     resolve_aliases();
+    // Media are rendered only by a volumetric integrator, as in Mitsuba, whose
+    // path tracer (also its default integrator) leaves them out: the first
+    // <integrator>'s type, or the type nested in a wrapper such as aov.
+    for (pugi::xml_node node : top)
+      if (std::string(node.name()) == "integrator") {
+        pugi::xml_node n = node;
+        static const std::set<std::string> volumetric = {"volpath", "volpathmis", "volpath_simple", "prbvolpath"};
+        for (int depth = 0; n && depth < 8; ++depth) {
+          integrator_type_ = attr(n, "type").value_or("");
+          if (volumetric.count(integrator_type_)) break;
+          n = n.child("integrator");
+        }
+        media_rendered_ = volumetric.count(integrator_type_) > 0;
+        break;
+      }
 
     using Handler = void (MitsubaLoader::*)(pugi::xml_node);
     static const std::map<std::string, Handler> handlers = {
@@ -907,9 +922,9 @@ class MitsubaLoader {
     // The volumetric path tracers (Mitsuba 3's volpath, volpathmis, prbvolpath,
     // Mitsuba 0.5's volpath, volpath_simple) and the path replay ones (prb,
     // prb_basic) render what path does where there are no media (psf renders a
-    // shape's interior medium in every integrator, and warns about other media):
-    // their estimates have the same expectation, and they take the same
-    // max_depth and rr_depth.
+    // shape's interior medium for the volumetric ones, as Mitsuba, and warns
+    // about other media): their estimates have the same expectation, and they
+    // take the same max_depth and rr_depth.
     static const std::set<std::string> like_path = {"path", "volpath", "volpathmis", "volpath_simple",
                                                     "prbvolpath", "prb", "prb_basic"};
     // An integrator that wraps another (Mitsuba 3's aov, moment and stokes,
@@ -1264,7 +1279,11 @@ class MitsubaLoader {
     for (const auto& [name, p] : e.props) {
       if (p.kind != Property::Kind::Object || std::string(p.object.name()) != "medium") continue;
       ++named_media;
-      if (name == "interior") interior = p.object;
+      if (name == "interior" && !media_rendered_)
+        warn(p.node, "medium:integrator",
+             "the integrator '" + (integrator_type_.empty() ? std::string("path") : integrator_type_) +
+                 "' leaves media out, as Mitsuba's does (volpath renders them); ignored");
+      else if (name == "interior") interior = p.object;
       else warn(p.node, "medium:" + name, "a shape's " + name + " medium is not rendered (only its interior); ignored");
     }
     if (objects(e, "medium").size() > named_media)
@@ -2563,6 +2582,8 @@ class MitsubaLoader {
   bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
   pugi::xml_node null_boundary_;  // the first medium behind a null BSDF, for a warning
+  std::string integrator_type_;   // the scene's (first, unwrapped) integrator's type; "" without one
+  bool media_rendered_ = false;   // a volumetric integrator: shapes' interior media are rendered
   std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
