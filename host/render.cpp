@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <stdexcept>
+#include <string>
 #include <thread>
 
 #include "bvh.h"
@@ -63,6 +65,12 @@ struct Renderer::Impl {
   // Shading attributes and textures (replacing `materials` by device_materials);
   // a scene without textures gets the placeholder entry 0 (one white texel).
   void upload_shading() {
+    // A path names its medium by 1 + a material index in the bits of
+    // PathState.flags above PSF_PATH_MEDIUM_SHIFT.
+    if (scene.materials.size() >= (size_t(1) << (32 - PSF_PATH_MEDIUM_SHIFT)))
+      throw std::invalid_argument("the scene has " + std::to_string(scene.materials.size()) +
+                                  " materials; at most " + std::to_string((1u << (32 - PSF_PATH_MEDIUM_SHIFT)) - 1) +
+                                  " are supported");
     std::vector<TriAttrib> attributes = triangle_attributes(scene);
     tri_attribs = rt.upload(attributes);
     materials = rt.upload(device_materials(scene, attributes));  // with PSF_MATFLAG_NORMALS
