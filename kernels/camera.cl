@@ -110,7 +110,7 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   st.pixel = film_pixel;
   st.sample = sample;
   st.depth = 0u;
-  st.flags = PSF_PATH_ALIVE;
+  st.flags = PSF_PATH_ALIVE | (params.camera_medium << PSF_PATH_MEDIUM_SHIFT);
   states[j] = st;
   PathVertex none;
   none.position = none.normal = none.albedo = none.alpha = (float4)(0.0f);

@@ -78,6 +78,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(FrameParams, batch_size);
   out[i++] = PSF_OFFSET(FrameParams, rr_depth);
   out[i++] = PSF_OFFSET(FrameParams, first_sphere);
+  out[i++] = PSF_OFFSET(FrameParams, camera_medium);
   out[i++] = sizeof(FilterParams);
   out[i++] = PSF_OFFSET(FilterParams, count);
   out[i++] = PSF_OFFSET(FilterParams, cells27);

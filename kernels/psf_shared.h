@@ -440,6 +440,8 @@ typedef struct {
   psf_uint dim_bounce0;    /* first sample dimension of the bounces: PSF_DIM_BOUNCE0, or _LENS with a thin lens */
   psf_uint hide;           /* PSF_HIDE_*: what camera rays do not see (Mitsuba's hide_emitters) */
   psf_uint first_sphere;   /* prim index of the first analytic sphere (the number of triangles) */
+  psf_uint camera_medium;  /* the medium camera rays start in (PathState.flags' upper bits), 0: none */
+  psf_uint pad0, pad1, pad2; /* to a multiple of 16 bytes */
 } FrameParams;
 
 #define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */

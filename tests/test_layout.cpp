@@ -79,6 +79,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, batch_size)", offsetof(FrameParams, batch_size)},
       {"offsetof(FrameParams, rr_depth)", offsetof(FrameParams, rr_depth)},
       {"offsetof(FrameParams, first_sphere)", offsetof(FrameParams, first_sphere)},
+      {"offsetof(FrameParams, camera_medium)", offsetof(FrameParams, camera_medium)},
       {"sizeof(FilterParams)", sizeof(FilterParams)},
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},

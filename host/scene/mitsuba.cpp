@@ -366,6 +366,13 @@ class MitsubaLoader {
              "either direction (light samples stop there; Mitsuba's pass through it): darker than Mitsuba's where "
              "they would");
     }
+    if (camera_medium_) {
+      auto it = medium_materials_.find(camera_medium_->object.internal_object());
+      if (it != medium_materials_.end()) scene_.camera_medium = it->second + 1;
+      else
+        warn(camera_medium_->node, "medium:sensor",
+             "the medium around the camera is the interior of no shape, so psf cannot tell where it ends; ignored");
+    }
     if (!has_sensor_) {
       scene_.camera = camera_framing(scene_.positions);
       scene_.camera.pixel_filter = "gaussian";
@@ -1074,9 +1081,14 @@ class MitsubaLoader {
     scene_.height = 576;
     for (pugi::xml_node film : objects(e, "film")) load_film(film);
     for (pugi::xml_node sampler : objects(e, "sampler")) load_sampler(sampler);
+    // The medium around the camera (Mitsuba 3's `medium`, 0.5's `exterior`):
+    // rendered where it is the interior of a shape (resolved at the end of load).
     for (const auto& [name, p] : e.props)
-      if (p.kind == Property::Kind::Object && std::string(p.object.name()) == "medium")
-        warn(p.node, "medium:sensor", "a medium around the camera is not rendered; ignored");
+      if (p.kind == Property::Kind::Object && std::string(p.object.name()) == "medium") {
+        if (!camera_medium_ && media_rendered_) camera_medium_ = p;
+        else if (!media_rendered_) warn(p.node, "medium:integrator", "the integrator leaves media out; ignored");
+        else warn(p.node, "medium:sensor", "only one medium around the camera; ignored");
+      }
   }
 
   void load_film(pugi::xml_node node) {
@@ -1557,6 +1569,7 @@ class MitsubaLoader {
       return uint32_t(scene_.materials.size() - 1);
     };
     uint32_t index = push(b, name);
+    if (interior.w > 0.0f) medium_materials_.emplace(medium_node.internal_object(), index);
     materials_.emplace(key, index);
     return index;
   }
@@ -2583,6 +2596,8 @@ class MitsubaLoader {
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
   pugi::xml_node null_boundary_;  // the first medium behind a null BSDF, for a warning
   std::string integrator_type_;   // the scene's (first, unwrapped) integrator's type; "" without one
+  std::optional<Property> camera_medium_;                 // the sensor's medium, if any
+  std::map<const void*, uint32_t> medium_materials_;      // medium node -> the first material it is the interior of
   bool media_rendered_ = false;   // a volumetric integrator: shapes' interior media are rendered
   std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"

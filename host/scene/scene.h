@@ -87,6 +87,7 @@ struct Scene {
   int max_depth = -1;                    // Mitsuba's max_depth: -1 unbounded, 1 emitters only, 2 direct light
   int rr_depth = 5;                      // Mitsuba's rr_depth: Russian roulette from this depth on
   uint32_t hide = 0;                     // PSF_HIDE_* (Mitsuba's hide_emitters): what camera rays do not see
+  uint32_t camera_medium = 0;            // 1 + the material whose interior medium holds the camera, 0: none
   int default_spp = 0;                   // the scene's sampler sampleCount, 0 if none
   std::vector<LightDesc> lights;         // point, spot, directional lights and the environment (emissive surfaces are materials)
   std::vector<std::string> warnings;     // unsupported features, each with file:line
