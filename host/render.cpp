@@ -471,7 +471,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
               s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
               cl_uint(s.caster->masked() ? 1 : 0), b.rays[0], hits, states, vertices, shadow_rays, shadow_hits,
-              s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, p.batch_size, b.queue[0], 0u);
+              s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, p.batch_size, b.queue[0]);
   } else {
     // A compacted wavefront: each bounce launches only the paths still alive. The
     // queue holds their path indices (in any order: a path's result does not
@@ -483,7 +483,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
                           : rt.device().type == "GPU" ? uint64_t(b.size / 16) : 0;
     // Rounds until no path is left: shade ends each path at the maximum depth,
     // and a medium's null boundary, crossed without counting, takes a round too.
-    for (int depth = 0; n_live > 0; ++depth) {
+    while (n_live > 0) {
       s.caster->closest(b.rays[in], hits, n_live);
       rt.zero(alive, sizeof(uint32_t));
       if (env_presampled) {  // environment light samples ahead of shade (kernels/shade.cl)
@@ -508,8 +508,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
         rt.launch("trace_paths", n_live, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
                   s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
                   cl_uint(s.caster->masked() ? 1 : 0), b.rays[in], hits, states, vertices, shadow_rays, shadow_hits,
-                  s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, n_live, b.queue[in],
-                  cl_uint(depth + 1));
+                  s.tri_attribs, s.textures, s.texels, env_presampled, b.env_samples, n_live, b.queue[in]);
         break;
       }
     }

@@ -582,11 +582,11 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
   shadow_slot(k, queue_in[k], shadow_hits, states, vertices);
 }
 
-/* trace_paths: each path of queue[0, count) whole in one work-item, from bounce
- * depth0 on, on slot k (its ray in rays[k]): the same stages as the wavefront
+/* trace_paths: each path of queue[0, count) whole in one work-item, from the
+ * bounce it is at, on slot k (its ray in rays[k]): the same stages as the wavefront
  * (closest hit, environment samples, shade, shadow ray, shadow test) in the same
  * order, so the result is the same, bit for bit. Two uses:
- * - CPU devices, the whole batch (queue: camera_rays' path order, depth0 0): a
+ * - CPU devices, the whole batch (queue: camera_rays' path order, from the camera): a
  *   path's state, rays and hits stay in the core's cache from one bounce to the
  *   next instead of streaming through memory at every bounce (on a GPU the paths'
  *   different lengths would idle most lanes);
@@ -606,8 +606,8 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
                           __global Ray* restrict shadow_rays, __global Hit* restrict shadow_hits,
                           __global const TriAttrib* restrict tri_attribs, __global const TextureInfo* restrict textures,
                           __global const half* restrict texels, uint env_presampled,
-                          __global float4* restrict env_samples, uint count, __global const uint* restrict queue,
-                          uint depth0) {
+                          __global float4* restrict env_samples, uint count,
+                          __global const uint* restrict queue) {
   uint k = get_global_id(0);
   if (k >= count) return;
   uint j = queue[k];
@@ -616,7 +616,7 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
   /* Until the path ends: shade_path_inline ends it at the maximum depth (a
    * medium's null boundary is crossed without counting, so the rounds may
    * outnumber the depth). */
-  for (uint round = depth0;; ++round) {
+  for (;;) {
     hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
     if (env_presampled) {
       env_row_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
