@@ -883,3 +883,29 @@ inline BsdfSample bsdf_sample(Material m, __global const half* table, Frame f, f
   bs.weight = bs.pdf > 0.0f ? m.albedo.xyz : (float3)(0.0f);
   return bs;
 }
+
+/* --- the phase function of media (shade.cl) ------------------------------ */
+
+/* The Henyey-Greenstein phase function of asymmetry g for directions whose
+ * cosine, from the direction of travel, is cos_theta: also the solid-angle pdf
+ * of sample_henyey_greenstein. */
+inline float henyey_greenstein(float g, float cos_theta) {
+  if (fabs(g) < 1e-3f) return 1.0f / (4.0f * M_PI_F); /* sampled as isotropic there */
+  const float d = 1.0f + g * g - 2.0f * g * cos_theta;
+  return (1.0f - g * g) / (4.0f * M_PI_F * d * sqrt(d));
+}
+
+/* A direction scattered from `d` (unit, the direction of travel) by the
+ * Henyey-Greenstein phase function of asymmetry g (> 0 forwards), sampled
+ * exactly, so that the sample's weight is 1. */
+inline float3 sample_henyey_greenstein(float3 d, float g, float u1, float u2) {
+  float c = 1.0f - 2.0f * u1;
+  if (fabs(g) >= 1e-3f) {
+    const float sq = (1.0f - g * g) / (1.0f - g + 2.0f * g * u1);
+    c = (1.0f + g * g - sq * sq) / (2.0f * g);
+  }
+  c = clamp(c, -1.0f, 1.0f);
+  float cos_phi;
+  const float sin_phi = psf_sincos(2.0f * M_PI_F * u2, &cos_phi), sin_theta = sqrt(fmax(0.0f, 1.0f - c * c));
+  return frame_to_world(frame_from_normal(d), (float3)(sin_theta * cos_phi, sin_theta * sin_phi, c));
+}

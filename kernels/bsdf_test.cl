@@ -102,3 +102,14 @@ __kernel void surface_test_coat(__global const Material* materials, __global con
   surface_frame(&m, attribs, bary[k].x, bary[k].y, p0.xyz, p1.xyz, p2.xyz, ng, ng, textures, texels, &n0);
   out[k] = (float4)(rough_transmittance(m, surface_table(m, textures, texels), cos_t[k]), m.eta.z, m.eta.w, m.alpha_u);
 }
+
+/* sample_henyey_greenstein for query k: direction of travel d[k].xyz, asymmetry g,
+ * (u1, u2) = u[k]. Writes the direction (xyz) and henyey_greenstein's value for
+ * it, its pdf (w). */
+__kernel void phase_test_sample(__global const float4* d, float g, __global const float2* u,
+                                __global float4* wi_pdf, uint count) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  float3 wi = sample_henyey_greenstein(d[k].xyz, g, u[k].x, u[k].y);
+  wi_pdf[k] = (float4)(wi, henyey_greenstein(g, dot(d[k].xyz, wi)));
+}

@@ -269,30 +269,6 @@ inline LightSample next_event_sample(uint k, FrameParams params, __global const 
   return ls;
 }
 
-/* The Henyey-Greenstein phase function of asymmetry g for directions whose
- * cosine, from the direction of travel, is cos_theta: also the solid-angle pdf
- * of sample_henyey_greenstein. */
-inline float henyey_greenstein(float g, float cos_theta) {
-  if (fabs(g) < 1e-3f) return 1.0f / (4.0f * M_PI_F); /* sampled as isotropic there */
-  const float d = 1.0f + g * g - 2.0f * g * cos_theta;
-  return (1.0f - g * g) / (4.0f * M_PI_F * d * sqrt(d));
-}
-
-/* A direction scattered from `d` (unit, the direction of travel) by the
- * Henyey-Greenstein phase function of asymmetry g (> 0 forwards), sampled
- * exactly, so that the sample's weight is 1. */
-inline float3 sample_henyey_greenstein(float3 d, float g, float u1, float u2) {
-  float c = 1.0f - 2.0f * u1;
-  if (fabs(g) >= 1e-3f) {
-    const float sq = (1.0f - g * g) / (1.0f - g + 2.0f * g * u1);
-    c = (1.0f + g * g - sq * sq) / (2.0f * g);
-  }
-  c = clamp(c, -1.0f, 1.0f);
-  float cos_phi;
-  const float sin_phi = psf_sincos(2.0f * M_PI_F * u2, &cos_phi), sin_theta = sqrt(fmax(0.0f, 1.0f - c * c));
-  return frame_to_world(frame_from_normal(d), (float3)(sin_theta * cos_phi, sin_theta * sin_phi, c));
-}
-
 /* A ray origin off the surface, on the side of `n`. */
 inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * fmax(1.0f, max3(fabs(p))); }
 
