@@ -451,6 +451,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.hide = s.scene.hide;
   p.first_sphere = uint32_t(s.scene.triangles.size());
   p.camera_medium = s.scene.camera_medium;
+  p.max_rounds = p.max_depth;
+  for (const Material& m : s.scene.materials)
+    if (m.flags & PSF_MATFLAG_NULL_BOUNDARY) p.max_rounds = uint32_t(-1);
   auto& states = b.states;
   auto& vertices = b.vertices;
   auto& hits = b.hits;

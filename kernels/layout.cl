@@ -79,6 +79,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(FrameParams, rr_depth);
   out[i++] = PSF_OFFSET(FrameParams, first_sphere);
   out[i++] = PSF_OFFSET(FrameParams, camera_medium);
+  out[i++] = PSF_OFFSET(FrameParams, max_rounds);
   out[i++] = sizeof(FilterParams);
   out[i++] = PSF_OFFSET(FilterParams, count);
   out[i++] = PSF_OFFSET(FilterParams, cells27);

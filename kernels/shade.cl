@@ -589,10 +589,10 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
   uint j = queue[k];
   AlphaScene as = {tri_material, materials, tri_attribs, textures, texels};
   const AlphaScene* alpha = masked ? &as : 0;
-  /* Until the path ends: shade_path_inline ends it at the maximum depth (a
-   * medium's null boundary is crossed without counting, so the rounds may
-   * outnumber the depth). */
-  for (;;) {
+  /* Until the path ends: shade_path_inline ends it at the maximum depth, before
+   * max_rounds (unbounded where a medium's null boundary, crossed without
+   * counting, can make the rounds outnumber the depth). */
+  for (uint round = 0u; (int)params.max_rounds < 0 || round < params.max_rounds; ++round) {
     hits[k] = intersect_closest_alpha(nodes, packs, rays[k], alpha);
     if (env_presampled) {
       env_row_slot(k, j, params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);

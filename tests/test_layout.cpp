@@ -80,6 +80,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, rr_depth)", offsetof(FrameParams, rr_depth)},
       {"offsetof(FrameParams, first_sphere)", offsetof(FrameParams, first_sphere)},
       {"offsetof(FrameParams, camera_medium)", offsetof(FrameParams, camera_medium)},
+      {"offsetof(FrameParams, max_rounds)", offsetof(FrameParams, max_rounds)},
       {"sizeof(FilterParams)", sizeof(FilterParams)},
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},
