@@ -412,8 +412,10 @@ size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked) {
   size_t marked = 0;
   for (BvhTriPack& p : bvh.packs)
     for (int lane = 0; lane < PSF_BVH_WIDTH; ++lane) {
-      uint32_t prim = p.prim[lane];
-      if (prim == PSF_NO_HIT || prim >= masked.size() || !masked[prim]) continue;
+      const uint32_t prim = p.prim[lane];
+      if (prim == PSF_NO_HIT) continue;
+      const uint32_t index = prim & ~PSF_PRIM_SPHERE;
+      if (index >= masked.size() || !masked[index]) continue;
       p.prim[lane] = prim | PSF_PRIM_MASKED;
       ++marked;
     }

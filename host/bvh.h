@@ -56,8 +56,9 @@ inline uint32_t leaf_count(uint32_t child) {
 }
 inline bool is_leaf(uint32_t child) { return child != PSF_EMPTY_CHILD && (child & PSF_LEAF_BIT); }
 
-// Sets PSF_PRIM_MASKED on the pack lanes of the triangles with masked[prim] set
-// (alpha-tested triangles of mask materials); returns how many lanes it marked.
+// Sets PSF_PRIM_MASKED on the pack lanes of the primitives with masked[prim] set
+// (prim: triangles, then spheres; alpha-tested mask materials, null boundaries);
+// returns how many lanes it marked.
 size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked);
 
 // The scene data that alpha testing reads (kernels/raycast.cl, AlphaScene).

@@ -54,7 +54,8 @@ struct Renderer::Impl {
     std::vector<BvhSphere> spheres;
     for (const SphereShape& sp : scene.spheres) spheres.push_back({sp.center, sp.radius});
     Bvh bvh = build_bvh(scene.positions, scene.triangles, spheres);
-    bool masked = mark_masked(bvh, masked_triangles(scene)) > 0;  // mask materials: alpha-tested ray casts
+    // Mask materials and media's null boundaries: ray casts that test materials.
+    bool masked = mark_masked(bvh, masked_prims(scene)) > 0;
     caster = std::make_unique<RayCaster>(rt, bvh);
     sobol = rt.upload(sobol_matrices());
     upload_geometry();
@@ -453,7 +454,10 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.camera_medium = s.scene.camera_medium;
   p.max_rounds = p.max_depth;
   for (const Material& m : s.scene.materials)
-    if (m.flags & PSF_MATFLAG_NULL_BOUNDARY) p.max_rounds = uint32_t(-1);
+    if (m.flags & PSF_MATFLAG_NULL_BOUNDARY) {
+      p.max_rounds = uint32_t(-1);
+      p.null_media = 1;
+    }
   auto& states = b.states;
   auto& vertices = b.vertices;
   auto& hits = b.hits;
@@ -500,8 +504,12 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
                 s.tri_light_pdf, s.env, s.env_data, n_live, b.queue[in], hits, b.rays[in], states, vertices,
                 shadow_rays, alive, b.queue[1 - in], b.rays[1 - in], s.tri_attribs, s.textures, s.texels,
                 env_presampled, b.env_samples);
-      s.caster->any(shadow_rays, shadow_hits, n_live);
-      rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices);
+      if (p.null_media)  // shadow rays through null boundaries, with the media's transmittance
+        rt.launch("cast_shadows_media", n_live, L, s.caster->nodes(), s.caster->packs(), n_live, b.queue[in],
+                  shadow_rays, shadow_hits, states, s.tri_material, s.materials, s.tri_attribs, s.textures, s.texels);
+      else
+        s.caster->any(shadow_rays, shadow_hits, n_live);
+      rt.launch("shade_shadows", n_live, L, n_live, b.queue[in], shadow_hits, states, vertices, p.null_media);
       rt.read(alive, &n_live, sizeof(n_live));
       in = 1 - in;
       // The last few live paths: the rest of each in one launch (trace_paths

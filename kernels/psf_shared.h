@@ -389,6 +389,7 @@ typedef struct {
 #define PSF_PATH_SPECULAR 2u  /* the last bounce was a delta lobe (no MIS) */
 #define PSF_PATH_VERTEX 4u    /* the path has its filtering vertex; contributions go to c */
 #define PSF_PATH_VERTEX_NEW 8u /* the filtering vertex was made at this bounce */
+#define PSF_PATH_NULL_CROSSED 16u /* a null boundary was crossed since the last scattering vertex */
 /* Bits from PSF_PATH_MEDIUM_SHIFT up of PathState.flags: 1 + the material whose
  * interior medium the path is in (Material.interior), 0 outside every medium. */
 #define PSF_PATH_MEDIUM_SHIFT 8u
@@ -398,8 +399,10 @@ typedef struct {
   psf_float4 throughput; /* xyz throughput from the filtering vertex (from the camera before it); w: solid-angle pdf of the last BSDF sample */
   psf_float4 radiance;   /* xyz radiance gathered before the filtering vertex, its own emission included */
   psf_float4 vertex_radiance; /* xyz c: radiance scattered at the filtering vertex towards the camera */
-  psf_float4 pending;    /* xyz next-event contribution awaiting its shadow ray */
-  psf_float4 prev_pos;   /* xyz position of the previous vertex (MIS of emitter hits); w: camera path length so far */
+  psf_float4 pending;    /* xyz next-event contribution awaiting its shadow ray; w: with FrameParams.null_media, */
+                         /* the medium the shadow ray starts in (as PathState.flags' upper bits; a uint's bits) */
+  psf_float4 prev_pos;   /* xyz position of the last scattering vertex (MIS of emitter hits; a null boundary */
+                         /* is none); w: camera path length so far */
   psf_uint pixel;        /* film pixel index y * width + x (the film's, with a crop window): the samples' key */
   psf_uint sample;       /* sample index within the pixel (Sobol index) */
   psf_uint depth;        /* number of surface interactions so far */
@@ -443,7 +446,9 @@ typedef struct {
   psf_uint camera_medium;  /* the medium camera rays start in (PathState.flags' upper bits), 0: none */
   psf_uint max_rounds;     /* trace_paths' rounds at most: max_depth, or -1 (unbounded) where a medium's null
                               boundary is crossed without counting (a bound the compiler knows is 5 % faster) */
-  psf_uint pad1, pad2;     /* to a multiple of 16 bytes */
+  psf_uint null_media;     /* 1: the scene has a medium behind a null boundary, which shadow rays pass with the
+                              transmittance of the media they cross (shade.cl shadow_cast); 0: none */
+  psf_uint pad2;           /* to a multiple of 16 bytes */
 } FrameParams;
 
 #define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */

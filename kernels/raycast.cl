@@ -36,6 +36,11 @@
  *   hit's uv) exceeds a hash of the ray and the triangle in [0,1) (stochastic
  *   transparency: binary cut-outs exactly, partial opacity on average). The
  *   unmasked kernels never test and cost nothing extra.
+ * - Null boundaries of media (PSF_MATFLAG_NULL_BOUNDARY, triangles and spheres,
+ *   marked as masked): a hit for closest-hit casts, but an any-hit cast given an
+ *   optical-depth record (AlphaScene.optical, shade.cl's shadow rays) passes
+ *   them and adds up the optical depth of the medium behind each crossing,
+ *   whatever order the traversal meets them in (null_crossing).
  * - Ray/sphere (analytic spheres, sphere packs): sphere_pack_test below. Spheres
  *   are never alpha-tested (host/scene keeps masked spheres as triangles), and
  *   their hits carry u = v = 0.
@@ -279,7 +284,53 @@ typedef struct {
   __global const TriAttrib* attribs;
   __global const TextureInfo* textures;
   __global const half* texels;
+  /* Null: null boundaries are hits. Else any-hit casts pass them and add to
+   * optical[0].xyz the sum over crossings of +sigma_t t (leaving the medium at
+   * distance t) or -sigma_t t (entering it), to optical[1].xyz -sigma_t or
+   * +sigma_t, and to optical[1].w -1 or +1 (null_crossing). */
+  float4* optical;
 } AlphaScene;
+
+/* A crossing at ray parameter t of the null boundary of a medium of extinction
+ * sigma, entering it or leaving it, into the optical-depth record (AlphaScene):
+ * a ray that starts in a medium of sigma_0 and ends at distance L has optical
+ * depth A + S L with A = optical[0].xyz and S = sigma_0 + optical[1].xyz, in any
+ * order of the crossings (a stretch inside from t_in to t_out adds
+ * sigma (t_out - t_in)). */
+inline void null_crossing(float4* optical, float3 sigma, float t, float dir_len, bool entering) {
+  const float s = entering ? -1.0f : 1.0f;
+  optical[0].xyz += s * sigma * (t * dir_len);
+  optical[1] -= s * (float4)(sigma, 1.0f);
+}
+
+/* The null-boundary crossings of lane k of a pack within (tmin, tmax) into the
+ * optical-depth record: a triangle's at t, entering where the ray meets its front
+ * (geometric normal e1 x e2, outward; Material.interior lies behind it); a
+ * sphere's at both roots in range, the nearer entering (host/scene tessellates
+ * spheres whose normals point inwards). */
+inline void pack_null_crossings(__global const float* p, uint k, float t, float3 org, float3 dir, float dir_len,
+                                float tmin, float tmax, float3 sigma, float4* optical) {
+  if (((__global const uint*)(p + PACK_PRIM))[k] & PSF_PRIM_SPHERE) {
+    const float3 c = (float3)(p[PACK_V0 + k], p[PACK_V0 + PSF_BVH_WIDTH + k], p[PACK_V0 + 2 * PSF_BVH_WIDTH + k]);
+    const float r = p[PACK_E1 + k];
+    /* Haines et al.'s form (sphere_pack_test) in float: null spheres hold media,
+     * not the ground planes of radius 1e5 that needed double there. */
+    const float3 d = dir / dir_len, f = org - c;
+    const float b = -dot(f, d);
+    const float3 l = f + b * d;
+    const float disc = r * r - dot(l, l);
+    if (!(disc >= 0.0f)) return;
+    const float q = b + copysign(sqrt(disc), b);
+    const float t0 = (dot(f, f) - r * r) / q / dir_len, t1 = q / dir_len;
+    const float tn = fmin(t0, t1), tf = fmax(t0, t1);
+    if (tn > tmin && tn < tmax) null_crossing(optical, sigma, tn, dir_len, true);
+    if (tf > tmin && tf < tmax) null_crossing(optical, sigma, tf, dir_len, false);
+    return;
+  }
+  const float3 e1 = (float3)(p[PACK_E1 + k], p[PACK_E1 + PSF_BVH_WIDTH + k], p[PACK_E1 + 2 * PSF_BVH_WIDTH + k]);
+  const float3 e2 = (float3)(p[PACK_E2 + k], p[PACK_E2 + PSF_BVH_WIDTH + k], p[PACK_E2 + 2 * PSF_BVH_WIDTH + k]);
+  null_crossing(optical, sigma, t, dir_len, dot(cross(e1, e2), dir) < 0.0f);
+}
 
 /* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` is opaque. */
 inline bool alpha_opaque(const AlphaScene* as, uint prim, float b1, float b2, float3 org, float3 dir) {
@@ -300,9 +351,10 @@ inline bool alpha_opaque(const AlphaScene* as, uint prim, float b1, float b2, fl
 }
 
 /* Removes from a pack test's lane mask the masked triangles whose hit is cut out
- * (their t becomes infinity). */
+ * (their t becomes infinity), and null boundaries where `as` has an optical-depth
+ * record, adding their crossings to it. */
 BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, bvh_floatw u, bvh_floatw v,
-                             const AlphaScene* as, float3 org, float3 dir) {
+                             const AlphaScene* as, float3 org, float3 dir, float dir_len, float tmin, float tmax) {
   __global const int* prims = (__global const int*)(p + PACK_PRIM);
 #if PSF_BVH_WIDTH == 8
   uint masked = mask & bvh_lane_mask(vload8(0, prims) < (int8)(0));
@@ -317,7 +369,17 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
   while (masked != 0u) {
     uint k = bvh_first_lane(masked);
     masked &= masked - 1u;
-    if (!alpha_opaque(as, (uint)prims[k] & ~PSF_PRIM_MASKED, ul[k], vl[k], org, dir)) {
+    const uint prim = (uint)prims[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE);
+    __global const Material* m = as->materials + as->tri_material[prim];
+    if (m->flags & PSF_MATFLAG_NULL_BOUNDARY) {
+      if (as->optical) {
+        pack_null_crossings(p, k, tl[k], org, dir, dir_len, tmin, tmax, m->interior.xyz, as->optical);
+        mask &= ~(1u << k);
+        tl[k] = INFINITY;
+      }
+      continue;
+    }
+    if (!alpha_opaque(as, prim, ul[k], vl[k], org, dir)) {
       mask &= ~(1u << k);
       tl[k] = INFINITY;
     }
@@ -341,7 +403,7 @@ BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint 
     }
     if (mask == 0u) continue;
     if (as) {
-      mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
+      mask = alpha_filter(p, mask, &t, u, v, as, org, dir, dir_len, tmin, hit->t);
       if (mask == 0u) continue;
     }
     /* Several lanes hit: the nearest (the other lanes hold infinity). */
@@ -474,7 +536,7 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
         } else {
           mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);
         }
-        if (mask != 0u && as) mask = alpha_filter(p, mask, &t, u, v, as, org, dir);
+        if (mask != 0u && as) mask = alpha_filter(p, mask, &t, u, v, as, org, dir, dir_len, tmin, hit.t);
         if (mask != 0u) {
           pack_take(p, bvh_first_lane(mask), t, u, v, &hit);
           return hit;
@@ -527,7 +589,7 @@ __kernel void raycast_closest_masked(__global const BvhNode* nodes, __global con
                                      __global const half* texels) {
   uint i = get_global_id(0);
   if (i >= count) return;
-  AlphaScene as = {tri_material, materials, attribs, textures, texels};
+  AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
   hits[i] = intersect_closest_alpha(nodes, packs, rays[i], &as);
 }
 
@@ -538,6 +600,6 @@ __kernel void raycast_any_masked(__global const BvhNode* nodes, __global const B
                                  __global const half* texels) {
   uint i = get_global_id(0);
   if (i >= count) return;
-  AlphaScene as = {tri_material, materials, attribs, textures, texels};
+  AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
   hits[i] = intersect_any_hit_alpha(nodes, packs, rays[i], &as);
 }

@@ -28,6 +28,9 @@
  * many paths overlap, which the long shade kernel cannot do (PoCL, living room
  * at 2 spp: the kernels but the first 0.80-0.85 s of device time where the two
  * without prefetches took 1.16-1.26 s).
+ * cast_shadows_media (scenes with a medium behind a null boundary, in place of
+ * raycast.cl's any-hit cast): shadow rays that pass null boundaries and carry
+ * the transmittance of the media they cross.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
  * records the filtering vertex's light-sample visibility (visibility.cl may
  * replace it by a hemisphere ray's).
@@ -205,6 +208,14 @@ inline float3 medium_transmittance(__global const Material* materials, uint medi
   return select(exp(-sigma * dist), (float3)(1.0f), sigma <= (float3)(0.0f));
 }
 
+/* The part of a light sample's transmittance that shading applies, over `dist`
+ * from the medium it starts in: all of it, where the first boundary on the way
+ * stops the sample; none where the scene has null boundaries (FrameParams.
+ * null_media), which shadow rays pass: shadow_cast then finds it all. */
+inline float3 shadow_transmittance(FrameParams params, __global const Material* materials, uint medium, float dist) {
+  return params.null_media ? (float3)(1.0f) : medium_transmittance(materials, medium, dist);
+}
+
 /* Free-flight sampling in the medium the path is in over a segment of length
  * `dist` (INFINITY where the ray escapes). Returns the distance t < dist of a
  * scattering event, with the throughput weighted by sigma_s T(t) / p(t), or
@@ -300,9 +311,9 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   const float t_medium = medium_sample(materials, medium, segment, key, &st);
   if (t_medium < segment) {
     /* A scattering event in the medium: a light sample weighted by the phase
-     * function and the medium's transmittance up to the light (a boundary on the
-     * way, a dielectric, stops it), then a direction from the phase function,
-     * MIS-weighted against light samples where it hits an emitter. */
+     * function and the transmittance up to the light (a dielectric boundary on
+     * the way stops it, a null one it passes), then a direction from the phase
+     * function, MIS-weighted against light samples where it hits an emitter. */
     const float3 d = ray.dir.xyz / ray_len, p = ray.org.xyz + d * t_medium;
     const uint segments = st.depth + 1u;
     bool go = depth_allows(params, segments + 1u);
@@ -317,8 +328,9 @@ inline __attribute__((always_inline)) bool shade_path_inline(
         if (ls.pdf > 0.0f) {
           const float f = henyey_greenstein(g, dot(d, ls.wi));
           const float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, f);
-          st.pending.xyz =
-              beta * f * ls.radiance * (w / ls.pdf) * medium_transmittance(materials, medium, ls.dist);
+          st.pending = (float4)(beta * f * ls.radiance * (w / ls.pdf) *
+                                    shadow_transmittance(params, materials, medium, ls.dist),
+                                as_float(medium));
           shadow.org = (float4)(p, 0.0f);
           shadow.dir = isinf(ls.dist) ? (float4)(ls.wi, INFINITY) : (float4)(ls.wi * ls.dist, 1.0f - PSF_RAY_EPS);
         }
@@ -335,7 +347,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
         ray.dir = (float4)(wi, INFINITY);
         st.throughput = (float4)(beta, henyey_greenstein(g, dot(d, wi)));
         st.prev_pos.xyz = p;
-        st.flags &= ~PSF_PATH_SPECULAR;
+        st.flags &= ~(PSF_PATH_SPECULAR | PSF_PATH_NULL_CROSSED);
         st.depth += 1u;
         *next = ray;
       }
@@ -383,15 +395,18 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   bool front = dot(ng, wo) > 0.0f;
   float3 beta = st.throughput.xyz;
 
-  /* Emission reached by the previous BSDF sample (or seen directly from the camera). */
+  /* Emission reached by the previous BSDF sample (or seen directly from the camera);
+   * its light-sample pdf from the last scattering vertex, before any null boundary. */
   if (max3(m.emission.xyz) > 0.0f && (front || m.two_sided) && !(st.depth == 0u && (params.hide & PSF_HIDE_AREA))) {
     float w = 1.0f;
-    if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR) && params.num_emitters > 0u)
+    if (st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR) && params.num_emitters > 0u) {
+      const float light_dist = (st.flags & PSF_PATH_NULL_CROSSED) ? distance(st.prev_pos.xyz, pos) : dist;
       w = power_heuristic(st.throughput.w,
                           hit.prim >= params.first_sphere
                               ? emitter_pdf_sphere(tri_light_pdf, hit.prim, tri_pos + 3u * hit.prim, m.two_sided,
-                                                   st.prev_pos.xyz, dist, fabs(dot(ng, wo)))
-                              : emitter_pdf_hit(tri_light_pdf, hit.prim, dist, fabs(dot(ng, wo))));
+                                                   st.prev_pos.xyz, light_dist, fabs(dot(ng, wo)))
+                              : emitter_pdf_hit(tri_light_pdf, hit.prim, light_dist, fabs(dot(ng, wo))));
+    }
     add_radiance(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
   }
 
@@ -411,7 +426,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   /* A medium's null boundary (PSF_MATFLAG_NULL_BOUNDARY) lets the path through
    * without counting towards its depth or Russian roulette, as Mitsuba's null
    * interactions; its crossing draws no number (its Fresnel reflectance is 0),
-   * so the next vertex may use the same dimensions. */
+   * so the next vertex may use the same dimensions, and it is no scattering
+   * vertex: the MIS of an emitter hit further on refers to the vertex before. */
   const bool null_boundary = (m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0u;
   bool scatter = (null_boundary || depth_allows(params, segments + 1u)) && bsdf_scatters(m);
 
@@ -442,8 +458,9 @@ inline __attribute__((always_inline)) bool shade_path_inline(
     if (ls.pdf > 0.0f && cos_s > 0.0f && max3(f) > 0.0f) {
       float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf); /* delta lights: no MIS */
       const uint shadow_medium = medium_after(medium, interior, hit_material, dot(ls.wi, ng) >= 0.0f);
-      st.pending.xyz = beta * f * cos_s * ls.radiance * (w / ls.pdf) *
-                       medium_transmittance(materials, shadow_medium, ls.dist);
+      st.pending = (float4)(beta * f * cos_s * ls.radiance * (w / ls.pdf) *
+                                shadow_transmittance(params, materials, shadow_medium, ls.dist),
+                            as_float(shadow_medium));
       shadow.org = (float4)(offset_origin(pos, dot(ls.wi, ng) >= 0.0f ? ng : -ng), 0.0f);
       if (isinf(ls.dist)) {
         shadow.dir = (float4)(ls.wi, INFINITY); /* directional light or environment */
@@ -470,10 +487,15 @@ inline __attribute__((always_inline)) bool shade_path_inline(
       else beta /= q;
     }
     if (scatter && max3(bs.weight) > 0.0f) {
-      st.throughput = (float4)(beta, bs.pdf);
-      st.prev_pos.xyz = pos;
-      if (bs.flags & BSDF_DELTA) st.flags |= PSF_PATH_SPECULAR;
-      else st.flags &= ~PSF_PATH_SPECULAR;
+      if (null_boundary) { /* the last scattering vertex's pdf, position and kind stay */
+        st.throughput.xyz = beta;
+        st.flags |= PSF_PATH_NULL_CROSSED;
+      } else {
+        st.throughput = (float4)(beta, bs.pdf);
+        st.prev_pos.xyz = pos;
+        st.flags &= ~(PSF_PATH_SPECULAR | PSF_PATH_NULL_CROSSED);
+        if (bs.flags & BSDF_DELTA) st.flags |= PSF_PATH_SPECULAR;
+      }
       float3 side = dot(bs.wi, ng) >= 0.0f ? ng : -ng; /* the geometric side wi leaves on */
       st.flags = (st.flags & ((1u << PSF_PATH_MEDIUM_SHIFT) - 1u)) |
                  (medium_after(medium, interior, hit_material, dot(bs.wi, ng) >= 0.0f) << PSF_PATH_MEDIUM_SHIFT);
@@ -539,23 +561,67 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   }
 }
 
+/* The shadow ray's verdict on slot k's light sample; with `media` (FrameParams.
+ * null_media) its hit carries the transmittance of the media on the way
+ * (shadow_cast). */
 inline void shadow_slot(uint k, uint j, __global const Hit* shadow_hits, __global PathState* states,
-                        __global PathVertex* vertices) {
+                        __global PathVertex* vertices, uint media) {
   PathState st = states[j];
-  bool visible = shadow_hits[k].prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
+  const Hit h = shadow_hits[k];
+  bool visible = h.prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
   if (st.flags & PSF_PATH_VERTEX_NEW) vertices[j].normal.w = visible ? 1.0f : 0.0f;
   if (visible) {
-    add_radiance(&st, st.pending.xyz);
+    add_radiance(&st, media ? st.pending.xyz * (float3)(h.t, h.u, h.v) : st.pending.xyz);
     st.pending = (float4)(0.0f);
     states[j] = st;
   }
 }
 
 __kernel void shade_shadows(uint count, __global const uint* queue_in, __global const Hit* shadow_hits,
-                            __global PathState* states, __global PathVertex* vertices) {
+                            __global PathState* states, __global PathVertex* vertices, uint media) {
   uint k = get_global_id(0);
   if (k >= count) return;
-  shadow_slot(k, queue_in[k], shadow_hits, states, vertices);
+  shadow_slot(k, queue_in[k], shadow_hits, states, vertices, media);
+}
+
+/* The any-hit cast of a light sample's shadow ray that starts in `medium`, in a
+ * scene with null boundaries (FrameParams.null_media): it passes them
+ * (raycast.cl null_crossing), and a ray nothing blocks returns in its hit's t, u
+ * and v the transmittance exp(-(A + S L)) of the media along it. A ray to
+ * infinity that ends inside a medium (one not closed) is absorbed. Out of line:
+ * trace_paths of scenes without such media pays nothing for its code. */
+__attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                          AlphaScene as, __global const Material* materials, uint medium) {
+  float4 optical[2];
+  optical[0] = (float4)(0.0f);
+  optical[1] = medium > 0u ? (float4)(materials[medium - 1u].interior.xyz, 1.0f) : (float4)(0.0f);
+  as.optical = optical;
+  Hit hit = intersect_any_hit_alpha(nodes, packs, ray, &as);
+  if (hit.prim != PSF_NO_HIT) return hit;
+  float3 tau = optical[0].xyz;
+  if (!isinf(ray.dir.w)) tau += optical[1].xyz * (ray.dir.w * length(ray.dir.xyz));
+  else if (optical[1].w > 0.5f) tau = (float3)(INFINITY);
+  const float3 tr = exp(-fmax(tau, (float3)(0.0f)));
+  hit.t = tr.x;
+  hit.u = tr.y;
+  hit.v = tr.z;
+  return hit;
+}
+
+/* The wavefront's shadow rays in a scene with null boundaries (instead of
+ * raycast_any_masked): shadow_cast from the medium each light sample starts in
+ * (PathState.pending.w). */
+__kernel void cast_shadows_media(__global const BvhNode* nodes, __global const BvhTriPack* packs, uint count,
+                                 __global const uint* queue_in, __global const Ray* shadow_rays,
+                                 __global Hit* shadow_hits, __global const PathState* states,
+                                 __global const uint* tri_material, __global const Material* materials,
+                                 __global const TriAttrib* attribs, __global const TextureInfo* textures,
+                                 __global const half* texels) {
+  uint k = get_global_id(0);
+  if (k >= count) return;
+  AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
+  shadow_hits[k] =
+      shadow_cast(nodes, packs, shadow_rays[k], as, materials, as_uint(states[queue_in[k]].pending.w));
 }
 
 /* trace_paths: each path of queue[0, count) whole in one work-item, from the
@@ -587,7 +653,7 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
   uint k = get_global_id(0);
   if (k >= count) return;
   uint j = queue[k];
-  AlphaScene as = {tri_material, materials, tri_attribs, textures, texels};
+  AlphaScene as = {tri_material, materials, tri_attribs, textures, texels, 0};
   const AlphaScene* alpha = masked ? &as : 0;
   /* Until the path ends: shade_path_inline ends it at the maximum depth, before
    * max_rounds (unbounded where a medium's null boundary, crossed without
@@ -604,8 +670,10 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
     bool go = shade_path_inline(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
                                 tri_light_pdf, env, env_data, hits, rays, states, vertices, shadow_rays, tri_attribs,
                                 textures, texels, env_presampled, env_samples, &next);
-    shadow_hits[k] = intersect_any_hit_alpha(nodes, packs, shadow_rays[k], alpha);
-    shadow_slot(k, j, shadow_hits, states, vertices);
+    shadow_hits[k] = params.null_media ? shadow_cast(nodes, packs, shadow_rays[k], as, materials,
+                                                     as_uint(states[j].pending.w))
+                                       : intersect_any_hit_alpha(nodes, packs, shadow_rays[k], alpha);
+    shadow_slot(k, j, shadow_hits, states, vertices, params.null_media);
     if (!go) break;
     rays[k] = next;
   }

@@ -1567,14 +1567,17 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
   // paths) runs the wavefront's stages on each path's own slot; a path's
   // samples depend on its pixel, sample and depth alone, so the images must be
   // identical, filtered or not: area lights (our Cornell box), an environment map
-  // (the floor scene), and with ../shared the living room (envmap, textures,
-  // alpha-masked leaves, glass, max depth 65).
+  // (the floor scene), fog behind a null boundary lit by a spot and a point light
+  // outside it (the wavefront's shadow rays in cast_shadows_media), and with
+  // ../shared the living room (envmap, textures, alpha-masked leaves, glass, max
+  // depth 65).
   auto& rt = psf::test::runtime();
   std::vector<std::pair<std::string, psf::Scene>> scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("envmap floor", envmap_floor());
   scenes.emplace_back("cornell-box, max depth 3", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.back().second.max_depth = 3;  // where the tail starts counting its bounces matters
+  scenes.emplace_back("fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")));
   if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
     scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
   else

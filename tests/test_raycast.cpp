@@ -862,3 +862,124 @@ TEST_CASE("Raycast: rays leaving a sphere's surface miss it outwards and cross i
     CHECK(bad == 0);
   }
 }
+
+TEST_CASE("Raycast: shadow rays pass media's null boundaries with their transmittance", "[raycast]") {
+  // kernels/shade.cl cast_shadows_media against a reference in double: a cube
+  // [-1, 1]^3 (12 triangles, normals outwards) and an analytic sphere of radius 1
+  // at (3, 0, 0), both null boundaries of media, and an opaque square at y = -2.
+  // Rays start anywhere around them, in the medium their origin lies in, with
+  // finite or infinite reach. A ray the square blocks is a hit; any other misses,
+  // with t, u, v = exp(-sum of sigma_t times the length of its stretch in each
+  // medium) (slab and sphere chords), within 2e-5 + 2e-5 of the optical depth.
+  const vec3 sigma_cube(0.5f, 1.0f, 2.0f), sigma_sphere(0.7f, 0.3f, 1.1f);
+  const dvec3 centre(3.0, 0.0, 0.0);
+  Mesh m;
+  for (int axis = 0; axis < 3; ++axis)
+    for (float side : {-1.0f, 1.0f}) {
+      vec3 c[4];
+      for (int k = 0; k < 4; ++k) {  // the face's corners in order around it
+        vec3 p;
+        p[axis] = side;
+        p[(axis + 1) % 3] = (k == 0 || k == 3) ? -1.0f : 1.0f;
+        p[(axis + 2) % 3] = k < 2 ? -1.0f : 1.0f;
+        c[k] = p;
+      }
+      if (glm::dot(glm::cross(c[1] - c[0], c[2] - c[0]), c[0]) < 0.0f) std::swap(c[1], c[3]);
+      m.add_quad(c[0], c[1], c[2], c[3]);
+    }
+  const uint32_t cube_tris = uint32_t(m.triangles.size());
+  m.add_quad(vec3(-3, -2, -3), vec3(6, -2, -3), vec3(6, -2, 3), vec3(-3, -2, 3));
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, {{vec3(centre), 1.0f}});
+  // Materials: 0 opaque, 1 the cube's null boundary, 2 the sphere's; prims are the
+  // triangles, then the sphere.
+  std::vector<Material> materials(3);
+  for (int k : {1, 2}) {
+    const vec3 s = k == 1 ? sigma_cube : sigma_sphere;
+    materials[k].flags = PSF_MATFLAG_NULL_BOUNDARY;
+    materials[k].interior = {{s.x, s.y, s.z, 1.0f}};
+  }
+  std::vector<uint32_t> tri_material(m.triangles.size() + 1, 0u);
+  std::vector<bool> masked(tri_material.size(), false);
+  for (uint32_t t = 0; t < cube_tris; ++t) tri_material[t] = 1u, masked[t] = true;
+  tri_material.back() = 2u;
+  masked.back() = true;
+  CHECK(psf::mark_masked(bvh, masked) == cube_tris + 1);
+
+  std::mt19937 rng(29);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const int n = psf::test::pick(4000, 400);
+  std::vector<Ray> rays;
+  std::vector<PathState> states(n);
+  std::vector<uint32_t> queue(n);
+  for (int i = 0; i < n; ++i) {
+    const vec3 o(-2.0f + 7.0f * u01(rng), -1.5f + 3.0f * u01(rng), -1.5f + 3.0f * u01(rng));
+    const vec3 d = uniform_sphere(rng) * (0.5f + 4.0f * u01(rng));
+    rays.push_back(make_ray(o, d, 0.0f, i % 4 == 0 ? std::numeric_limits<float>::infinity() : 0.2f + 2.0f * u01(rng)));
+    const bool in_cube = std::max(std::fabs(o.x), std::max(std::fabs(o.y), std::fabs(o.z))) < 1.0f;
+    const bool in_sphere = glm::length(dvec3(o) - centre) < 1.0;
+    const uint32_t medium = in_cube ? 2u : in_sphere ? 3u : 0u;  // 1 + material index
+    std::memcpy(&states[i].pending.s[3], &medium, sizeof(medium));
+    queue[i] = uint32_t(i);
+  }
+  auto& rt = psf::test::runtime();
+  psf::RayCaster caster(rt, bvh);
+  cl::Buffer hits = rt.buffer(CL_MEM_WRITE_ONLY, n * sizeof(Hit));
+  cl::Buffer attribs = rt.buffer(CL_MEM_READ_ONLY, tri_material.size() * sizeof(TriAttrib));
+  cl::Buffer textures = rt.buffer(CL_MEM_READ_ONLY, sizeof(TextureInfo)), texels = rt.buffer(CL_MEM_READ_ONLY, 16);
+  rt.launch("cast_shadows_media", size_t(n), 64, caster.nodes(), caster.packs(), cl_uint(n), rt.upload(queue),
+            rt.upload(rays), hits, rt.upload(states), rt.upload(tri_material), rt.upload(materials), attribs, textures,
+            texels);
+  rt.finish();
+  const std::vector<Hit> out = rt.download<Hit>(hits, n);
+
+  int bad = 0, blocked = 0, through_media = 0;
+  for (int i = 0; i < n; ++i) {
+    const dvec3 o(rays[i].org.s[0], rays[i].org.s[1], rays[i].org.s[2]);
+    const dvec3 d(rays[i].dir.s[0], rays[i].dir.s[1], rays[i].dir.s[2]);
+    const double tmax = rays[i].dir.s[3];
+    // The square: t where the ray meets y = -2 within the square.
+    bool block = false;
+    if (d.y != 0.0) {
+      const double t = (-2.0 - o.y) / d.y;
+      const dvec3 p = o + t * d;
+      block = t > 0.0 && t < tmax && p.x > -3.0 && p.x < 6.0 && p.z > -3.0 && p.z < 3.0;
+    }
+    // The chords within [0, tmax]: the slab test of the cube, the sphere's roots.
+    double t0 = 0.0, t1 = tmax;
+    for (int a = 0; a < 3; ++a) {
+      const double ta = (-1.0 - o[a]) / d[a], tb = (1.0 - o[a]) / d[a];
+      t0 = std::max(t0, std::min(ta, tb));
+      t1 = std::min(t1, std::max(ta, tb));
+    }
+    const double cube = std::max(0.0, t1 - t0) * glm::length(d);
+    const dvec3 f = o - centre;
+    const double a2 = glm::dot(d, d), b = glm::dot(f, d), c = glm::dot(f, f) - 1.0, disc = b * b - a2 * c;
+    double sphere = 0.0;
+    if (disc > 0.0) {
+      const double s0 = std::max(0.0, (-b - std::sqrt(disc)) / a2), s1 = std::min(tmax, (-b + std::sqrt(disc)) / a2);
+      sphere = std::max(0.0, s1 - s0) * glm::length(d);
+    }
+    const bool missed = out[i].prim == PSF_NO_HIT;
+    bool ok = missed == !block;
+    blocked += block;
+    through_media += !block && cube + sphere > 0.0;
+    double worst = 0.0;
+    if (ok && missed) {
+      const float got[3] = {out[i].t, out[i].u, out[i].v};
+      for (int k = 0; k < 3; ++k) {
+        const double tau = sigma_cube[k] * cube + sigma_sphere[k] * sphere;
+        worst = std::max(worst, std::abs(got[k] - std::exp(-tau)));
+        ok = ok && std::abs(got[k] - std::exp(-tau)) <= 2e-5 * (1.0 + tau);
+      }
+    }
+    if (!ok && ++bad <= 5) {
+      INFO("ray " << i << ": prim " << out[i].prim << " (blocked " << block << "), cube " << cube << ", sphere "
+                  << sphere << ", worst transmittance error " << worst);
+      CHECK(ok);
+    }
+  }
+  INFO(bad << " of " << n << " rays fail");
+  CHECK(bad == 0);
+  CHECK(blocked > n / 10);
+  CHECK(through_media > n / 5);
+}

@@ -237,25 +237,35 @@ TEST_CASE("Render: a medium that scatters without absorbing leaves a furnace as 
   // Russian roulette's 1/q: the mean of 16,384 paths lies within 2 %. A medium
   // whose events were not sampled by their pdfs, or a phase function that lost
   // energy, would not.
-  for (const char* boundary : {"<float name=\"int_ior\" value=\"1.5\"/>", "<float name=\"int_ior\" value=\"1\"/>"}) {
-    const bool glass = std::string(boundary).find("1.5") != std::string::npos;
-    const psf::RenderResult res = render_xml(glass ? "glass.xml" : "matched.xml", std::string(R"(<scene version="3.0.0">
+  // Behind a null boundary (a cube, an analytic sphere of radius 1.2), the sky
+  // comes into the fog by light samples, which pass the boundary with the
+  // transmittance of the fog on their way out, and by phase samples that leave,
+  // weighted against them by MIS from the last scattering event: a light sample
+  // that ignored the fog behind it, or an MIS weight taken at the boundary, would
+  // make the furnace brighter than its sky.
+  const std::string fog = R"(<medium type="homogeneous" name="interior">
+      <float name="sigma_t" value="2"/><float name="albedo" value="1"/>)";
+  const std::string hg = R"(<phase type="hg"><float name="g" value="0.5"/></phase>)";
+  const std::vector<std::pair<std::string, std::string>> shapes = {
+      {"glass", R"(<shape type="cube"><bsdf type="dielectric"><float name="int_ior" value="1.5"/></bsdf>)" + fog + hg +
+                    "</medium></shape>"},
+      {"index-matched", R"(<shape type="cube"><bsdf type="dielectric"><float name="int_ior" value="1"/></bsdf>)" +
+                            fog + "</medium></shape>"},
+      {"null cube", R"(<shape type="cube"><bsdf type="null"/>)" + fog + hg + "</medium></shape>"},
+      {"null sphere", R"(<shape type="sphere"><float name="radius" value="1.2"/><bsdf type="null"/>)" + fog +
+                          "</medium></shape>"}};
+  for (const auto& [name, shape] : shapes) {
+    INFO(name);
+    const psf::RenderResult res = render_xml("furnace-medium.xml", R"(<scene version="3.0.0">
   <integrator type="volpath"/>
   <sensor type="perspective"><float name="fov" value="60"/>
     <transform name="to_world"><lookat origin="0.3, 0.5, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
     <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
   </sensor>
   <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
-  <shape type="cube">
-    <bsdf type="dielectric">)") + boundary + R"(</bsdf>
-    <medium type="homogeneous" name="interior">
-      <float name="sigma_t" value="2"/><float name="albedo" value="1"/>)" +
-        std::string(glass ? R"(<phase type="hg"><float name="g" value="0.5"/></phase>)" : "") + R"(
-    </medium>
-  </shape>
+  )" + shape + R"(
 </scene>
 )", 64, -1);
-    INFO((glass ? "glass" : "index-matched"));
     CHECK(res.nonfinite == 0);
     CHECK(mean(res.image) == Approx(1.0).epsilon(0.02));
   }
@@ -263,17 +273,24 @@ TEST_CASE("Render: a medium that scatters without absorbing leaves a furnace as 
 
 TEST_CASE("Render: single scattering of a point light inside a medium matches its integral", "[render]") {
   // A cube [-1, 1]^3 of fog (sigma_t 0.8, albedo 0.7, isotropic) behind a null
-  // boundary, a point light of intensity 1 at its centre, no other light, seen
-  // along -z by an orthographic camera whose 4 x 4 pixels all look near (x0, y0).
-  // With 2 segments at most (camera to a scattering event, a light sample from
-  // there; crossing the null boundary counts for nothing, as in Mitsuba) the
-  // image is single scattering alone:
+  // boundary, a point light of intensity 1 at its centre or above it at (0, ly, 0)
+  // = (0, 3, 0), no other light, seen along -z by an orthographic camera whose
+  // 4 x 4 pixels all look near (x0, y0). With 2 segments at most (camera to a
+  // scattering event, a light sample from there; crossing the null boundary counts
+  // for nothing, as in Mitsuba) the image is single scattering alone:
   //   L = integral over z in [-1, 1] of albedo sigma_t exp(-sigma_t (1 - z))
-  //       (1 / 4 pi) exp(-sigma_t r) / r^2 dz,   r = |(x0, y0, z)|,
-  // which a midpoint rule gives. Each pixel's paths sample where they scatter
-  // (free flight) and take a light sample there: 16 x 1024 paths, 3 %.
+  //       (1 / 4 pi) exp(-sigma_t s) / r^2 dz,   r = |(x0, y0, z) - light|,
+  // s the length of the light's segment inside the fog: r from the centre, r (1 -
+  // y0) / (ly - y0) from above (it leaves through the top face), which a
+  // midpoint rule gives. Each pixel's paths sample where they scatter (free
+  // flight) and take a light sample there, which passes the null boundary with
+  // the transmittance of the fog behind it: 16 x 1024 paths, 3 %, in both path
+  // kernels (the wavefront casts its shadow rays in a kernel of its own).
   const float x0 = 0.5f, y0 = 0.3f, sigma = 0.8f, albedo = 0.7f;
-  const psf::Image img = render_xml("single.xml", R"(<scene version="3.0.0">
+  for (const float ly : {0.0f, 3.0f})
+    for (int per_path : {1, 0}) {
+      INFO("light at y " << ly << ", per_path " << per_path);
+      const psf::Image img = render_xml("single.xml", R"(<scene version="3.0.0">
   <integrator type="volpath"/>
   <sensor type="orthographic">
     <transform name="to_world">
@@ -281,7 +298,8 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
     </transform>
     <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film>
   </sensor>
-  <emitter type="point"><point name="position" x="0" y="0" z="0"/><rgb name="intensity" value="1, 1, 1"/></emitter>
+  <emitter type="point"><point name="position" x="0" y=")" + std::to_string(ly) + R"(" z="0"/>
+    <rgb name="intensity" value="1, 1, 1"/></emitter>
   <shape type="cube">
     <bsdf type="null"/>
     <medium type="homogeneous" name="interior">
@@ -289,15 +307,18 @@ TEST_CASE("Render: single scattering of a point light inside a medium matches it
     </medium>
   </shape>
 </scene>
-)", 1024, 2, 1).image;  // the warning: point lights light nothing across the null boundary
-  double want = 0.0;
-  const int steps = 100000;
-  for (int i = 0; i < steps; ++i) {
-    const double z = -1.0 + 2.0 * (i + 0.5) / steps, r2 = x0 * x0 + y0 * y0 + z * z;
-    want += albedo * sigma * std::exp(-sigma * (1.0 - z)) / (4.0 * M_PI) * std::exp(-sigma * std::sqrt(r2)) / r2;
-  }
-  want *= 2.0 / steps;
-  CHECK(mean(img) == Approx(want).epsilon(0.03));
+)", 1024, 2, 0, per_path).image;
+      double want = 0.0;
+      const int steps = 100000;
+      for (int i = 0; i < steps; ++i) {
+        const double z = -1.0 + 2.0 * (i + 0.5) / steps, r2 = x0 * x0 + (y0 - ly) * (y0 - ly) + z * z;
+        const double inside = ly > 1.0f ? (1.0 - y0) / (ly - y0) : 1.0;
+        want += albedo * sigma * std::exp(-sigma * (1.0 - z)) / (4.0 * M_PI) *
+                std::exp(-sigma * std::sqrt(r2) * inside) / r2;
+      }
+      want *= 2.0 / steps;
+      CHECK(mean(img) == Approx(want).epsilon(0.03));
+    }
 }
 
 TEST_CASE("Render: a medium's null boundary costs no depth, in either path kernel", "[render]") {

@@ -1350,12 +1350,22 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
   CHECK((ink.s[0] == 0.0f && ink.s[1] == 0.0f && ink.s[2] == 0.0f && ink.s[3] == 0.0f));
   CHECK((fog.s[0] == 0.75f && fog.s[1] == 0.75f && fog.s[2] == 0.75f && fog.s[3] == 0.4f));
 
-  // Light samples stop at a null boundary: a point light lights nothing across it.
+  // Light samples pass a null boundary (kernels/raycast.cl): a point light
+  // outside one is no cause for a warning. A null sphere keeps its analytic
+  // form unless its normals point inwards (shadow rays' crossings take them
+  // outwards): that one is tessellated.
   psf::Scene lit = load_text(
       "<integrator type=\"volpath\"/>\n"
       "<emitter type=\"point\"><point name=\"position\" x=\"0\" y=\"3\" z=\"0\"/></emitter>\n"
-      "<shape type=\"cube\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
-  CHECK(count_warnings(lit, ":4: point, spot and directional lights light nothing across a medium's null") == 1);
+      "<shape type=\"sphere\"><bsdf type=\"null\"/><medium type=\"homogeneous\" name=\"interior\"/></shape>\n"
+      "<shape type=\"sphere\"><boolean name=\"flip_normals\" value=\"true\"/><bsdf type=\"null\"/>\n"
+      "  <medium type=\"homogeneous\" name=\"interior\"/></shape>\n");
+  CHECK(lit.warnings.size() == 1);  // no sensor
+  CHECK(lit.spheres.size() == 1);
+  CHECK(!lit.triangles.empty());
+  REQUIRE(!lit.tri_material.empty());
+  CHECK((lit.materials[lit.tri_material[0]].flags & PSF_MATFLAG_NULL_BOUNDARY) != 0u);
+  CHECK((lit.materials[lit.spheres[0].material].flags & PSF_MATFLAG_NULL_BOUNDARY) != 0u);
 
   // A null boundary (which rays skip) becomes a dielectric of relative index 1:
   // no reflection, no bending, but a hit that takes the path into the medium.

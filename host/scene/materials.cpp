@@ -127,12 +127,15 @@ std::vector<Material> device_materials(const Scene& scene, const std::vector<Tri
   return out;
 }
 
-std::vector<bool> masked_triangles(const Scene& scene) {
-  std::vector<bool> out(scene.triangles.size(), false);
-  for (size_t i = 0; i < scene.tri_material.size() && i < out.size(); ++i) {
-    uint32_t m = scene.tri_material[i];
-    out[i] = m < scene.materials.size() && (scene.materials[m].flags & PSF_MATFLAG_MASKED);
-  }
+std::vector<bool> masked_prims(const Scene& scene) {
+  auto tested = [&](uint32_t m) {
+    return m < scene.materials.size() &&
+           (scene.materials[m].flags & (PSF_MATFLAG_MASKED | PSF_MATFLAG_NULL_BOUNDARY)) != 0u;
+  };
+  std::vector<bool> out(scene.triangles.size() + scene.spheres.size(), false);
+  for (size_t i = 0; i < scene.tri_material.size() && i < scene.triangles.size(); ++i)
+    out[i] = tested(scene.tri_material[i]);
+  for (size_t i = 0; i < scene.spheres.size(); ++i) out[scene.triangles.size() + i] = tested(scene.spheres[i].material);
   return out;
 }
 

@@ -353,19 +353,6 @@ class MitsubaLoader {
       }
     }
 
-    // Light samples stop at a medium's null boundary (an index-matched
-    // dielectric here), where Mitsuba's pass through it: point, spot and
-    // directional lights, which only light samples find, light nothing across it.
-    if (null_boundary_) {
-      size_t delta = 0;
-      for (const LightDesc& l : scene_.lights)
-        delta += l.type == LightType::Point || l.type == LightType::Spot || l.type == LightType::Directional;
-      if (delta > 0)
-        warn(null_boundary_, "medium:delta-lights",
-             "point, spot and directional lights light nothing across a medium's null boundary in psf, in "
-             "either direction (light samples stop there; Mitsuba's pass through it): darker than Mitsuba's where "
-             "they would");
-    }
     if (camera_medium_) {
       auto it = medium_materials_.find(camera_medium_->object.internal_object());
       if (it != medium_materials_.end()) scene_.camera_medium = it->second + 1;
@@ -1372,7 +1359,11 @@ class MitsubaLoader {
   }
 
   bool add_analytic_sphere(const glm::mat4& to_world, glm::vec3 center, float radius, uint32_t mat, bool flip) {
+    // Masked spheres are alpha-tested as triangles; a null boundary's shadow-ray
+    // crossings (kernels/raycast.cl) take a sphere's normals to point outwards.
     if (mat < scene_.materials.size() && (scene_.materials[mat].flags & PSF_MATFLAG_MASKED)) return false;
+    if (mat < scene_.materials.size() && flip && (scene_.materials[mat].flags & PSF_MATFLAG_NULL_BOUNDARY))
+      return false;
     const glm::mat3 a(to_world);
     if (!is_similarity(a)) return false;
     const float s = std::cbrt(glm::determinant(a));
@@ -1526,7 +1517,8 @@ class MitsubaLoader {
       // psf's null surfaces are skipped by every ray, so no path would enter the
       // medium: its boundary becomes a smooth dielectric of relative index 1,
       // which reflects nothing and lets every path through unbent, but is a hit
-      // that moves the path into the medium or out (its light samples stop there).
+      // that moves the path into the medium or out; light samples pass it with
+      // the transmittance of the media they cross (kernels/raycast.cl).
       b.m = Material{};
       b.m.type = PSF_MATERIAL_DIELECTRIC;
       b.m.eta = {{1.0f, 1.0f, 0.0f, 0.0f}};
@@ -1534,7 +1526,6 @@ class MitsubaLoader {
       b.m.transmittance = {{1.0f, 1.0f, 1.0f, 0.0f}};
       b.m.flags = PSF_MATFLAG_NULL_BOUNDARY;
       b.null = false;
-      if (!null_boundary_) null_boundary_ = medium_node;
     }
     SurfaceEmission emission = emitter_node ? emitter(emitter_node) : SurfaceEmission{};
     const glm::vec3 radiance = emission.radiance;
@@ -2594,7 +2585,6 @@ class MitsubaLoader {
   std::set<const void*> in_progress_;                                  // BSDFs and merges being built (cycle check)
   bool vertex_color_ = false;  // the BSDF being built reads the vertex colours (Bsdf::vertex_color)
   std::map<const void*, SurfaceEmission> emitters_;                    // emitter element -> radiance
-  pugi::xml_node null_boundary_;  // the first medium behind a null BSDF, for a warning
   std::string integrator_type_;   // the scene's (first, unwrapped) integrator's type; "" without one
   std::optional<Property> camera_medium_;                 // the sensor's medium, if any
   std::map<const void*, uint32_t> medium_materials_;      // medium node -> the first material it is the interior of

@@ -114,8 +114,10 @@ void scene_bounds(const Scene& scene, glm::vec3& lo, glm::vec3& hi);
 // them); a blend whose partner lies outside the table is dropped.
 std::vector<Material> device_materials(const Scene& scene, const std::vector<TriAttrib>& attributes);
 
-// Per triangle: whether its material is alpha-tested (PSF_MATFLAG_MASKED).
-std::vector<bool> masked_triangles(const Scene& scene);
+// Per primitive (the triangles, then the analytic spheres): whether ray casts
+// test its material, for its opacity (PSF_MATFLAG_MASKED) or as a medium's null
+// boundary, which shadow rays pass (PSF_MATFLAG_NULL_BOUNDARY; kernels/raycast.cl).
+std::vector<bool> masked_prims(const Scene& scene);
 
 // Camera for the film: pinhole rays as in kernels/camera.cl.
 Camera make_camera(const CameraDesc& desc, int width, int height);
