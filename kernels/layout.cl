@@ -43,6 +43,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(Material, tex_blend);
   out[i++] = PSF_OFFSET(Material, interior);
   out[i++] = PSF_OFFSET(Material, interior_albedo);
+  out[i++] = PSF_OFFSET(Material, exterior);
   out[i++] = sizeof(TextureInfo);
   out[i++] = PSF_OFFSET(TextureInfo, uv_v);
   out[i++] = PSF_OFFSET(TextureInfo, offset);

@@ -279,6 +279,11 @@ typedef struct {
   psf_float4 interior;
   psf_float4 interior_albedo; /* xyz the medium's single-scattering albedo (0: it only absorbs), w its
                                  Henyey-Greenstein g (0: isotropic) */
+  /* The medium outside the shape (Mitsuba's exterior): 1 + the index of a material whose interior it is (maybe one no
+   * shape uses), 0 for none. A surface with an interior or an exterior medium is a transition between the two, as
+   * in Mitsuba (either may be none, vacuum); any other keeps a path's medium. */
+  psf_uint exterior;
+  psf_uint pad_medium0, pad_medium1, pad_medium2; /* to a multiple of 16 bytes */
 } Material;
 
 /* TriAttrib.flags */

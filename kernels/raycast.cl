@@ -285,31 +285,37 @@ typedef struct {
   __global const TextureInfo* textures;
   __global const half* texels;
   /* Null: null boundaries are hits. Else any-hit casts pass them and add to
-   * optical[0].xyz the sum over crossings of +sigma_t t (leaving the medium at
-   * distance t) or -sigma_t t (entering it), to optical[1].xyz -sigma_t or
-   * +sigma_t, and to optical[1].w -1 or +1 (null_crossing). */
+   * optical[0].xyz the sum over crossings of -(sigma_after - sigma_before) t
+   * (t: the crossing's distance), to optical[1].xyz sigma_after - sigma_before,
+   * and to optical[1].w its largest magnitude (null_crossing); optical[2] holds
+   * the last triangle crossing (pack_null_crossings). */
   float4* optical;
 } AlphaScene;
 
-/* A crossing at ray parameter t of the null boundary of a medium of extinction
- * sigma, entering it or leaving it, into the optical-depth record (AlphaScene):
- * a ray that starts in a medium of sigma_0 and ends at distance L has optical
- * depth A + S L with A = optical[0].xyz and S = sigma_0 + optical[1].xyz, in any
- * order of the crossings (a stretch inside from t_in to t_out adds
- * sigma (t_out - t_in)). */
+/* A crossing at ray parameter t of a null boundary whose interior's extinction
+ * exceeds its exterior's by sigma, entering the interior or leaving it, into the
+ * optical-depth record (AlphaScene): a ray that starts in a medium of sigma_0
+ * and ends at distance L has optical depth A + S L with A = optical[0].xyz and
+ * S = sigma_0 + optical[1].xyz, in any order of the crossings (a stretch
+ * inside from t_in to t_out adds sigma (t_out - t_in)). */
 inline void null_crossing(float4* optical, float3 sigma, float t, float dir_len, bool entering) {
   const float s = entering ? -1.0f : 1.0f;
   optical[0].xyz += s * sigma * (t * dir_len);
-  optical[1] -= s * (float4)(sigma, 1.0f);
+  optical[1].xyz -= s * sigma;
+  optical[1].w += fmax(fabs(sigma.x), fmax(fabs(sigma.y), fabs(sigma.z)));
 }
 
 /* The null-boundary crossings of lane k of a pack within (tmin, tmax) into the
  * optical-depth record: a triangle's at t, entering where the ray meets its front
  * (geometric normal e1 x e2, outward; Material.interior lies behind it); a
  * sphere's at both roots in range, the nearer entering (host/scene tessellates
- * spheres whose normals point inwards). */
-inline void pack_null_crossings(__global const float* p, uint k, float t, float3 org, float3 dir, float dir_len,
-                                float tmin, float tmax, float3 sigma, float4* optical) {
+ * spheres whose normals point inwards). A ray through an edge crosses both
+ * triangles that share it (pack_test widens them so that none slips between):
+ * a triangle crossing at the distance and on the side of the crossing counted
+ * last, of the same material, is that one again and counts for nothing
+ * (optical[2]: its t, side and material). */
+inline void pack_null_crossings(__global const float* p, uint k, float t, uint material, float3 org, float3 dir,
+                                float dir_len, float tmin, float tmax, float3 sigma, float4* optical) {
   if (((__global const uint*)(p + PACK_PRIM))[k] & PSF_PRIM_SPHERE) {
     const float3 c = (float3)(p[PACK_V0 + k], p[PACK_V0 + PSF_BVH_WIDTH + k], p[PACK_V0 + 2 * PSF_BVH_WIDTH + k]);
     const float r = p[PACK_E1 + k];
@@ -329,7 +335,11 @@ inline void pack_null_crossings(__global const float* p, uint k, float t, float3
   }
   const float3 e1 = (float3)(p[PACK_E1 + k], p[PACK_E1 + PSF_BVH_WIDTH + k], p[PACK_E1 + 2 * PSF_BVH_WIDTH + k]);
   const float3 e2 = (float3)(p[PACK_E2 + k], p[PACK_E2 + PSF_BVH_WIDTH + k], p[PACK_E2 + 2 * PSF_BVH_WIDTH + k]);
-  null_crossing(optical, sigma, t, dir_len, dot(cross(e1, e2), dir) < 0.0f);
+  const bool entering = dot(cross(e1, e2), dir) < 0.0f;
+  const float side = entering ? 1.0f : -1.0f;
+  if (optical[2].y == side && as_uint(optical[2].z) == material && fabs(t - optical[2].x) <= 1e-5f * fabs(t)) return;
+  optical[2] = (float4)(t, side, as_float(material), 0.0f);
+  null_crossing(optical, sigma, t, dir_len, entering);
 }
 
 /* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` is opaque. */
@@ -373,7 +383,9 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
     __global const Material* m = as->materials + as->tri_material[prim];
     if (m->flags & PSF_MATFLAG_NULL_BOUNDARY) {
       if (as->optical) {
-        pack_null_crossings(p, k, tl[k], org, dir, dir_len, tmin, tmax, m->interior.xyz, as->optical);
+        const float3 outside = m->exterior > 0u ? as->materials[m->exterior - 1u].interior.xyz : (float3)(0.0f);
+        pack_null_crossings(p, k, tl[k], as->tri_material[prim], org, dir, dir_len, tmin, tmax,
+                            m->interior.xyz - outside, as->optical);
         mask &= ~(1u << k);
         tl[k] = INFINITY;
       }

@@ -193,11 +193,13 @@ inline void add_radiance(PathState* st, float3 c) {
 }
 
 /* The medium (PathState.flags' upper bits) of a path that leaves a surface on
- * its front (geometric normal's) side or its back: a surface bounding an
- * interior medium (Material.interior) leads out of it on the front and into it on
- * the back; any other keeps the path's medium. Nested media are not tracked. */
-inline uint medium_after(uint current, float4 interior, uint material, bool leaves_front) {
-  return interior.w > 0.0f ? (leaves_front ? 0u : material + 1u) : current;
+ * its front (geometric normal's) side or its back: a surface with an interior
+ * medium (Material.interior) or an exterior one (Material.exterior) leads into
+ * the exterior on the front and into the interior on the back (either may be
+ * none), as Mitsuba's medium transitions; any other keeps the path's medium. */
+inline uint medium_after(uint current, float4 interior, uint exterior, uint material, bool leaves_front) {
+  if (!(interior.w > 0.0f) && exterior == 0u) return current;
+  return leaves_front ? exterior : interior.w > 0.0f ? material + 1u : 0u;
 }
 
 /* Transmittance exp(-sigma_t d) of `dist` through medium `medium` (1 outside
@@ -391,7 +393,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
   st.prev_pos.w += dist;
   const uint hit_material = tri_material[hit.prim];
   Material m = materials[hit_material];
-  const float4 interior = m.interior; /* the shape's, whatever BSDF a blend picks */
+  const float4 interior = m.interior; /* the shape's media, whatever BSDF a blend picks */
+  const uint exterior = m.exterior;
   bool front = dot(ng, wo) > 0.0f;
   float3 beta = st.throughput.xyz;
 
@@ -457,7 +460,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
     float cos_s = fabs(dot(frame.n, ls.wi)); /* the BSDF decides which side scatters */
     if (ls.pdf > 0.0f && cos_s > 0.0f && max3(f) > 0.0f) {
       float w = ls.delta ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf); /* delta lights: no MIS */
-      const uint shadow_medium = medium_after(medium, interior, hit_material, dot(ls.wi, ng) >= 0.0f);
+      const uint shadow_medium = medium_after(medium, interior, exterior, hit_material, dot(ls.wi, ng) >= 0.0f);
       st.pending = (float4)(beta * f * cos_s * ls.radiance * (w / ls.pdf) *
                                 shadow_transmittance(params, materials, shadow_medium, ls.dist),
                             as_float(shadow_medium));
@@ -498,7 +501,8 @@ inline __attribute__((always_inline)) bool shade_path_inline(
       }
       float3 side = dot(bs.wi, ng) >= 0.0f ? ng : -ng; /* the geometric side wi leaves on */
       st.flags = (st.flags & ((1u << PSF_PATH_MEDIUM_SHIFT) - 1u)) |
-                 (medium_after(medium, interior, hit_material, dot(bs.wi, ng) >= 0.0f) << PSF_PATH_MEDIUM_SHIFT);
+                 (medium_after(medium, interior, exterior, hit_material, dot(bs.wi, ng) >= 0.0f)
+                  << PSF_PATH_MEDIUM_SHIFT);
       ray.org = (float4)(offset_origin(pos, side), 0.0f);
       ray.dir = (float4)(bs.wi, INFINITY);
       st.depth += null_boundary ? 0u : 1u;
@@ -588,19 +592,27 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
  * scene with null boundaries (FrameParams.null_media): it passes them
  * (raycast.cl null_crossing), and a ray nothing blocks returns in its hit's t, u
  * and v the transmittance exp(-(A + S L)) of the media along it. A ray to
- * infinity that ends inside a medium (one not closed) is absorbed. Out of line:
+ * infinity that ends inside a medium (one not closed) is absorbed. optical[1].w
+ * adds up the magnitudes of the extinctions summed into S, the scale of its
+ * rounding. Out of line:
  * trace_paths of scenes without such media pays nothing for its code. */
 __attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
                                           AlphaScene as, __global const Material* materials, uint medium) {
-  float4 optical[2];
+  float4 optical[3];
   optical[0] = (float4)(0.0f);
-  optical[1] = medium > 0u ? (float4)(materials[medium - 1u].interior.xyz, 1.0f) : (float4)(0.0f);
+  optical[2] = (float4)(0.0f);
+  optical[1] = (float4)(0.0f);
+  if (medium > 0u) {
+    const float3 sigma = materials[medium - 1u].interior.xyz;
+    optical[1] = (float4)(sigma, max3(fabs(sigma)));
+  }
   as.optical = optical;
   Hit hit = intersect_any_hit_alpha(nodes, packs, ray, &as);
   if (hit.prim != PSF_NO_HIT) return hit;
   float3 tau = optical[0].xyz;
+  /* S at the end: exactly 0 outside every medium but for the rounding of its sum */
   if (!isinf(ray.dir.w)) tau += optical[1].xyz * (ray.dir.w * length(ray.dir.xyz));
-  else if (optical[1].w > 0.5f) tau = (float3)(INFINITY);
+  else tau = select(tau, (float3)(INFINITY), optical[1].xyz > (float3)(1e-5f * optical[1].w));
   const float3 tr = exp(-fmax(tau, (float3)(0.0f)));
   hit.t = tr.x;
   hit.u = tr.y;

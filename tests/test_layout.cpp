@@ -44,6 +44,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(Material, tex_blend)", offsetof(Material, tex_blend)},
       {"offsetof(Material, interior)", offsetof(Material, interior)},
       {"offsetof(Material, interior_albedo)", offsetof(Material, interior_albedo)},
+      {"offsetof(Material, exterior)", offsetof(Material, exterior)},
       {"sizeof(TextureInfo)", sizeof(TextureInfo)},
       {"offsetof(TextureInfo, uv_v)", offsetof(TextureInfo, uv_v)},
       {"offsetof(TextureInfo, offset)", offsetof(TextureInfo, offset)},

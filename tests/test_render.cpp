@@ -338,6 +338,43 @@ TEST_CASE("Render: a medium's null boundary costs no depth, in either path kerne
   }
 }
 
+TEST_CASE("Render: a shape's exterior medium is where paths go when they leave it", "[render]") {
+  // A null cube [-1, 1]^3 of absorbing fog (sigma_t 0.5) holds an index-matched
+  // dielectric cube [-0.7, 0.7]^3 whose exterior is the fog (Mitsuba's
+  // medium transition): inside it nothing, or ink (sigma_t 2). An orthographic
+  // camera looks along -z at the white sky through both (its view 0.6 wide, and
+  // the gaussian pixel filter's reach, stay within the inner cube): 0.6 of fog
+  // and 1.4 of the inner cube, exp(-0.3) or exp(-0.3 - 2.8), in both path kernels. A path
+  // that kept the fog inside the inner cube would read exp(-1); one that left
+  // the inner cube into no medium, exp(-0.45).
+  for (const bool ink : {false, true})
+    for (int per_path : {1, 0}) {
+      INFO((ink ? "ink" : "nothing") << " inside, per_path " << per_path);
+      const psf::Image img = render_xml("exterior.xml", std::string(R"(<scene version="3.0.0">
+  <integrator type="volpath"/>
+  <medium type="homogeneous" id="fog"><float name="sigma_t" value="0.5"/><float name="albedo" value="0"/></medium>
+  <sensor type="orthographic">
+    <transform name="to_world"><scale value="0.3"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+  <shape type="cube"><bsdf type="null"/><ref name="interior" id="fog"/></shape>
+  <shape type="cube">
+    <transform name="to_world"><scale value="0.7"/></transform>
+    <bsdf type="dielectric"><float name="int_ior" value="1"/></bsdf>
+    <ref name="exterior" id="fog"/>)") + (ink ? R"(
+    <medium type="homogeneous" name="interior">
+      <float name="sigma_t" value="2"/><float name="albedo" value="0"/>
+    </medium>)"
+                                                : "") + R"(
+  </shape>
+</scene>
+)", 4, -1, 0, per_path).image;
+      const float want = std::exp(-0.3f - (ink ? 2.8f : 0.0f));
+      for (float v : img.rgb) REQUIRE(v == Approx(want).epsilon(1e-3));
+    }
+}
+
 TEST_CASE("Render: a camera inside a medium sees through it", "[render]") {
   // The sensor's medium (Mitsuba 3's `medium`) is the interior of a null-bounded
   // cube [-1, 1]^3 of absorbing fog; an orthographic camera at z = 0.5 inside it

@@ -1312,7 +1312,7 @@ TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's r
   CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values exceed 65504") == 1);
 }
 
-TEST_CASE("Media: a shape's homogeneous interior medium is its material's; others warn", "[scene]") {
+TEST_CASE("Media: a shape's homogeneous interior and exterior media are its material's; others warn", "[scene]") {
   psf::Scene s = load_text(
       "<integrator type=\"volpath\"/>\n"
       "<sensor type=\"perspective\"><ref name=\"exterior\" id=\"fog\"/></sensor>\n"
@@ -1329,7 +1329,6 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
     for (const auto& w : s.warnings) all += w + "\n";
     return all;
   }());
-  CHECK(count_warnings(s, ":8: a shape's exterior medium is not rendered") == 1);
   CHECK(count_warnings(s, ":9: medium 'heterogeneous' is not supported") == 1);
   CHECK(count_warnings(s, "around the camera") == 0);  // fog, the second cube's interior, holds it
   std::vector<glm::vec4> interiors;  // each cube's (12 triangles each)
@@ -1340,9 +1339,26 @@ TEST_CASE("Media: a shape's homogeneous interior medium is its material's; other
   }
   CHECK(glm::length(interiors[0] - glm::vec4(0.2f, 1.0f, 2.0f, 1.0f)) < 1e-6f);  // scale x sigma_t
   CHECK(interiors[1] == glm::vec4(0.3f, 0.3f, 0.3f, 1.0f));                       // its extinction all the same
-  CHECK(interiors[2] == glm::vec4(0.0f));                                          // an exterior: none
+  CHECK(interiors[2] == glm::vec4(0.0f));                                          // only an exterior
   CHECK(interiors[3] == glm::vec4(0.0f));                                          // an unsupported type: none
-  CHECK(s.warnings.size() == 2);
+  CHECK(s.warnings.size() == 1);
+  // An exterior medium names a material whose interior it is (ink: the first cube's).
+  CHECK(s.materials[s.tri_material[24]].exterior == s.tri_material[0] + 1);
+  CHECK(s.materials[s.tri_material[0]].exterior == 0u);
+
+  // A medium only outside shapes, and around the camera, gets a material of its
+  // own that no triangle uses.
+  psf::Scene outside = load_text(
+      "<integrator type=\"volpath\"/>\n"
+      "<medium type=\"homogeneous\" id=\"haze\"><float name=\"sigma_t\" value=\"0.25\"/></medium>\n"
+      "<sensor type=\"perspective\"><ref name=\"medium\" id=\"haze\"/></sensor>\n"
+      "<shape type=\"cube\"><bsdf type=\"dielectric\"/><ref name=\"exterior\" id=\"haze\"/></shape>\n");
+  CHECK(outside.warnings.empty());
+  REQUIRE(outside.camera_medium > 0u);
+  const Material& haze = outside.materials.at(outside.camera_medium - 1);
+  CHECK((haze.interior.s[0] == 0.25f && haze.interior.s[3] == 1.0f));
+  CHECK(std::count(outside.tri_material.begin(), outside.tri_material.end(), outside.camera_medium - 1) == 0);
+  CHECK(outside.materials[outside.tri_material[0]].exterior == outside.camera_medium);
   CHECK(s.camera_medium == s.tri_material[12] + 1);
   // The single-scattering albedo (Mitsuba 3's default 0.75) and the phase function's g.
   const auto& ink = s.materials[s.tri_material[0]].interior_albedo;

@@ -353,13 +353,7 @@ class MitsubaLoader {
       }
     }
 
-    if (camera_medium_) {
-      auto it = medium_materials_.find(camera_medium_->object.internal_object());
-      if (it != medium_materials_.end()) scene_.camera_medium = it->second + 1;
-      else
-        warn(camera_medium_->node, "medium:sensor",
-             "the medium around the camera is the interior of no shape, so psf cannot tell where it ends; ignored");
-    }
+    if (camera_medium_) scene_.camera_medium = medium_material(camera_medium_->object);
     if (!has_sensor_) {
       scene_.camera = camera_framing(scene_.positions);
       scene_.camera.pixel_filter = "gaussian";
@@ -1068,8 +1062,8 @@ class MitsubaLoader {
     scene_.height = 576;
     for (pugi::xml_node film : objects(e, "film")) load_film(film);
     for (pugi::xml_node sampler : objects(e, "sampler")) load_sampler(sampler);
-    // The medium around the camera (Mitsuba 3's `medium`, 0.5's `exterior`):
-    // rendered where it is the interior of a shape (resolved at the end of load).
+    // The medium around the camera (Mitsuba 3's `medium`, 0.5's `exterior`),
+    // resolved at the end of load (medium_material).
     for (const auto& [name, p] : e.props)
       if (p.kind == Property::Kind::Object && std::string(p.object.name()) == "medium") {
         if (!camera_medium_ && media_rendered_) camera_medium_ = p;
@@ -1272,23 +1266,26 @@ class MitsubaLoader {
       if (tag != "bsdf" && tag != "emitter" && tag != "medium")
         warn(o, tag, "<" + tag + "> in a <shape> is not supported yet; ignored");
     }
-    // Media: the shape's interior is rendered (absorption only), its exterior not.
-    pugi::xml_node interior;
+    // Media: the shape's interior and exterior.
+    pugi::xml_node interior, exterior;
     size_t named_media = 0;
     for (const auto& [name, p] : e.props) {
       if (p.kind != Property::Kind::Object || std::string(p.object.name()) != "medium") continue;
       ++named_media;
-      if (name == "interior" && !media_rendered_)
+      if ((name == "interior" || name == "exterior") && !media_rendered_)
         warn(p.node, "medium:integrator",
              "the integrator '" + (integrator_type_.empty() ? std::string("path") : integrator_type_) +
                  "' leaves media out, as Mitsuba's does (volpath renders them); ignored");
       else if (name == "interior") interior = p.object;
-      else warn(p.node, "medium:" + name, "a shape's " + name + " medium is not rendered (only its interior); ignored");
+      else if (name == "exterior") exterior = p.object;
+      else
+        warn(p.node, "medium:" + name,
+             "a shape's medium must be named interior or exterior, not '" + name + "'; ignored");
     }
     if (objects(e, "medium").size() > named_media)
       warn(e.node, "medium:unnamed", "a <medium> in a <shape> needs name=\"interior\" or \"exterior\"; ignored");
     uint32_t mat = material(bsdfs.empty() ? pugi::xml_node() : bsdfs[0],
-                            emitters.empty() ? pugi::xml_node() : emitters[0], interior);
+                            emitters.empty() ? pugi::xml_node() : emitters[0], interior, exterior);
     const glm::mat4 to_world = parent * get_transform(e, "to_world");
     const bool flip = get_bool(e, "flip_normals", false);
     if (e.type == "sphere") {
@@ -1492,19 +1489,47 @@ class MitsubaLoader {
     return m;
   }
 
-  // The material of a shape with this BSDF, emitter and interior medium (any may
-  // be null), shared between shapes.
-  uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node, pugi::xml_node medium_node = {}) {
+  // 1 + the index of a material whose interior is medium `node`: the first shape's
+  // that has it inside, else a material of its own that no shape uses (a medium
+  // only outside shapes, or around the camera); 0 where it is not rendered.
+  uint32_t medium_material(pugi::xml_node node) {
+    auto it = medium_materials_.find(node.internal_object());
+    if (it != medium_materials_.end()) return it->second + 1;
+    std::optional<Medium> md = medium(node);
+    if (!md) return 0;
+    Material m = diffuse_material(glm::vec3(0.0f));
+    m.interior = {{md->sigma_t.x, md->sigma_t.y, md->sigma_t.z, 1.0f}};
+    m.interior_albedo = {{md->albedo.x, md->albedo.y, md->albedo.z, md->g}};
+    scene_.materials.push_back(m);
+    const std::string id = node.attribute("id").as_string();
+    scene_.material_names.push_back("medium" + (id.empty() ? std::string() : " '" + id + "'"));
+    const uint32_t index = uint32_t(scene_.materials.size() - 1);
+    medium_materials_.emplace(node.internal_object(), index);
+    return index + 1;
+  }
+
+  // The material of a shape with this BSDF, emitter, interior and exterior medium
+  // (any may be null), shared between shapes.
+  uint32_t material(pugi::xml_node bsdf_node, pugi::xml_node emitter_node, pugi::xml_node medium_node = {},
+                    pugi::xml_node exterior_node = {}) {
     auto key = std::make_tuple(bsdf_node.internal_object(), emitter_node.internal_object(),
-                               medium_node.internal_object());
+                               medium_node.internal_object(), exterior_node.internal_object());
     auto it = materials_.find(key);
     if (it != materials_.end()) return it->second;
     glm::vec4 interior(0.0f), interior_albedo(0.0f);
-    if (medium_node)
-      if (std::optional<Medium> md = medium(medium_node)) {
+    if (medium_node) {
+      auto known = medium_materials_.find(medium_node.internal_object());
+      if (known != medium_materials_.end()) {  // read already (and warned about, if it must be)
+        const Material& holder = scene_.materials[known->second];
+        interior = glm::vec4(holder.interior.s[0], holder.interior.s[1], holder.interior.s[2], 1.0f);
+        interior_albedo = glm::vec4(holder.interior_albedo.s[0], holder.interior_albedo.s[1],
+                                    holder.interior_albedo.s[2], holder.interior_albedo.s[3]);
+      } else if (std::optional<Medium> md = medium(medium_node)) {
         interior = glm::vec4(md->sigma_t, 1.0f);
         interior_albedo = glm::vec4(md->albedo, md->g);
       }
+    }
+    const uint32_t exterior = exterior_node ? medium_material(exterior_node) : 0u;
 
     Bsdf b;
     b.name = "default";
@@ -1512,7 +1537,7 @@ class MitsubaLoader {
     // Without a BSDF Mitsuba (3 and 0.5) gives a shape a diffuse one of
     // reflectance 0.5, but an emitter's shape a black one: a light reflects nothing.
     else if (emitter_node) b.m = diffuse_material(glm::vec3(0.0f));
-    const bool null_boundary = b.null && interior.w > 0.0f;
+    const bool null_boundary = b.null && (interior.w > 0.0f || exterior > 0u);
     if (null_boundary) {
       // psf's null surfaces are skipped by every ray, so no path would enter the
       // medium: its boundary becomes a smooth dielectric of relative index 1,
@@ -1547,6 +1572,7 @@ class MitsubaLoader {
       m.two_sided = from.two_sided && !emits ? 1u : 0u;
       m.interior = {{interior.x, interior.y, interior.z, interior.w}};
       m.interior_albedo = {{interior_albedo.x, interior_albedo.y, interior_albedo.z, interior_albedo.w}};
+      m.exterior = exterior;
       return m;
     };
     std::string name = b.name;
@@ -2589,7 +2615,8 @@ class MitsubaLoader {
   std::optional<Property> camera_medium_;                 // the sensor's medium, if any
   std::map<const void*, uint32_t> medium_materials_;      // medium node -> the first material it is the interior of
   bool media_rendered_ = false;   // a volumetric integrator: shapes' interior media are rendered
-  std::map<std::tuple<const void*, const void*, const void*>, uint32_t> materials_;  // (bsdf, emitter, medium)
+  // (bsdf, emitter, interior medium, exterior medium) -> material
+  std::map<std::tuple<const void*, const void*, const void*, const void*>, uint32_t> materials_;
   int version_major_ = 3;                                              // the scene's version="major.minor.patch"
   bool has_sensor_ = false;                                            // a <sensor> was loaded
   bool has_environment_ = false;                                       // an envmap or constant emitter was loaded
