@@ -342,9 +342,9 @@ inline void pack_null_crossings(__global const float* p, uint k, float t, uint m
   null_crossing(optical, sigma, t, dir_len, entering);
 }
 
-/* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` is opaque. */
-inline bool alpha_opaque(const AlphaScene* as, uint prim, float b1, float b2, float3 org, float3 dir) {
-  __global const Material* m = as->materials + as->tri_material[prim];
+/* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` of material m is opaque. */
+inline bool alpha_opaque(const AlphaScene* as, __global const Material* m, uint prim, float b1, float b2, float3 org,
+                         float3 dir) {
   float opacity = m->opacity;
   uint tex = m->tex_opacity;
   if (tex != PSF_NO_TEXTURE) {
@@ -379,19 +379,19 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
   while (masked != 0u) {
     uint k = bvh_first_lane(masked);
     masked &= masked - 1u;
-    const uint prim = (uint)prims[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE);
-    __global const Material* m = as->materials + as->tri_material[prim];
+    const uint prim = (uint)prims[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE), material = as->tri_material[prim];
+    __global const Material* m = as->materials + material;
     if (m->flags & PSF_MATFLAG_NULL_BOUNDARY) {
       if (as->optical) {
         const float3 outside = m->exterior > 0u ? as->materials[m->exterior - 1u].interior.xyz : (float3)(0.0f);
-        pack_null_crossings(p, k, tl[k], as->tri_material[prim], org, dir, dir_len, tmin, tmax,
-                            m->interior.xyz - outside, as->optical);
+        pack_null_crossings(p, k, tl[k], material, org, dir, dir_len, tmin, tmax, m->interior.xyz - outside,
+                            as->optical);
         mask &= ~(1u << k);
         tl[k] = INFINITY;
       }
       continue;
     }
-    if (!alpha_opaque(as, prim, ul[k], vl[k], org, dir)) {
+    if (!alpha_opaque(as, m, prim, ul[k], vl[k], org, dir)) {
       mask &= ~(1u << k);
       tl[k] = INFINITY;
     }

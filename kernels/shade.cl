@@ -594,18 +594,15 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
  * and v the transmittance exp(-(A + S L)) of the media along it. A ray to
  * infinity that ends inside a medium (one not closed) is absorbed. optical[1].w
  * adds up the magnitudes of the extinctions summed into S, the scale of its
- * rounding. Out of line:
- * trace_paths of scenes without such media pays nothing for its code. */
+ * rounding. Out of line: trace_paths of scenes without such media pays nothing
+ * for its code. */
 __attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
-                                          AlphaScene as, __global const Material* materials, uint medium) {
+                                          AlphaScene as, uint medium) {
+  const float3 sigma = medium > 0u ? as.materials[medium - 1u].interior.xyz : (float3)(0.0f);
   float4 optical[3];
   optical[0] = (float4)(0.0f);
+  optical[1] = (float4)(sigma, max3(fabs(sigma)));
   optical[2] = (float4)(0.0f);
-  optical[1] = (float4)(0.0f);
-  if (medium > 0u) {
-    const float3 sigma = materials[medium - 1u].interior.xyz;
-    optical[1] = (float4)(sigma, max3(fabs(sigma)));
-  }
   as.optical = optical;
   Hit hit = intersect_any_hit_alpha(nodes, packs, ray, &as);
   if (hit.prim != PSF_NO_HIT) return hit;
@@ -632,8 +629,7 @@ __kernel void cast_shadows_media(__global const BvhNode* nodes, __global const B
   uint k = get_global_id(0);
   if (k >= count) return;
   AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
-  shadow_hits[k] =
-      shadow_cast(nodes, packs, shadow_rays[k], as, materials, as_uint(states[queue_in[k]].pending.w));
+  shadow_hits[k] = shadow_cast(nodes, packs, shadow_rays[k], as, as_uint(states[queue_in[k]].pending.w));
 }
 
 /* trace_paths: each path of queue[0, count) whole in one work-item, from the
@@ -682,8 +678,7 @@ __kernel void trace_paths(FrameParams params, __global const uint* restrict sobo
     bool go = shade_path_inline(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
                                 tri_light_pdf, env, env_data, hits, rays, states, vertices, shadow_rays, tri_attribs,
                                 textures, texels, env_presampled, env_samples, &next);
-    shadow_hits[k] = params.null_media ? shadow_cast(nodes, packs, shadow_rays[k], as, materials,
-                                                     as_uint(states[j].pending.w))
+    shadow_hits[k] = params.null_media ? shadow_cast(nodes, packs, shadow_rays[k], as, as_uint(states[j].pending.w))
                                        : intersect_any_hit_alpha(nodes, packs, shadow_rays[k], alpha);
     shadow_slot(k, j, shadow_hits, states, vertices, params.null_media);
     if (!go) break;

@@ -1453,7 +1453,13 @@ class MitsubaLoader {
     glm::vec3 sigma_t{1.0f}, albedo{0.75f};
     float g = 0.0f;
   };
-  std::optional<Medium> medium(pugi::xml_node node) {
+  // Medium `node`, read (and warned about) once however many shapes refer to it.
+  const std::optional<Medium>& medium(pugi::xml_node node) {
+    auto it = media_.find(node.internal_object());
+    if (it == media_.end()) it = media_.emplace(node.internal_object(), read_medium(node)).first;
+    return it->second;
+  }
+  std::optional<Medium> read_medium(pugi::xml_node node) {
     const Element e = parse_element(node);
     if (e.type != "homogeneous") {
       warn(node, "medium:" + e.type, "medium '" + e.type + "' is not supported; the shape's interior is left empty");
@@ -1495,7 +1501,7 @@ class MitsubaLoader {
   uint32_t medium_material(pugi::xml_node node) {
     auto it = medium_materials_.find(node.internal_object());
     if (it != medium_materials_.end()) return it->second + 1;
-    std::optional<Medium> md = medium(node);
+    const std::optional<Medium>& md = medium(node);
     if (!md) return 0;
     Material m = diffuse_material(glm::vec3(0.0f));
     m.interior = {{md->sigma_t.x, md->sigma_t.y, md->sigma_t.z, 1.0f}};
@@ -1517,18 +1523,11 @@ class MitsubaLoader {
     auto it = materials_.find(key);
     if (it != materials_.end()) return it->second;
     glm::vec4 interior(0.0f), interior_albedo(0.0f);
-    if (medium_node) {
-      auto known = medium_materials_.find(medium_node.internal_object());
-      if (known != medium_materials_.end()) {  // read already (and warned about, if it must be)
-        const Material& holder = scene_.materials[known->second];
-        interior = glm::vec4(holder.interior.s[0], holder.interior.s[1], holder.interior.s[2], 1.0f);
-        interior_albedo = glm::vec4(holder.interior_albedo.s[0], holder.interior_albedo.s[1],
-                                    holder.interior_albedo.s[2], holder.interior_albedo.s[3]);
-      } else if (std::optional<Medium> md = medium(medium_node)) {
+    if (medium_node)
+      if (const std::optional<Medium>& md = medium(medium_node)) {
         interior = glm::vec4(md->sigma_t, 1.0f);
         interior_albedo = glm::vec4(md->albedo, md->g);
       }
-    }
     const uint32_t exterior = exterior_node ? medium_material(exterior_node) : 0u;
 
     Bsdf b;
@@ -2614,6 +2613,7 @@ class MitsubaLoader {
   std::string integrator_type_;   // the scene's (first, unwrapped) integrator's type; "" without one
   std::optional<Property> camera_medium_;                 // the sensor's medium, if any
   std::map<const void*, uint32_t> medium_materials_;      // medium node -> the first material it is the interior of
+  std::map<const void*, std::optional<Medium>> media_;    // medium node -> the medium read from it (medium())
   bool media_rendered_ = false;   // a volumetric integrator: shapes' interior media are rendered
   // (bsdf, emitter, interior medium, exterior medium) -> material
   std::map<std::tuple<const void*, const void*, const void*, const void*>, uint32_t> materials_;
