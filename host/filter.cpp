@@ -184,8 +184,8 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   rt_.zero(max_count_, sizeof(uint32_t));
   const uint32_t count_items = (n + PSF_MAX_COUNT_CHUNK - 1) / PSF_MAX_COUNT_CHUNK;
   rt_.launch("filter_max_count", count_items, kLocal, n, valid_, sorted_counts_, max_count_);
-  rt_.launch("scatter_values", n, kLocal, n, stride_, indices_, valid_, values_a_, sorted_counts_, values, filtered,
-             counts);
+  rt_.launch("scatter_values", n, kLocal, n, stride_, p.demodulate, indices_, valid_, vertices, values_a_,
+             sorted_counts_, values, filtered, counts);
   uint32_t max_count = 0;
   rt_.read(max_count_, &max_count, sizeof(max_count));
   return max_count;

@@ -26,6 +26,14 @@ struct FilterOptions {
   int iterations = 1;             // averaging passes, each over the previous result (--iterations)
   float normal_cos = 0.95f;       // weights: <n_i, n_j> >= normal_cos (--normal-threshold)
   float albedo_tol = 0.05f;       // weights: |albedo_i - albedo_j| <= albedo_tol (--albedo-threshold)
+  // Texture-preserving averaging (--demodulate): the filter averages c_j /
+  // albedo_j and multiplies the mean by albedo_i (each channel at least
+  // PSF_DEMODULATE_MIN), and similar vertices' albedos are compared as log2
+  // ratios, |log2 albedo_i - log2 albedo_j| <= albedo_log2_tol, instead of by
+  // albedo_tol: neighbours on a texture that varies by up to that ratio count,
+  // and each keeps its own albedo.
+  bool demodulate = false;
+  float albedo_log2_tol = 1.0f;   // with demodulate (--albedo-threshold sets it then)
   bool cells27 = false;           // cells of size r (3x3 rows along x searched) instead of 2r (2x2 rows)
   // > 0: similar vertices agree on whether one hemisphere ray of this length (scene
   // units) hits something (kernels/visibility.cl); 0: on their light sample's

@@ -82,6 +82,7 @@ struct RenderArgs {
   std::string filter = "psf";          // --filter
   std::string aov;                     // --aov list
   psf::FilterOptions fopt;             // path space filtering parameters
+  bool albedo_threshold_given = false; // --albedo-threshold: with --demodulate, fopt.albedo_log2_tol
   std::string visibility_ray = "auto";  // --visibility-ray: auto, light or a length
   std::string foreshortening = "on";   // --foreshortening on|off
   std::vector<std::string> defines;    // -D name=value
@@ -232,6 +233,7 @@ int run_render(const RenderArgs& a) {
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.rr_depth = scene.rr_depth;
   opt.filter = a.fopt;
+  if (a.fopt.demodulate && a.albedo_threshold_given) opt.filter.albedo_log2_tol = a.fopt.albedo_tol;
   opt.filter.visibility_ray = a.visibility_ray == "auto"    ? psf::kVisibilityRayAuto
                               : a.visibility_ray == "light" ? 0.0f
                                                             : float(std::strtod(a.visibility_ray.c_str(), nullptr));
@@ -382,13 +384,19 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 64));
   render->add_option("--normal-threshold", ra.fopt.normal_cos, "Similar vertices: <n_i, n_j> >= this (0.95)")
       ->check(finite_number(-1.0, 1.0));
-  render->add_option("--albedo-threshold", ra.fopt.albedo_tol, "Similar vertices: |albedo_i - albedo_j| <= this (0.05)")
+  render
+      ->add_option("--albedo-threshold", ra.fopt.albedo_tol,
+                   "Similar vertices: |albedo_i - albedo_j| <= this (0.05); with --demodulate "
+                   "|log2 albedo_i - log2 albedo_j| <= this (1)")
       ->check(finite_number(0.0, kFloatMax));
   render->add_option("--visibility-ray", ra.visibility_ray,
                      "Similar vertices agree on: LENGTH, whether one hemisphere ray of this length (scene units) "
                      "hits something; light, their light sample's visibility; auto (default): a ray of 1 % of the "
                      "scene's size where the only light is an environment, else light")
       ->check(CLI::IsMember({"auto", "light"}) | finite_number(0.0, kFloatMax, true));
+  render->add_flag("--demodulate", ra.fopt.demodulate,
+                   "Texture-preserving averaging: of c / albedo, times the vertex's own albedo, over neighbours "
+                   "whose albedo differs by a ratio (--albedo-threshold in log2 units)");
   render->add_flag("--cells27", ra.fopt.cells27,
                    "Neighbour search in cells of size r (3x3 rows along x) instead of 2r (2x2 rows)");
   render->add_option("--min-removed", ra.fopt.min_removed,
@@ -437,6 +445,7 @@ int main(int argc, char** argv) {
       }
       return run_compare(compare_test, compare_ref, bx, by);
     }
+    ra.albedo_threshold_given = render->count("--albedo-threshold") > 0;
     return run_render(ra);
   } catch (const psf::NoDeviceError& e) {
     std::cerr << "psf: " << e.what() << "\n";

@@ -550,7 +550,8 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     double n = std::max(1.0, double(first + p.batch_size) / double(pixels));
     fp.n_scale = float(std::pow(n, -double(o.filter.alpha)));
     fp.normal_cos = o.filter.normal_cos;
-    fp.albedo_tol = o.filter.albedo_tol;
+    fp.albedo_tol = o.filter.demodulate ? o.filter.albedo_log2_tol : o.filter.albedo_tol;
+    fp.demodulate = o.filter.demodulate ? 1u : 0u;
     fp.count = p.batch_size;
     fp.cells27 = o.filter.cells27 ? 1u : 0u;
     fp.stretch = o.filter.foreshortening && !(o.filter.r0 > 0.0f) ? 1u : 0u;

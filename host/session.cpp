@@ -51,7 +51,9 @@ std::string options_text(const RenderOptions& o) {
   if (o.filter.enabled)
     s << " alpha=" << o.filter.alpha << " r0=" << o.filter.r0 << " footprint=" << o.filter.footprint_pixels
       << " foreshortening=" << o.filter.foreshortening
-      << " iterations=" << o.filter.iterations << " normal=" << o.filter.normal_cos << " albedo=" << o.filter.albedo_tol
+      << " iterations=" << o.filter.iterations << " normal=" << o.filter.normal_cos << " albedo="
+      << (o.filter.demodulate ? o.filter.albedo_log2_tol : o.filter.albedo_tol)
+      << (o.filter.demodulate ? " demodulate=1" : "")
       << " cells27=" << o.filter.cells27 << " min_removed=" << o.filter.min_removed;
   if (o.filter.enabled) {
     s << " visibility_ray=";

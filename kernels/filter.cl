@@ -5,7 +5,9 @@
  *
  * over the tuples j of the batch, with binary weights w_ij = 1 iff
  * <n_i, n_j> >= normal_cos, |albedo_i - albedo_j| <= albedo_tol (Euclidean, RGB),
- * equal light-sample visibility, and the same grid level (cell_keys.cl). The
+ * equal light-sample visibility, and the same grid level (cell_keys.cl); with
+ * FilterParams.demodulate the albedo fields hold log2 albedo and the values
+ * c / albedo (tuples.cl), so the same test compares ratios. The
  * centre tuple always counts, so the average is never empty; a non-finite c_j
  * of a neighbour is left out (the centre's own is kept and counted by accumulate).
  * Reads: the tuples' fields and values in cell order (tuples.cl), the cells'

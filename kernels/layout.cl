@@ -85,4 +85,5 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(FilterParams, count);
   out[i++] = PSF_OFFSET(FilterParams, cells27);
   out[i++] = PSF_OFFSET(FilterParams, stretch);
+  out[i++] = PSF_OFFSET(FilterParams, demodulate);
 }

@@ -473,9 +473,12 @@ typedef struct {
   psf_uint cells27;  /* 1: cells of size r searched 3x3x3; 0: cells of size 2r searched 2x2x2 */
   psf_uint stretch;  /* 1: r0_i is multiplied by the vertex's footprint stretch (albedo.w; --foreshortening) */
   psf_uint pad0;     /* padding */
-  psf_uint pad1;
+  psf_uint demodulate; /* 1: average c_j / albedo_j and compare albedos as log2 ratios (PSF_DEMODULATE_MIN) */
   psf_uint pad2;
 } FilterParams;
+
+/* With FilterParams.demodulate, albedo channels below this count as this. */
+#define PSF_DEMODULATE_MIN 0.01f
 
 /* The tuples of a batch in cell order: gather_tuples (tuples.cl) copies each
  * path's filtering vertex (PathVertex) with its query radius and grid level

@@ -8,12 +8,26 @@
  * PSF_FILTER_LANES candidates at a time. Only the tuples with a filtering vertex
  * (the first *valid of the sorted order) are gathered and filtered. scatter_values:
  * filtered values and neighbour counts back to path order, the others' own values
- * with a count of 1. */
+ * with a count of 1. With FilterParams.demodulate the values gathered are c_j /
+ * albedo_j and the albedo fields log2 albedo_j (filter.cl then compares albedos
+ * as ratios), and scatter_values multiplies each mean by its vertex's albedo. */
 
 __kernel void store_tuples(uint count, __global const PathState* states, __global float4* values) {
   uint i = get_global_id(0);
   if (i >= count) return;
   values[i] = (float4)(states[i].vertex_radiance.xyz, 0.0f);
+}
+
+/* The albedo a demodulated tuple's value is divided by, and multiplied by again
+ * after averaging (scatter_values): each channel at least PSF_DEMODULATE_MIN. */
+inline float3 demodulation_albedo(float4 a) { return fmax(a.xyz, (float3)(PSF_DEMODULATE_MIN)); }
+
+/* FilterParams.demodulate: c_j / albedo_j is averaged, and albedos are compared
+ * as log2 ratios (the albedo fields hold log2 of each channel). */
+inline void demodulate_tuple(float4* a, float4* c) {
+  float3 m = demodulation_albedo(*a);
+  (*c).xyz = (*c).xyz / m;
+  (*a).xyz = log2(m);
 }
 
 /* On CPUs (lanes == PSF_GATHER_LANES) each work-item gathers that many consecutive
@@ -33,6 +47,7 @@ __kernel void store_tuples(uint count, __global const PathState* states, __globa
     float rj = vertex_radius(p, xj.w, aj.w);                                             \
     float4 cj = values[j];                                                               \
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
+    if (p.demodulate) demodulate_tuple(&aj, &cj);                                        \
     x.s##k = xj.x;                                                                       \
     y.s##k = xj.y;                                                                       \
     z.s##k = xj.z;                                                                       \
@@ -62,6 +77,7 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
     float rj = vertex_radius(p, xj.w, aj.w);
     float4 cj = values[j];
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
+    if (p.demodulate) demodulate_tuple(&aj, &cj);
     sorted[PSF_SORTED_X * stride + i] = xj.x;
     sorted[PSF_SORTED_Y * stride + i] = xj.y;
     sorted[PSF_SORTED_Z * stride + i] = xj.z;
@@ -116,7 +132,8 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
   vstore8(cb, 0, sorted_values + 2 * stride + i0);
 }
 
-__kernel void scatter_values(uint count, uint stride, __global const uint* order, __global const uint* valid,
+__kernel void scatter_values(uint count, uint stride, uint demodulate, __global const uint* order,
+                             __global const uint* valid, __global const PathVertex* vertices,
                              __global const float* sorted_values, __global const uint* sorted_counts,
                              __global const float4* unfiltered, __global float4* values, __global uint* counts) {
   uint i = get_global_id(0);
@@ -132,6 +149,8 @@ __kernel void scatter_values(uint count, uint stride, __global const uint* order
     counts[j] = 1u;
     return;
   }
-  values[j] = (float4)(sorted_values[i], sorted_values[stride + i], sorted_values[2 * stride + i], 0.0f);
+  float3 mean = (float3)(sorted_values[i], sorted_values[stride + i], sorted_values[2 * stride + i]);
+  if (demodulate) mean *= demodulation_albedo(vertices[j].albedo);
+  values[j] = (float4)(mean, 0.0f);
   counts[j] = sorted_counts[i];
 }

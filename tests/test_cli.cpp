@@ -5,6 +5,7 @@
 #include <ImfChannelList.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
+#include <ImfStringAttribute.h>
 #include <sys/wait.h>
 
 #include <array>
@@ -216,4 +217,22 @@ TEST_CASE("CLI: --look-at and --fov replace the scene's camera", "[cli]") {
                  " -o " + (dir / "cam3.exr").string());
   INFO(same.output);
   CHECK(same.status == 0);  // the same camera, written otherwise
+}
+
+TEST_CASE("CLI: --demodulate compares albedos as log2 ratios, 1 unless --albedo-threshold says", "[cli]") {
+  fs::path dir = temp_dir();
+  write_file(dir / "tiny.xml", kTinyScene);
+  auto options = [&](const std::string& args) {
+    fs::path out = dir / "demodulate.exr";
+    Run r = run("render " + (dir / "tiny.xml").string() + " --spp 2 -q " + args + " -o " + out.string());
+    REQUIRE(r.status == 0);
+    Imf::InputFile file(out.string().c_str());
+    auto* a = file.header().findTypedAttribute<Imf::StringAttribute>("psf:options");
+    REQUIRE(a != nullptr);
+    return a->value();
+  };
+  CHECK(options("").find(" albedo=0.05 cells27") != std::string::npos);
+  CHECK(options("--demodulate").find(" albedo=1 demodulate=1 ") != std::string::npos);
+  CHECK(options("--demodulate --albedo-threshold 0.5").find(" albedo=0.5 demodulate=1 ") != std::string::npos);
+  CHECK(options("--albedo-threshold 0.2").find(" albedo=0.2 cells27") != std::string::npos);
 }

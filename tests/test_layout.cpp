@@ -86,6 +86,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},
       {"offsetof(FilterParams, stretch)", offsetof(FilterParams, stretch)},
+      {"offsetof(FilterParams, demodulate)", offsetof(FilterParams, demodulate)},
   };
   auto& rt = psf::test::runtime();
   cl::Buffer out = rt.buffer(CL_MEM_WRITE_ONLY, 128 * sizeof(cl_uint));
