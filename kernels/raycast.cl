@@ -37,10 +37,10 @@
  *   transparency: binary cut-outs exactly, partial opacity on average). The
  *   unmasked kernels never test and cost nothing extra.
  * - Null boundaries of media (PSF_MATFLAG_NULL_BOUNDARY, triangles and spheres,
- *   marked as masked): a hit for closest-hit casts, but an any-hit cast given an
- *   optical-depth record (AlphaScene.optical, shade.cl's shadow rays) passes
- *   them and adds up the optical depth of the medium behind each crossing,
- *   whatever order the traversal meets them in (null_crossing).
+ *   marked as masked): a hit for closest-hit casts, but an any-hit cast given a
+ *   record of crossings (AlphaScene.crossings, shade.cl's shadow rays) passes
+ *   them and records each, in order of distance whatever order the traversal
+ *   meets them in (record_null_crossing).
  * - Ray/sphere (analytic spheres, sphere packs): sphere_pack_test below. Spheres
  *   are never alpha-tested (host/scene keeps masked spheres as triangles), and
  *   their hits carry u = v = 0.
@@ -276,6 +276,17 @@ BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_flo
   hit->prim = ((__global const uint*)(p + PACK_PRIM))[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE);
 }
 
+/* The null-boundary crossings of one shadow ray (record_null_crossing): ray
+ * parameters in ascending order and tags 2 material + 1 if entering. A ray
+ * that crosses more than PSF_NULL_CROSSINGS boundaries keeps the nearest. */
+#define PSF_NULL_CROSSINGS 16u
+typedef struct {
+  float t[PSF_NULL_CROSSINGS];
+  uint tag[PSF_NULL_CROSSINGS];
+  uint count;   /* entries used */
+  uint dropped; /* crossings left out beyond the nearest PSF_NULL_CROSSINGS */
+} NullCrossings;
+
 /* The scene data the alpha test reads (masked kernels); a null pointer to it
  * means no alpha testing, which the compiler removes after inlining. */
 typedef struct {
@@ -284,38 +295,41 @@ typedef struct {
   __global const TriAttrib* attribs;
   __global const TextureInfo* textures;
   __global const half* texels;
-  /* Null: null boundaries are hits. Else any-hit casts pass them and add to
-   * optical[0].xyz the sum over crossings of -(sigma_after - sigma_before) t
-   * (t: the crossing's distance), to optical[1].xyz sigma_after - sigma_before,
-   * and to optical[1].w its largest magnitude (null_crossing); optical[2] holds
-   * the last triangle crossing (pack_null_crossings). */
-  float4* optical;
+  /* Null: null boundaries are hits. Else any-hit casts pass them and record
+   * each crossing here (record_null_crossing), for shade.cl's shadow_cast. */
+  NullCrossings* crossings;
 } AlphaScene;
 
-/* A crossing at ray parameter t of a null boundary whose interior's extinction
- * exceeds its exterior's by sigma, entering the interior or leaving it, into the
- * optical-depth record (AlphaScene): a ray that starts in a medium of sigma_0
- * and ends at distance L has optical depth A + S L with A = optical[0].xyz and
- * S = sigma_0 + optical[1].xyz, in any order of the crossings (a stretch
- * inside from t_in to t_out adds sigma (t_out - t_in)). */
-inline void null_crossing(float4* optical, float3 sigma, float t, float dir_len, bool entering) {
-  const float s = entering ? -1.0f : 1.0f;
-  optical[0].xyz += s * sigma * (t * dir_len);
-  optical[1].xyz -= s * sigma;
-  optical[1].w += fmax(fabs(sigma.x), fmax(fabs(sigma.y), fabs(sigma.z)));
+/* A crossing at ray parameter t of null-boundary material `material`, entering
+ * its shape or leaving it, into the record: the crossings are kept in order of
+ * t, the nearest PSF_NULL_CROSSINGS of them (the traversal meets them in any
+ * order); one beyond those is counted in `dropped`. */
+inline void record_null_crossing(NullCrossings* c, float t, uint material, bool entering) {
+  uint n = c->count;
+  if (n == PSF_NULL_CROSSINGS) {
+    ++c->dropped;
+    if (t >= c->t[n - 1u]) return;
+    --n; /* the farthest makes room */
+  }
+  uint i = n;
+  for (; i > 0u && c->t[i - 1u] > t; --i) {
+    c->t[i] = c->t[i - 1u];
+    c->tag[i] = c->tag[i - 1u];
+  }
+  c->t[i] = t;
+  c->tag[i] = 2u * material + (entering ? 1u : 0u);
+  c->count = n + 1u;
 }
 
-/* The null-boundary crossings of lane k of a pack within (tmin, tmax) into the
- * optical-depth record: a triangle's at t, entering where the ray meets its front
- * (geometric normal e1 x e2, outward; Material.interior lies behind it); a
- * sphere's at both roots in range, the nearer entering (host/scene tessellates
- * spheres whose normals point inwards). A ray through an edge crosses both
- * triangles that share it (pack_test widens them so that none slips between):
- * a triangle crossing at the distance and on the side of the crossing counted
- * last, of the same material, is that one again and counts for nothing
- * (optical[2]: its t, side and material). */
+/* The null-boundary crossings of lane k of a pack within (tmin, tmax): a
+ * triangle's at t, entering where the ray meets its front (geometric normal e1 x
+ * e2, outward; Material.interior lies behind it); a sphere's at both roots in
+ * range, the nearer entering (host/scene tessellates spheres whose normals point
+ * inwards). A ray through an edge crosses both triangles that share it
+ * (pack_test widens them so that none slips between): shadow_cast counts such
+ * a pair once. */
 inline void pack_null_crossings(__global const float* p, uint k, float t, uint material, float3 org, float3 dir,
-                                float dir_len, float tmin, float tmax, float3 sigma, float4* optical) {
+                                float dir_len, float tmin, float tmax, NullCrossings* crossings) {
   if (((__global const uint*)(p + PACK_PRIM))[k] & PSF_PRIM_SPHERE) {
     const float3 c = (float3)(p[PACK_V0 + k], p[PACK_V0 + PSF_BVH_WIDTH + k], p[PACK_V0 + 2 * PSF_BVH_WIDTH + k]);
     const float r = p[PACK_E1 + k];
@@ -329,17 +343,13 @@ inline void pack_null_crossings(__global const float* p, uint k, float t, uint m
     const float q = b + copysign(sqrt(disc), b);
     const float t0 = (dot(f, f) - r * r) / q / dir_len, t1 = q / dir_len;
     const float tn = fmin(t0, t1), tf = fmax(t0, t1);
-    if (tn > tmin && tn < tmax) null_crossing(optical, sigma, tn, dir_len, true);
-    if (tf > tmin && tf < tmax) null_crossing(optical, sigma, tf, dir_len, false);
+    if (tn > tmin && tn < tmax) record_null_crossing(crossings, tn, material, true);
+    if (tf > tmin && tf < tmax) record_null_crossing(crossings, tf, material, false);
     return;
   }
   const float3 e1 = (float3)(p[PACK_E1 + k], p[PACK_E1 + PSF_BVH_WIDTH + k], p[PACK_E1 + 2 * PSF_BVH_WIDTH + k]);
   const float3 e2 = (float3)(p[PACK_E2 + k], p[PACK_E2 + PSF_BVH_WIDTH + k], p[PACK_E2 + 2 * PSF_BVH_WIDTH + k]);
-  const bool entering = dot(cross(e1, e2), dir) < 0.0f;
-  const float side = entering ? 1.0f : -1.0f;
-  if (optical[2].y == side && as_uint(optical[2].z) == material && fabs(t - optical[2].x) <= 1e-5f * fabs(t)) return;
-  optical[2] = (float4)(t, side, as_float(material), 0.0f);
-  null_crossing(optical, sigma, t, dir_len, entering);
+  record_null_crossing(crossings, t, material, dot(cross(e1, e2), dir) < 0.0f);
 }
 
 /* Whether the hit at barycentrics (b1, b2) on masked triangle `prim` of material m is opaque. */
@@ -361,8 +371,8 @@ inline bool alpha_opaque(const AlphaScene* as, __global const Material* m, uint 
 }
 
 /* Removes from a pack test's lane mask the masked triangles whose hit is cut out
- * (their t becomes infinity), and null boundaries where `as` has an optical-depth
- * record, adding their crossings to it. */
+ * (their t becomes infinity), and null boundaries where `as` has a record of
+ * crossings, adding theirs to it. */
 BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, bvh_floatw u, bvh_floatw v,
                              const AlphaScene* as, float3 org, float3 dir, float dir_len, float tmin, float tmax) {
   __global const int* prims = (__global const int*)(p + PACK_PRIM);
@@ -382,10 +392,8 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
     const uint prim = (uint)prims[k] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE), material = as->tri_material[prim];
     __global const Material* m = as->materials + material;
     if (m->flags & PSF_MATFLAG_NULL_BOUNDARY) {
-      if (as->optical) {
-        const float3 outside = m->exterior > 0u ? as->materials[m->exterior - 1u].interior.xyz : (float3)(0.0f);
-        pack_null_crossings(p, k, tl[k], material, org, dir, dir_len, tmin, tmax, m->interior.xyz - outside,
-                            as->optical);
+      if (as->crossings) {
+        pack_null_crossings(p, k, tl[k], material, org, dir, dir_len, tmin, tmax, as->crossings);
         mask &= ~(1u << k);
         tl[k] = INFINITY;
       }

@@ -202,6 +202,11 @@ inline uint medium_after(uint current, float4 interior, uint exterior, uint mate
   return leaves_front ? exterior : interior.w > 0.0f ? material + 1u : 0u;
 }
 
+/* The extinction sigma_t of medium `medium` (0 outside every medium). */
+inline float3 medium_sigma(__global const Material* materials, uint medium) {
+  return medium > 0u ? materials[medium - 1u].interior.xyz : (float3)(0.0f);
+}
+
 /* Transmittance exp(-sigma_t d) of `dist` through medium `medium` (1 outside
  * every medium; 0 over an infinite distance through one that absorbs). */
 inline float3 medium_transmittance(__global const Material* materials, uint medium, float dist) {
@@ -589,28 +594,44 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
 }
 
 /* The any-hit cast of a light sample's shadow ray that starts in `medium`, in a
- * scene with null boundaries (FrameParams.null_media): it passes them
- * (raycast.cl null_crossing), and a ray nothing blocks returns in its hit's t, u
- * and v the transmittance exp(-(A + S L)) of the media along it. A ray to
- * infinity that ends inside a medium (one not closed) is absorbed. optical[1].w
- * adds up the magnitudes of the extinctions summed into S, the scale of its
- * rounding. Out of line: trace_paths of scenes without such media pays nothing
- * for its code. */
+ * scene with null boundaries (FrameParams.null_media): it passes them, and a ray
+ * nothing blocks returns in its hit's t, u and v the transmittance exp(-tau) of
+ * the media along it. tau is summed over the stretches between its crossings in
+ * order of distance, each through the medium the ray is in there, which each
+ * crossing replaces as a path's does (medium_after, Mitsuba's medium
+ * transitions), so that light samples see the media the paths see whatever the
+ * scene declares. A crossing of the same material and side at the distance of
+ * one counted before it (a ray through an edge two triangles share) counts
+ * once. A ray to infinity that ends inside a medium (one not closed) is
+ * absorbed. Past PSF_NULL_CROSSINGS crossings the medium after the last one
+ * kept is taken to the end. Out of line: trace_paths of scenes without such
+ * media pays nothing for its code. */
 __attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
                                           AlphaScene as, uint medium) {
-  const float3 sigma = medium > 0u ? as.materials[medium - 1u].interior.xyz : (float3)(0.0f);
-  float4 optical[3];
-  optical[0] = (float4)(0.0f);
-  optical[1] = (float4)(sigma, max3(fabs(sigma)));
-  optical[2] = (float4)(0.0f);
-  as.optical = optical;
+  NullCrossings c;
+  c.count = 0u;
+  c.dropped = 0u;
+  as.crossings = &c;
   Hit hit = intersect_any_hit_alpha(nodes, packs, ray, &as);
   if (hit.prim != PSF_NO_HIT) return hit;
-  float3 tau = optical[0].xyz;
-  /* S at the end: exactly 0 outside every medium but for the rounding of its sum */
-  if (!isinf(ray.dir.w)) tau += optical[1].xyz * (ray.dir.w * length(ray.dir.xyz));
-  else tau = select(tau, (float3)(INFINITY), optical[1].xyz > (float3)(1e-5f * optical[1].w));
-  const float3 tr = exp(-fmax(tau, (float3)(0.0f)));
+  const float len = length(ray.dir.xyz);
+  float3 tau = (float3)(0.0f);
+  float prev = 0.0f;
+  for (uint k = 0u; k < c.count; ++k) {
+    const float t = c.t[k];
+    bool again = false;
+    for (uint q = k; q > 0u && c.t[q - 1u] >= t - 1e-5f * fabs(t); --q) again |= c.tag[q - 1u] == c.tag[k];
+    if (again) continue;
+    tau += medium_sigma(as.materials, medium) * ((t - prev) * len);
+    prev = t;
+    const uint material = c.tag[k] >> 1;
+    __global const Material* m = as.materials + material;
+    medium = medium_after(medium, m->interior, m->exterior, material, (c.tag[k] & 1u) == 0u);
+  }
+  const float3 sigma = medium_sigma(as.materials, medium);
+  if (!isinf(ray.dir.w)) tau += sigma * ((ray.dir.w - prev) * len);
+  else tau = select(tau, (float3)(INFINITY), sigma > (float3)(0.0f));
+  const float3 tr = exp(-tau);
   hit.t = tr.x;
   hit.u = tr.y;
   hit.v = tr.z;
