@@ -537,7 +537,11 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     // Each vertex's visibility from one hemisphere ray instead of its light
     // sample (kernels/visibility.cl); the camera rays' buffer is free by now.
     rt.launch("visibility_rays", p.batch_size, L, p, visibility_ray, vertices, b.rays[0]);
-    s.caster->any(b.rays[0], shadow_hits, p.batch_size);
+    if (p.null_media)  // through null boundaries, as light samples go
+      rt.launch("visibility_cast_media", p.batch_size, L, s.caster->nodes(), s.caster->packs(), p.batch_size,
+                b.rays[0], shadow_hits, s.tri_material, s.materials, s.tri_attribs, s.textures, s.texels);
+    else
+      s.caster->any(b.rays[0], shadow_hits, p.batch_size);
     rt.launch("visibility_store", p.batch_size, L, p.batch_size, shadow_hits, vertices);
   }
   if (filtering) {

@@ -19,7 +19,8 @@
  * counted: where the shading normal leans away from the geometric one, some
  * directions graze the vertex's own triangle.
  * visibility_store: normal.w of each vertex becomes 1 where its ray hit nothing,
- * 0 where it hit something (raycast.cl's any-hit kernel runs in between). */
+ * 0 where it hit something (raycast.cl's any-hit kernel runs in between, or
+ * visibility_cast_media, below, where null boundaries are to be passed). */
 
 inline float3 visibility_direction(uint seed, uint first_lo, uint first_hi, uint i, float3 n) {
   uint h = psf_hash_combine(psf_hash_combine(psf_hash(seed ^ 0x5bd1e995u), first_hi), first_lo + i);
@@ -48,4 +49,19 @@ __kernel void visibility_store(uint count, __global const Hit* hits, __global Pa
   uint i = get_global_id(0);
   if (i >= count) return;
   if (vertices[i].albedo.w != 0.0f) vertices[i].normal.w = hits[i].prim == PSF_NO_HIT ? 1.0f : 0.0f;
+}
+
+/* The hemisphere rays' any-hit cast in a scene with null boundaries
+ * (FrameParams.null_media, in place of raycast.cl's any-hit kernel): they pass
+ * the boundaries as light samples do (shade.cl shadow_cast; the transmittance it
+ * returns is not used), so that a medium's boundary near a vertex does not count
+ * as something that hides it. */
+__kernel void visibility_cast_media(__global const BvhNode* nodes, __global const BvhTriPack* packs, uint count,
+                                    __global const Ray* rays, __global Hit* hits, __global const uint* tri_material,
+                                    __global const Material* materials, __global const TriAttrib* attribs,
+                                    __global const TextureInfo* textures, __global const half* texels) {
+  uint i = get_global_id(0);
+  if (i >= count) return;
+  AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
+  hits[i] = shadow_cast(nodes, packs, rays[i], as, 0u);
 }

@@ -1170,3 +1170,53 @@ TEST_CASE("Raycast: shadow rays change medium at each null boundary in order, as
   CHECK(bad == 0);
   CHECK(nested > n / 20);
 }
+
+TEST_CASE("Raycast: the filter's hemisphere rays pass null boundaries and stop at surfaces", "[raycast]") {
+  // kernels/visibility.cl visibility_cast_media: rays from inside a null cube of
+  // fog, [-1, 1]^3, some of them towards an opaque square at y = -2 below it:
+  // a ray that reaches the square is a hit; every other passes the cube's
+  // boundary and misses, with any reach.
+  Mesh m;
+  add_cube(m);
+  const uint32_t cube_tris = uint32_t(m.triangles.size());
+  m.add_quad(vec3(-3, -2, -3), vec3(3, -2, -3), vec3(3, -2, 3), vec3(-3, -2, 3));
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  std::vector<Material> materials(2);  // 0 the square, 1 the cube's boundary
+  materials[1].flags = PSF_MATFLAG_NULL_BOUNDARY;
+  materials[1].interior = {{0.5f, 1.0f, 2.0f, 1.0f}};
+  std::vector<uint32_t> tri_material(m.triangles.size(), 0u);
+  std::vector<bool> masked(m.triangles.size(), false);
+  for (uint32_t t = 0; t < cube_tris; ++t) tri_material[t] = 1u, masked[t] = true;
+  CHECK(psf::mark_masked(bvh, masked) == cube_tris);
+  std::mt19937 rng(37);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  const int n = 512;
+  std::vector<Ray> rays;
+  for (int i = 0; i < n; ++i) {
+    const vec3 o = vec3(-0.9f) + 1.8f * vec3(u01(rng), u01(rng), u01(rng));
+    const float reach = i % 2 == 0 ? std::numeric_limits<float>::infinity() : 0.5f + 4.0f * u01(rng);
+    rays.push_back(make_ray(o, uniform_sphere(rng), 1e-4f, reach));
+  }
+  auto& rt = psf::test::runtime();
+  psf::RayCaster caster(rt, bvh);
+  cl::Buffer hits = rt.buffer(CL_MEM_WRITE_ONLY, n * sizeof(Hit));
+  cl::Buffer attribs = rt.buffer(CL_MEM_READ_ONLY, tri_material.size() * sizeof(TriAttrib));
+  cl::Buffer textures = rt.buffer(CL_MEM_READ_ONLY, sizeof(TextureInfo)), texels = rt.buffer(CL_MEM_READ_ONLY, 16);
+  rt.launch("visibility_cast_media", size_t(n), 64, caster.nodes(), caster.packs(), cl_uint(n), rt.upload(rays), hits,
+            rt.upload(tri_material), rt.upload(materials), attribs, textures, texels);
+  rt.finish();
+  const std::vector<Hit> out = rt.download<Hit>(hits, n);
+  int bad = 0, square = 0;
+  for (int i = 0; i < n; ++i) {
+    const vec3 o(rays[i].org.s[0], rays[i].org.s[1], rays[i].org.s[2]);
+    const vec3 d(rays[i].dir.s[0], rays[i].dir.s[1], rays[i].dir.s[2]);
+    const float t = d.y < 0.0f ? (-2.0f - o.y) / d.y : -1.0f;
+    const vec3 p = o + t * d;
+    const bool reaches = t > 0.0f && t < rays[i].dir.s[3] && std::fabs(p.x) < 3.0f && std::fabs(p.z) < 3.0f;
+    square += reaches;
+    bad += (out[i].prim != PSF_NO_HIT) != reaches;
+    if (reaches && out[i].prim != PSF_NO_HIT) bad += out[i].prim < cube_tris;  // the square's, not the cube's
+  }
+  CHECK(bad == 0);
+  CHECK(square > n / 8);
+}
