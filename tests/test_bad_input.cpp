@@ -19,6 +19,8 @@
 #include <limits>
 #include <sstream>
 
+#include <sys/stat.h>
+
 #include "render.h"
 #include "support.h"
 
@@ -310,4 +312,110 @@ TEST_CASE("Bad input: NaN/Inf path contributions never reach the image and are c
   for (float v : acc.image().rgb) CHECK(std::isfinite(v));
   for (float v : acc.unfiltered_image().rgb) CHECK(std::isfinite(v));
   for (float v : acc.filtered) CHECK(std::isfinite(v));
+}
+
+TEST_CASE("Bad input: what fuzzing found crashing, hanging or eating memory gives exit 2 or renders", "[bad_input]") {
+  fs::path dir = temp_dir();
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(dir / name, std::ios::binary) << text;
+    return (dir / name).string();
+  };
+  const std::string head = "<scene version=\"3.0.0\">\n";
+  SECTION("a PNG whose deflate data stb_image refuses without a reason (a null message)") {
+    require_clear_error(render(bad("corrupt-png-texture.xml")), "corrupt-deflate.png': cannot decode image");
+  }
+  SECTION("an EXR texture whose data window lies 300M rows down (an int offset overflowed)") {
+    Outcome o = render(bad("far-data-window-texture.xml"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+  }
+  SECTION("a PLY element of no properties and 2^64 - 1 items (a loop of as many steps)") {
+    Outcome o = render(bad("empty-element-huge-count.ply"));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+  }
+  SECTION("a .glb whose buffer has byteLength 0 (tinygltf threw std::out_of_range)") {
+    require_clear_error(render(bad("glb-empty-buffer.glb")), "glb-empty-buffer.glb: glTF parse error");
+  }
+  SECTION("a flat HDR image cut short (stb_image read zeros past its end)") {
+    write("short.hdr", "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 64 +X 4\n\x80\x80\x80\x80");
+    const std::string xml = write("short.xml", head + "<emitter type=\"envmap\"><string name=\"filename\" "
+                                                      "value=\"short.hdr\"/></emitter>\n</scene>\n");
+    require_clear_error(render(xml), "short.hdr: cannot read environment map: truncated HDR image");
+  }
+  SECTION("BSDFs and merges that refer to each other 5000 deep (a stack overflow)") {
+    std::string bsdfs = head, merges = head;
+    for (int i = 0; i < 5000; ++i) {
+      const std::string next = i + 1 < 5000 ? "<ref id=\"b" + std::to_string(i + 1) + "\"/>" : "<bsdf type=\"diffuse\"/>";
+      bsdfs += "<bsdf type=\"twosided\" id=\"b" + std::to_string(i) + "\">" + next + "</bsdf>\n";
+      const std::string shape = i + 1 < 5000 ? "<ref id=\"m" + std::to_string(i + 1) + "\"/>" : "<shape type=\"sphere\"/>";
+      merges += "<shape type=\"merge\" id=\"m" + std::to_string(i) + "\">" + shape + "</shape>\n";
+    }
+    bsdfs += "<shape type=\"sphere\"><ref id=\"b0\"/></shape>\n</scene>\n";
+    merges += "</scene>\n";
+    require_clear_error(render(write("bsdfs.xml", bsdfs)), "bsdfs.xml:66: BSDFs nested more than 64 deep");
+    require_clear_error(render(write("merges.xml", merges)), "merges nested more than 64 deep");
+  }
+  SECTION("merges that each hold the next twice (2^40 spheres)") {
+    std::string xml = head;
+    for (int i = 0; i < 40; ++i) {
+      const std::string next = i + 1 < 40 ? "<ref id=\"m" + std::to_string(i + 1) + "\"/>" : "<shape type=\"sphere\"/>";
+      xml += "<shape type=\"merge\" id=\"m" + std::to_string(i) + "\">" + next + next + "</shape>\n";
+    }
+    require_clear_error(render(write("dag.xml", xml + "<shape type=\"merge\"><ref id=\"m0\"/></shape>\n</scene>\n")),
+                        "dag.xml:2: the merge holds more than 1048576 shapes");
+  }
+  SECTION("includes that each include the next twice (2^23 files)") {
+    for (int i = 0; i < 23; ++i) {
+      const std::string next = i + 1 < 23 ? "<include filename=\"i" + std::to_string(i + 1) + ".xml\"/>" : "";
+      write("i" + std::to_string(i) + ".xml", head + next + next + "</scene>\n");
+    }
+    require_clear_error(render(write("top.xml", head + "<include filename=\"i0.xml\"/>\n</scene>\n")),
+                        "more than 4096 included files");
+  }
+  SECTION("a device or a FIFO named as a scene file, an include, an MTL or a spectrum") {
+    require_clear_error(render(write("zero.xml", head + "<include filename=\"/dev/zero\"/>\n</scene>\n")),
+                        "zero.xml:2: included file '/dev/zero' is not a regular file");
+    require_clear_error(render(write("zero.obj", "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")),
+                        "zero.obj:1: mtllib '/dev/zero' is not a regular file");
+    require_clear_error(render(write("spectrum.xml", head + "<shape type=\"sphere\"><bsdf type=\"diffuse\"><spectrum "
+                                                            "name=\"reflectance\" filename=\"/dev/zero\"/></bsdf>"
+                                                            "</shape>\n</scene>\n")),
+                        "spectrum file '/dev/zero' is not a regular file");
+    const fs::path fifo = dir / "pipe.xml";
+    REQUIRE(mkfifo(fifo.c_str(), 0600) == 0);
+    require_clear_error(render(write("fifo.xml", head + "<include filename=\"pipe.xml\"/>\n</scene>\n")),
+                        "fifo.xml:2: included file");
+    require_clear_error(render(fifo.string()), "pipe.xml: is not a regular file");
+  }
+  SECTION("glTF: nodes shared by two parents (2^40 copies), 12,500 deep, a buffer that is a folder") {
+    const std::string mesh =
+        "\"meshes\": [{\"primitives\": [{\"attributes\": {\"POSITION\": 0}}]}], \"accessors\": [{\"componentType\": "
+        "5126, \"count\": 3, \"type\": \"VEC3\", \"bufferView\": 0}], \"bufferViews\": [{\"buffer\": 0, "
+        "\"byteLength\": 36}], \"buffers\": [{\"byteLength\": 36, \"uri\": \"";
+    std::string dag = "{\"asset\": {\"version\": \"2.0\"}, \"scenes\": [{\"nodes\": [0]}], \"nodes\": [";
+    for (int i = 0; i < 40; ++i)
+      dag += "{\"children\": [" + std::to_string(i + 1) + ", " + std::to_string(i + 1) + "]}, ";
+    dag += "{\"mesh\": 0}], " + mesh + "data:application/octet-stream;base64," + std::string(48, 'A') + "\"}]}";
+    require_clear_error(render(write("dag.gltf", dag)), "dag.gltf: nodes[1]: is the child of more than one node");
+    std::string chain = "{\"asset\": {\"version\": \"2.0\"}, \"scenes\": [{\"nodes\": [0]}], \"nodes\": [";
+    for (int i = 0; i < 12500; ++i) chain += "{\"children\": [" + std::to_string(i + 1) + "]}, ";
+    chain += "{\"mesh\": 0}], " + mesh + "data:application/octet-stream;base64," + std::string(48, 'A') + "\"}]}";
+    require_clear_error(render(write("chain.gltf", chain)), "chain.gltf: nodes[1024]: nodes nested more than 1024 deep");
+    const std::string folder = "{\"asset\": {\"version\": \"2.0\"}, \"scenes\": [{\"nodes\": [0]}], \"nodes\": "
+                               "[{\"mesh\": 0}], " + mesh + ".\"}]}";
+    require_clear_error(render(write("folder.gltf", folder)), "is a folder");
+    // An accessor's bufferView -5 (read as all zeros) and a byteStride shorter than its elements.
+    const std::string valid = "{\"asset\": {\"version\": \"2.0\"}, \"scenes\": [{\"nodes\": [0]}], \"nodes\": "
+                              "[{\"mesh\": 0}], " + mesh + "data:application/octet-stream;base64," +
+                              std::string(48, 'A') + "\"}]}";
+    auto edit = [&](const std::string& from, const std::string& to) {
+      std::string s = valid;
+      return s.replace(s.find(from), from.size(), to);
+    };
+    require_clear_error(render(write("view.gltf", edit("\"bufferView\": 0", "\"bufferView\": -5"))),
+                        "view.gltf: accessors[0]: bufferView -5 out of range");
+    const std::string stride = edit("\"byteLength\": 36}", "\"byteLength\": 36, \"byteStride\": 4}");
+    require_clear_error(render(write("stride.gltf", stride)), "byteStride 4 is smaller than an element (12 bytes)");
+  }
 }

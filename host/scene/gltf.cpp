@@ -32,6 +32,7 @@
 #include <sstream>
 
 #include "scene/formats.h"
+#include "scene/loaders.h"
 #include "scene/materials.h"
 
 namespace psf::detail {
@@ -56,6 +57,15 @@ bool load_png_or_jpeg(tinygltf::Image* image, const int index, std::string* err,
   return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, user);
 }
 
+// tinygltf's ReadWholeFile for regular files only.
+bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+  if (const std::string why = unreadable_input(path); !why.empty()) {
+    if (err) *err += "File " + path + " " + why + "\n";
+    return false;
+  }
+  return tinygltf::ReadWholeFile(out, err, path, user);
+}
+
 class GltfLoader {
  public:
   explicit GltfLoader(const std::string& path) : path_(path) {}
@@ -75,12 +85,21 @@ class GltfLoader {
     check_json_depth(text, binary);
     const std::string prepared = prepare_compressed(text, binary);
     loader.SetImageLoader(load_png_or_jpeg, nullptr);
+    // External buffers and images: regular files only (a uri "." or /dev/zero
+    // would be read as a folder or for ever).
+    loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_regular_file,
+                           &tinygltf::WriteWholeFile, nullptr});
     const std::string base = std::filesystem::path(path_).parent_path().string();
-    bool ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
-                                                   reinterpret_cast<const unsigned char*>(prepared.data()),
-                                                   static_cast<unsigned int>(prepared.size()), base)
-                     : loader.LoadASCIIFromString(&model_, &err, &warn, prepared.data(),
-                                                  static_cast<unsigned int>(prepared.size()), base);
+    bool ok = false;
+    try {  // tinygltf throws on some malformed files (a .glb's buffer of byteLength 0: std::out_of_range)
+      ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
+                                                reinterpret_cast<const unsigned char*>(prepared.data()),
+                                                static_cast<unsigned int>(prepared.size()), base)
+                  : loader.LoadASCIIFromString(&model_, &err, &warn, prepared.data(),
+                                               static_cast<unsigned int>(prepared.size()), base);
+    } catch (const std::exception& e) {
+      throw SceneError(path_, 0, std::string("glTF parse error: ") + e.what());
+    }
     if (!ok || !err.empty()) throw SceneError(path_, 0, "glTF parse error: " + trim(err.empty() ? warn : err));
     for (const std::string& w : split_lines(warn)) warn_once("tinygltf: " + w);
 
@@ -117,6 +136,17 @@ class GltfLoader {
       for (size_t i = 0; i < child.size(); ++i)
         if (!child[i]) roots.push_back(int(i));
     }
+    // glTF's nodes form trees (2.0, 3.5.1: a node has one parent at most, a
+    // scene's roots are unique): a node shared by two parents, drawn once per
+    // path to it, could make a small file draw 2^40 copies.
+    std::vector<int> parents(model_.nodes.size(), 0);
+    for (const auto& n : model_.nodes)
+      for (int c : n.children)
+        if (c >= 0 && size_t(c) < parents.size() && ++parents[size_t(c)] == 2)
+          fail("nodes[" + std::to_string(c) + "]", "is the child of more than one node (glTF's nodes form trees)");
+    for (size_t i = 0; i < roots.size(); ++i)
+      if (std::find(roots.begin(), roots.begin() + ptrdiff_t(i), roots[i]) != roots.begin() + ptrdiff_t(i))
+        fail("scene.nodes", "lists node " + std::to_string(roots[i]) + " twice");
     std::vector<int> stack;
     for (int r : roots) visit(r, glm::mat4(1.0f), stack, "scene.nodes");
 
@@ -172,10 +202,13 @@ class GltfLoader {
     return t * r * s;
   }
 
+  static constexpr size_t kMaxNodeDepth = 1024;
   void visit(int index, const glm::mat4& parent, std::vector<int>& stack, const std::string& from) {
     std::string where = "nodes[" + std::to_string(index) + "]";
     if (index < 0 || size_t(index) >= model_.nodes.size()) fail(from, "node index " + std::to_string(index) + " out of range");
     if (std::find(stack.begin(), stack.end(), index) != stack.end()) fail(where, "the node hierarchy has a cycle");
+    if (stack.size() >= kMaxNodeDepth)  // the recursion's stack; no scene nests nodes this deep
+      fail(where, "nodes nested more than " + std::to_string(kMaxNodeDepth) + " deep");
     const tinygltf::Node& node = model_.nodes[size_t(index)];
     glm::mat4 m = parent * local_transform(node, where);
     for (int k = 0; k < 16; ++k)
@@ -334,8 +367,9 @@ class GltfLoader {
         default: return 0.0;
       }
     };
+    if (a.bufferView < -1) fail(where, "bufferView " + std::to_string(a.bufferView) + " out of range");
     if (a.bufferView < 0) {  // no buffer view: all zeros (glTF 2.0, 3.6.2.3), then the sparse values
-      if (a.count > (size_t(1) << 28))
+      if (a.count > (size_t(1) << 22))  // a 200-byte file must not ask for gigabytes of zeros
         fail(where, "count " + std::to_string(a.count) + " is too large for an accessor without a bufferView");
       std::vector<double> zeros(a.count * components, 0.0);
       apply_sparse(a, where, components, csize, decode, zeros);
@@ -343,6 +377,9 @@ class GltfLoader {
     }
     const int stride = a.ByteStride(buffer_view(a.bufferView, where));
     if (stride <= 0) fail(where, "invalid byte stride");
+    if (size_t(stride) < components * csize)
+      fail(where, "byteStride " + std::to_string(stride) + " is smaller than an element (" +
+                      std::to_string(components * csize) + " bytes)");
     const unsigned char* base =
         view_bytes(a.bufferView, a.byteOffset, a.count, components * csize, size_t(stride), where);
     std::vector<double> out(a.count * components, 0.0);

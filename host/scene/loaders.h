@@ -11,6 +11,12 @@
 
 namespace psf::detail {
 
+// What is wrong with reading `path` whole as scene input: "" for a regular file
+// (or one that does not exist: the reader's own message names that), else "is a
+// folder" or "is not a regular file" (a device such as /dev/zero or a FIFO,
+// which would never end or never answer).
+std::string unreadable_input(const std::string& path);
+
 // A triangle mesh in object space.
 struct TriMesh {
   std::vector<glm::vec3> positions;   // vertex positions

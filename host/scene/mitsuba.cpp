@@ -370,6 +370,13 @@ class MitsubaLoader {
       if (from) fail(from, "included file '" + path + "' is a folder");
       throw SceneError(path, 0, "is a folder, not a scene file");
     }
+    if (const std::string why = unreadable_input(path); !why.empty()) {
+      if (from) fail(from, "included file '" + path + "' " + why);
+      throw SceneError(path, 0, why);
+    }
+    // Includes that each include the next twice would open 2^depth files.
+    if (++files_opened_ > kMaxFiles)
+      fail(from, "more than " + std::to_string(kMaxFiles) + " included files (includes that repeat each other?)");
     std::ifstream in(path, std::ios::binary);
     if (!in) {
       if (from) fail(from, "cannot open included file '" + path + "'");
@@ -672,6 +679,8 @@ class MitsubaLoader {
     std::vector<std::string> tokens;
     if (std::optional<std::string> file = attr(node, "filename")) {
       std::string path = resolve(node, *file);
+      if (const std::string why = unreadable_input(path); !why.empty())
+        fail(node, "spectrum file '" + path + "' " + why);
       std::ifstream in(path);
       if (!in) fail(node, "cannot open spectrum file '" + path + "'");
       for (std::string line; std::getline(in, line);) {
@@ -1175,6 +1184,21 @@ class MitsubaLoader {
 
   void load_shape(pugi::xml_node node) { load_shape_at(node, glm::mat4(1.0f), 0); }
 
+  // The shapes a merge draws, counting those of the merges inside it (each
+  // merge's count once, however often it is held), up to kMaxShapes + 1; a
+  // merge inside itself counts 0 here (load_shape_at reports it).
+  size_t merge_shapes(pugi::xml_node node, size_t depth = 1) {
+    if (auto m = merge_counts_.find(node.internal_object()); m != merge_counts_.end()) return m->second;
+    if (depth > kMaxNesting) fail(node, "merges nested more than " + std::to_string(kMaxNesting) + " deep");
+    merge_counts_[node.internal_object()] = 0;  // while counting: a cycle adds nothing
+    size_t n = 0;
+    for (pugi::xml_node child : objects(parse_element(node), "shape")) {
+      const Element c = parse_element(child);
+      n = std::min(n + (c.type == "merge" ? merge_shapes(child, depth + 1) : 1), kMaxShapes + 1);
+    }
+    return merge_counts_[node.internal_object()] = n;
+  }
+
   // A shape, its to_world after `parent` (the instance it is reached through,
   // `depth` 1, else 0). A shapegroup is not drawn itself; an instance draws the
   // shapes of the shapegroup it refers to, each copied into the scene with the
@@ -1190,6 +1214,11 @@ class MitsubaLoader {
     }
     if (e.type == "merge") {  // Mitsuba 3's merge: its shapes, drawn as they are (merging only saves memory there)
       if (!in_progress_.insert(node.internal_object()).second) fail(node, "merge shape contains itself");
+      if (in_progress_.size() > kMaxNesting) fail(node, "merges nested more than " + std::to_string(kMaxNesting) + " deep");
+      // Merges that each hold the next twice would draw 2^depth copies of what the last holds.
+      if (merge_shapes(node) > kMaxShapes)
+        fail(node, "the merge holds more than " + std::to_string(kMaxShapes) + " shapes (merges that hold each other "
+                   "more than once?)");
       for (pugi::xml_node child : objects(e, "shape")) load_shape_at(child, parent, depth);
       in_progress_.erase(node.internal_object());
       return;
@@ -1612,6 +1641,8 @@ class MitsubaLoader {
     auto cached = bsdfs_.find(node.internal_object());
     if (cached != bsdfs_.end()) return cached->second;
     if (!in_progress_.insert(node.internal_object()).second) fail(node, "BSDF refers to itself");
+    if (in_progress_.size() > kMaxNesting)  // each level is a frame of this recursion
+      fail(node, "BSDFs nested more than " + std::to_string(kMaxNesting) + " deep");
     Element e = parse_element(node);
     auto plugin = bsdf_plugins().find(e.type);
     // vertex_color_: whether this BSDF's own colour term (not a nested BSDF's)
@@ -2600,6 +2631,11 @@ class MitsubaLoader {
   Scene scene_;                                                        // the result
   std::map<std::string, std::string> params_;                          // $name values: caller's, then <default>s
   std::vector<std::unique_ptr<XmlFile>> files_;                        // main file first, then includes
+  static constexpr int kMaxFiles = 4096;  // scene files opened at most (open)
+  int files_opened_ = 0;
+  static constexpr size_t kMaxNesting = 64;    // BSDFs within BSDFs, merges within merges (their recursion)
+  static constexpr size_t kMaxShapes = 1u << 20;  // shapes one merge draws (merge_shapes)
+  std::map<const void*, size_t> merge_counts_;    // merge_shapes' counts by merge
   std::unordered_map<const void*, const XmlFile*> roots_;              // document node -> its file
   std::map<std::string, pugi::xml_node> ids_;                          // id -> element
   std::vector<pugi::xml_node> aliases_;                                // <alias> elements, resolved after the ids

@@ -118,8 +118,10 @@ void check_mtllib_files(const std::string& text, const std::string& path, const 
   for_each_keyword_line(text, "mtllib", [&](int line, const char* b, const char* e) {
     std::istringstream names(std::string(b, e));
     for (std::string name; names >> name;)
-      if (std::filesystem::is_directory(std::filesystem::path(base_dir.empty() ? "." : base_dir) / name))
-        throw SceneError(path, line, "mtllib '" + name + "' is a folder, not an MTL file");
+      if (const std::string why =
+              unreadable_input((std::filesystem::path(base_dir.empty() ? "." : base_dir) / name).string());
+          !why.empty())
+        throw SceneError(path, line, "mtllib '" + name + "' " + (why == "is a folder" ? why + ", not an MTL file" : why));
     return true;
   });
 }
@@ -139,6 +141,7 @@ std::string trim_newlines(std::string s) {
 }  // namespace
 
 ObjData read_obj(const std::string& path, bool with_materials) {
+  if (const std::string why = unreadable_input(path); !why.empty()) throw SceneError(path, 0, "OBJ file " + why);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open OBJ file");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

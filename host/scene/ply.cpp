@@ -20,6 +20,7 @@
 #include <sstream>
 
 #include "scene/formats.h"
+#include "scene/loaders.h"
 
 namespace psf::detail {
 namespace {
@@ -180,6 +181,7 @@ enum Role { kX, kY, kZ, kNx, kNy, kNz, kU, kV, kR, kG, kB, kRoles };
 }  // namespace
 
 PlyMesh read_ply(const std::string& path) {
+  if (const std::string why = unreadable_input(path); !why.empty()) throw SceneError(path, 0, "PLY file " + why);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open PLY file");
   std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -337,6 +339,7 @@ PlyMesh read_ply(const std::string& path) {
       out.ignored.push_back(e.name);
     }
     values.resize(e.props.size());
+    if (e.props.empty()) continue;  // items of nothing (a count of 2^64 - 1 would be a loop of as many steps)
     for (uint64_t item = 0; item < e.count; ++item) {
       for (size_t pi = 0; pi < e.props.size(); ++pi) {
         const PlyProperty& p = e.props[pi];

@@ -10,6 +10,17 @@
 
 namespace psf {
 
+namespace detail {
+
+std::string unreadable_input(const std::string& path) {
+  std::error_code ec;
+  const std::filesystem::file_status st = std::filesystem::status(path, ec);  // through symbolic links
+  if (ec || !std::filesystem::exists(st) || std::filesystem::is_regular_file(st)) return "";
+  return std::filesystem::is_directory(st) ? "is a folder" : "is not a regular file";
+}
+
+}  // namespace detail
+
 SceneError::SceneError(const std::string& file, int line, const std::string& message)
     : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + message),
       file_(file),
@@ -93,6 +104,7 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
   if (std::filesystem::is_directory(path)) throw SceneError(path, 0, "is a folder, not a scene file");
+  if (!detail::unreadable_input(path).empty()) throw SceneError(path, 0, detail::unreadable_input(path));
   if (ext == ".xml") return detail::load_mitsuba(path, params);
   Scene scene;
   if (ext == ".obj") scene = detail::load_obj_scene(path);

@@ -21,6 +21,7 @@
 #include <limits>
 
 #include "scene/formats.h"
+#include "scene/loaders.h"
 
 namespace psf::detail {
 namespace {
@@ -80,6 +81,8 @@ class Inflater {
 }  // namespace
 
 SerializedMesh read_serialized(const std::string& path, int shape_index) {
+  if (const std::string why = unreadable_input(path); !why.empty())
+    throw SceneError(path, 0, "serialized mesh file " + why);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open serialized mesh file");
   const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

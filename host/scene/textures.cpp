@@ -34,6 +34,7 @@ std::string lower(std::string s) {
 using Pixels = ImagePixels;
 
 Pixels load_exr(const std::string& path) {
+  if (const std::string why = unreadable_input(path); !why.empty()) throw std::runtime_error("the image file " + why);
   Pixels p;
   try {
     Imf::RgbaInputFile file(path.c_str());
@@ -42,7 +43,10 @@ Pixels load_exr(const std::string& path) {
     p.height = dw.max.y - dw.min.y + 1;
     p.has_alpha = (file.channels() & Imf::WRITE_A) != 0;
     Imf::Array2D<Imf::Rgba> px(p.height, p.width);
-    file.setFrameBuffer(&px[0][0] - dw.min.x - dw.min.y * p.width, 1, size_t(p.width));
+    // The data window may lie anywhere: the offset in 64 bits (an int product
+    // overflowed for a window 300M rows down, and OpenEXR wrote out of bounds).
+    file.setFrameBuffer(&px[0][0] - (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * ptrdiff_t(p.width)), 1,
+                        size_t(p.width));
     file.readPixels(dw.min.y, dw.max.y);
     p.rgba.resize(size_t(p.width) * p.height * 4);
     for (int y = 0; y < p.height; ++y)
@@ -63,8 +67,9 @@ Pixels load_exr(const std::string& path) {
 // Checks a Radiance HDR file's run-length encoded scanlines before stb_image
 // decodes them: the stb_image Debian ships loops forever on a run whose length
 // byte is 0, which is what it reads past the end of a truncated file. Throws on
-// a scanline that would not decode, or data cut short; flat (unencoded) files
-// and other formats pass unchecked.
+// a scanline that would not decode, or data cut short (flat, unencoded
+// scanlines too, where stb_image would read zeros past the end); other formats
+// pass unchecked.
 void check_hdr_runs(const std::string& d) {
   size_t at = d.find("\n\n");  // the header ends with an empty line
   if (at == std::string::npos) return;
@@ -74,11 +79,20 @@ void check_hdr_runs(const std::string& d) {
   int height = 0, width = 0;
   if (std::sscanf(d.substr(at, eol - at).c_str(), "-Y %d +X %d", &height, &width) != 2) return;  // stb refuses it
   at = eol + 1;
-  if (width < 8 || width >= 32768 || height <= 0) return;  // never run-length encoded
+  if (height <= 0 || width <= 0) return;  // stb refuses it
+  if (width < 8 || width >= 32768) {       // never run-length encoded: flat, 4 bytes a pixel
+    if ((d.size() - at) / 4 / size_t(width) < size_t(height)) throw std::runtime_error("truncated HDR image");
+    return;
+  }
   auto byte = [&](size_t i) { return static_cast<unsigned char>(d[i]); };
   for (int y = 0; y < height; ++y) {
     if (at + 4 > d.size()) throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
-    if (byte(at) != 2 || byte(at + 1) != 2 || (byte(at + 2) & 0x80)) return;  // flat: stb reads it safely
+    if (byte(at) != 2 || byte(at + 1) != 2 || (byte(at + 2) & 0x80)) {
+      // Flat from here on (4 bytes a pixel; stb_image reads zeros past the end).
+      if ((d.size() - at) / 4 / size_t(width) < size_t(height - y))
+        throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
+      return;
+    }
     if ((byte(at + 2) << 8 | byte(at + 3)) != width)
       throw std::runtime_error("malformed HDR image: scanline " + std::to_string(y) + " has the wrong width");
     at += 4;
@@ -101,6 +115,7 @@ Pixels load_stb(const std::string& path, bool raw) {
   Pixels p;
   int comp = 0;
   // The file read once, then decoded from memory (format probes, the HDR check and the decoder).
+  if (const std::string why = unreadable_input(path); !why.empty()) throw std::runtime_error("the image file " + why);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot decode image: can't fopen");
   const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -113,7 +128,10 @@ Pixels load_stb(const std::string& path, bool raw) {
   void* data = hdr ? static_cast<void*>(stbi_loadf_from_memory(b, len, &p.width, &p.height, &comp, 0))
                : wide ? static_cast<void*>(stbi_load_16_from_memory(b, len, &p.width, &p.height, &comp, 0))
                       : static_cast<void*>(stbi_load_from_memory(b, len, &p.width, &p.height, &comp, 0));
-  if (!data) throw std::runtime_error(std::string("cannot decode image: ") + stbi_failure_reason());
+  if (!data) {
+    const char* reason = stbi_failure_reason();  // null where stb_image gives none (a corrupt PNG's deflate data)
+    throw std::runtime_error(std::string("cannot decode image: ") + (reason ? reason : "corrupt data"));
+  }
   p.has_alpha = comp == 2 || comp == 4;
   const size_t n = size_t(p.width) * p.height;
   p.rgba.resize(n * 4);
