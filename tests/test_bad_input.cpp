@@ -417,5 +417,24 @@ TEST_CASE("Bad input: what fuzzing found crashing, hanging or eating memory give
                         "view.gltf: accessors[0]: bufferView -5 out of range");
     const std::string stride = edit("\"byteLength\": 36}", "\"byteLength\": 36, \"byteStride\": 4}");
     require_clear_error(render(write("stride.gltf", stride)), "byteStride 4 is smaller than an element (12 bytes)");
+    require_clear_error(render(write("scene.gltf", edit("\"scenes\"", "\"scene\": -7, \"scenes\""))),
+                        "scene.gltf: scene: scene -7 out of range");
+    // 4 vertices without indices: one triangle and a vertex left over, with a warning.
+    std::string four = valid;
+    for (const auto& [from, to] : {std::pair<std::string, std::string>{"\"count\": 3", "\"count\": 4"},
+                                   {"\"byteLength\": 36}", "\"byteLength\": 48}"},
+                                   {"\"byteLength\": 36,", "\"byteLength\": 48,"},
+                                   {std::string(48, 'A'), std::string(64, 'A')}})
+      four.replace(four.find(from), from.size(), to);
+    Outcome o = render(write("four.gltf", four));
+    INFO(o.run.output);
+    CHECK(o.run.status == 0);
+    CHECK(contains(o.run.output, "4 vertices or indices, not a multiple of 3; the last 1 ignored"));
+  }
+  SECTION("a max_depth below -1, which Mitsuba 3 refuses") {
+    require_clear_error(render(write("depth.xml", head + "<integrator type=\"path\"><integer name=\"max_depth\" "
+                                                         "value=\"-7\"/></integrator>\n<shape type=\"sphere\"/>\n"
+                                                         "</scene>\n")),
+                        "depth.xml:2: 'max_depth' must be -1 (unbounded) or at least 0");
   }
 }

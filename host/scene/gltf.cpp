@@ -124,6 +124,7 @@ class GltfLoader {
 
     std::vector<int> roots;
     if (!model_.scenes.empty()) {
+      if (model_.defaultScene < -1) fail("scene", "scene " + std::to_string(model_.defaultScene) + " out of range");
       int s = model_.defaultScene >= 0 ? model_.defaultScene : 0;
       if (size_t(s) >= model_.scenes.size()) fail("scene", "defaultScene " + std::to_string(s) + " does not exist");
       roots = model_.scenes[size_t(s)].nodes;
@@ -672,6 +673,9 @@ class GltfLoader {
         for (size_t i = 0; i < nv; ++i) idx[i] = uint32_t(i);
       }
       if (mode == TINYGLTF_MODE_TRIANGLES) {
+        if (idx.size() % 3 != 0)  // glTF 2.0, 3.7.2.1: a multiple of 3; the rest is no triangle
+          warn_once(where + ": " + std::to_string(idx.size()) + " vertices or indices, not a multiple of 3; the last " +
+                    std::to_string(idx.size() % 3) + " ignored");
         for (size_t i = 0; i + 2 < idx.size(); i += 3) tm.triangles.push_back({idx[i], idx[i + 1], idx[i + 2]});
       } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
         for (size_t i = 0; i + 2 < idx.size(); ++i)

@@ -940,6 +940,8 @@ class MitsubaLoader {
       warn(node, "integrator:" + e.type, "integrator '" + e.type + "' is not supported yet; using path tracing");
     // direct: emitters seen directly plus one bounce of direct light.
     scene_.max_depth = direct ? 2 : get_int(e, "max_depth", -1);
+    if (scene_.max_depth < -1)  // as Mitsuba 3 refuses it
+      fail(find(e, "max_depth")->node, "'max_depth' must be -1 (unbounded) or at least 0");
     scene_.rr_depth = direct ? 5 : get_int(e, "rr_depth", 5);
     if (scene_.rr_depth < 1) fail(find(e, "rr_depth")->node, "'rr_depth' must be at least 1");
     // hide_emitters: Mitsuba 3's path tracer (3.6; prb and prb_basic alike)
