@@ -278,7 +278,8 @@ BVH_INLINE void pack_take(__global const float* p, uint k, bvh_floatw t, bvh_flo
 
 /* The null-boundary crossings of one shadow ray (record_null_crossing): ray
  * parameters in ascending order and tags 2 material + 1 if entering. A ray
- * that crosses more than PSF_NULL_CROSSINGS boundaries keeps the nearest. */
+ * that crosses more than PSF_NULL_CROSSINGS boundaries keeps the nearest and
+ * counts the others in `dropped` (shade.cl shadow_cast casts again for them). */
 #define PSF_NULL_CROSSINGS 16u
 typedef struct {
   float t[PSF_NULL_CROSSINGS];

@@ -603,9 +603,9 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
  * scene declares. A crossing of the same material and side at the distance of
  * one counted before it (a ray through an edge two triangles share) counts
  * once. A ray to infinity that ends inside a medium (one not closed) is
- * absorbed. Past PSF_NULL_CROSSINGS crossings the medium after the last one
- * kept is taken to the end. Out of line: trace_paths of scenes without such
- * media pays nothing for its code. */
+ * absorbed. A ray with more crossings than the record holds is cast again from
+ * the last one kept, as often as it takes. Out of line: trace_paths of scenes
+ * without such media pays nothing for its code. */
 __attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
                                           AlphaScene as, uint medium) {
   NullCrossings c;
@@ -617,16 +617,32 @@ __attribute__((noinline)) Hit shadow_cast(__global const BvhNode* nodes, __globa
   const float len = length(ray.dir.xyz);
   float3 tau = (float3)(0.0f);
   float prev = 0.0f;
-  for (uint k = 0u; k < c.count; ++k) {
-    const float t = c.t[k];
-    bool again = false;
-    for (uint q = k; q > 0u && c.t[q - 1u] >= t - 1e-5f * fabs(t); --q) again |= c.tag[q - 1u] == c.tag[k];
-    if (again) continue;
-    tau += medium_sigma(as.materials, medium) * ((t - prev) * len);
-    prev = t;
-    const uint material = c.tag[k] >> 1;
-    __global const Material* m = as.materials + material;
-    medium = medium_after(medium, m->interior, m->exterior, material, (c.tag[k] & 1u) == 0u);
+  for (uint first = 0u;;) {
+    for (uint k = first; k < c.count; ++k) {
+      const float t = c.t[k];
+      bool again = false;
+      for (uint q = k; q > 0u && c.t[q - 1u] >= t - 1e-5f * fabs(t); --q) again |= c.tag[q - 1u] == c.tag[k];
+      if (again) continue;
+      tau += medium_sigma(as.materials, medium) * ((t - prev) * len);
+      prev = t;
+      const uint material = c.tag[k] >> 1;
+      __global const Material* m = as.materials + material;
+      medium = medium_after(medium, m->interior, m->exterior, material, (c.tag[k] & 1u) == 0u);
+    }
+    if (c.dropped == 0u) break;
+    /* More crossings than the record holds: the rest from another cast that
+     * starts at the last one kept, whose record starts with that crossing (not
+     * walked again), so that its twin across an edge still counts once. The
+     * first cast found nothing opaque on the whole ray. */
+    const float t_last = c.t[c.count - 1u];
+    c.t[0] = t_last;
+    c.tag[0] = c.tag[c.count - 1u];
+    c.count = 1u;
+    c.dropped = 0u;
+    Ray rest = ray;
+    rest.org.w = t_last;
+    intersect_any_hit_alpha(nodes, packs, rest, &as);
+    first = 1u;
   }
   const float3 sigma = medium_sigma(as.materials, medium);
   if (!isinf(ray.dir.w)) tau += sigma * ((ray.dir.w - prev) * len);

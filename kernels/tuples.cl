@@ -46,8 +46,8 @@ inline void demodulate_tuple(float4* a, float4* c) {
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo; \
     float rj = vertex_radius(p, xj.w, aj.w);                                             \
     float4 cj = values[j];                                                               \
-    int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     if (p.demodulate) demodulate_tuple(&aj, &cj);                                        \
+    int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;             \
     x.s##k = xj.x;                                                                       \
     y.s##k = xj.y;                                                                       \
     z.s##k = xj.z;                                                                       \
@@ -76,8 +76,8 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
     float4 xj = vertices[j].position, nj = vertices[j].normal, aj = vertices[j].albedo;
     float rj = vertex_radius(p, xj.w, aj.w);
     float4 cj = values[j];
+    if (p.demodulate) demodulate_tuple(&aj, &cj); /* before the finiteness: c / 0.01 may overflow */
     int finite = isfinite(cj.x) && isfinite(cj.y) && isfinite(cj.z) ? 1 : 0;
-    if (p.demodulate) demodulate_tuple(&aj, &cj);
     sorted[PSF_SORTED_X * stride + i] = xj.x;
     sorted[PSF_SORTED_Y * stride + i] = xj.y;
     sorted[PSF_SORTED_Z * stride + i] = xj.z;

@@ -363,7 +363,24 @@ TEST_CASE("Bad input: what fuzzing found crashing, hanging or eating memory give
       xml += "<shape type=\"merge\" id=\"m" + std::to_string(i) + "\">" + next + next + "</shape>\n";
     }
     require_clear_error(render(write("dag.xml", xml + "<shape type=\"merge\"><ref id=\"m0\"/></shape>\n</scene>\n")),
-                        "dag.xml:2: the merge holds more than 1048576 shapes");
+                        "dag.xml:2: the scene draws more than 1048576 shapes");
+    // 2^16 spheres in a merge held 100 times (by shapes, and by instances of a
+    // shapegroup of it), the chain defined inside a shapegroup that is not drawn.
+    std::string many = head + "<shape type=\"shapegroup\">\n", grouped = head + "<shape type=\"shapegroup\">\n";
+    for (int i = 0; i < 16; ++i) {
+      const std::string next = i + 1 < 16 ? "<ref id=\"m" + std::to_string(i + 1) + "\"/>" : "<shape type=\"sphere\"/>";
+      const std::string merge = "<shape type=\"merge\" id=\"m" + std::to_string(i) + "\">" + next + next + "</shape>\n";
+      many += merge;
+      grouped += merge;
+    }
+    many += "</shape>\n";
+    grouped += "</shape>\n<shape type=\"shapegroup\" id=\"g\"><ref id=\"m0\"/></shape>\n";
+    for (int i = 0; i < 100; ++i) {
+      many += "<shape type=\"merge\"><ref id=\"m0\"/></shape>\n";
+      grouped += "<shape type=\"instance\"><ref id=\"g\"/></shape>\n";
+    }
+    require_clear_error(render(write("many.xml", many + "</scene>\n")), "the scene draws more than 1048576 shapes");
+    require_clear_error(render(write("grouped.xml", grouped + "</scene>\n")), "the scene draws more than 1048576 shapes");
   }
   SECTION("includes that each include the next twice (2^23 files)") {
     for (int i = 0; i < 23; ++i) {
@@ -387,6 +404,9 @@ TEST_CASE("Bad input: what fuzzing found crashing, hanging or eating memory give
     require_clear_error(render(write("fifo.xml", head + "<include filename=\"pipe.xml\"/>\n</scene>\n")),
                         "fifo.xml:2: included file");
     require_clear_error(render(fifo.string()), "pipe.xml: is not a regular file");
+    const std::string gltf = "{\"asset\": {\"version\": \"2.0\"}, \"buffers\": [{\"byteLength\": 4, \"uri\": "
+                             "\"pipe.xml\"}]}";
+    require_clear_error(render(write("fifo.gltf", gltf)), "pipe.xml is not a regular file");
   }
   SECTION("glTF: nodes shared by two parents (2^40 copies), 12,500 deep, a buffer that is a folder") {
     const std::string mesh =

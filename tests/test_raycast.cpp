@@ -1220,3 +1220,51 @@ TEST_CASE("Raycast: the filter's hemisphere rays pass null boundaries and stop a
   CHECK(bad == 0);
   CHECK(square > n / 8);
 }
+
+TEST_CASE("Raycast: a shadow ray through more null boundaries than one record holds", "[raycast]") {
+  // 14 slabs of fog (28 crossings, more than PSF_NULL_CROSSINGS), each 0.2 thick
+  // and 0.4 apart, crossed from below by rays of finite and infinite reach:
+  // exp(-sigma x the length inside them), against the slab chords in double.
+  Mesh m;
+  const int slabs = 14;
+  for (int k = 0; k < slabs; ++k) add_cube(m, vec3(0.0f, 0.4f * float(k), 0.0f), glm::mat3(4.0f, 0, 0, 0, 0.1f, 0, 0, 0, 4.0f));
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  std::vector<Material> materials(1);
+  materials[0].flags = PSF_MATFLAG_NULL_BOUNDARY;
+  materials[0].interior = {{0.5f, 1.0f, 0.25f, 1.0f}};
+  const std::vector<uint32_t> tri_material(m.triangles.size(), 0u);
+  CHECK(psf::mark_masked(bvh, std::vector<bool>(m.triangles.size(), true)) == m.triangles.size());
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 256; ++i) {
+    const vec3 o(-1.0f + 2.0f * u01(rng), -1.0f, -1.0f + 2.0f * u01(rng));
+    const vec3 d = glm::normalize(vec3(0.3f * (u01(rng) - 0.5f), 1.0f, 0.3f * (u01(rng) - 0.5f))) * 8.0f;
+    rays.push_back(make_ray(o, d, 0.0f, i % 2 == 0 ? std::numeric_limits<float>::infinity() : 1.0f));
+  }
+  const std::vector<Hit> out = cast_shadows_media(bvh, rays, std::vector<uint32_t>(rays.size(), 0u), tri_material,
+                                                  materials);
+  int bad = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const dvec3 o(rays[i].org.s[0], rays[i].org.s[1], rays[i].org.s[2]);
+    const dvec3 d(rays[i].dir.s[0], rays[i].dir.s[1], rays[i].dir.s[2]);
+    const double tmax = std::min(double(rays[i].dir.s[3]), 1e30);
+    double inside = 0.0;  // the slabs' chords within [0, tmax], in length
+    for (int k = 0; k < slabs; ++k) {
+      const double y0 = 0.4 * k - 0.1, y1 = 0.4 * k + 0.1;
+      const double t0 = std::max(0.0, (y0 - o.y) / d.y), t1 = std::min(tmax, (y1 - o.y) / d.y);
+      inside += std::max(0.0, t1 - t0) * glm::length(d);
+    }
+    const float got[3] = {out[i].t, out[i].u, out[i].v};
+    bool ok = out[i].prim == PSF_NO_HIT;
+    for (int c = 0; c < 3 && ok; ++c) {
+      const double tau = materials[0].interior.s[c] * inside;
+      ok = std::abs(got[c] - std::exp(-tau)) <= 2e-5 * (1.0 + tau);
+    }
+    if (!ok && ++bad <= 3) {
+      INFO("ray " << i << ": length in fog " << inside << ", transmittance " << got[0] << " " << got[1] << " " << got[2]);
+      CHECK(ok);
+    }
+  }
+  CHECK(bad == 0);
+}

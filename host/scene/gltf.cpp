@@ -57,6 +57,13 @@ bool load_png_or_jpeg(tinygltf::Image* image, const int index, std::string* err,
   return tinygltf::LoadImageData(image, index, err, warn, width, height, bytes, size, user);
 }
 
+// tinygltf's FileExists without opening anything but a regular file (its own
+// fopen blocks on a FIFO): a folder or device exists, and read_regular_file
+// then says what it is.
+bool file_exists(const std::string& path, void* user) {
+  return !unreadable_input(path).empty() || tinygltf::FileExists(path, user);
+}
+
 // tinygltf's ReadWholeFile for regular files only.
 bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
   if (const std::string why = unreadable_input(path); !why.empty()) {
@@ -87,8 +94,8 @@ class GltfLoader {
     loader.SetImageLoader(load_png_or_jpeg, nullptr);
     // External buffers and images: regular files only (a uri "." or /dev/zero
     // would be read as a folder or for ever).
-    loader.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_regular_file,
-                           &tinygltf::WriteWholeFile, nullptr});
+    loader.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_regular_file, &tinygltf::WriteWholeFile,
+                           nullptr});
     const std::string base = std::filesystem::path(path_).parent_path().string();
     bool ok = false;
     try {  // tinygltf throws on some malformed files (a .glb's buffer of byteLength 0: std::out_of_range)

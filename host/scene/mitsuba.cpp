@@ -342,6 +342,14 @@ class MitsubaLoader {
         {"emitter", &MitsubaLoader::load_top_emitter},   {"texture", &MitsubaLoader::skip},
         {"alias", &MitsubaLoader::skip},         {"medium", &MitsubaLoader::skip},  // used where a shape refers to it
     };
+    // The shapes the scene will draw, counted first (merge_shapes): merges or
+    // instances that each hold the next twice would draw 2^depth copies (a
+    // 1 KB file, 2^40 spheres), and a million shapes take a minute to load.
+    size_t shapes = 0;
+    for (pugi::xml_node node : top)
+      if (std::string(node.name()) == "shape" && (shapes += shapes_drawn_by(node)) > kMaxShapes)
+        fail(node, "the scene draws more than " + std::to_string(kMaxShapes) +
+                       " shapes (merges or instances that hold each other more than once?)");
     for (pugi::xml_node node : top) {
       auto it = handlers.find(node.name());
       if (it != handlers.end()) {
@@ -1186,19 +1194,31 @@ class MitsubaLoader {
 
   void load_shape(pugi::xml_node node) { load_shape_at(node, glm::mat4(1.0f), 0); }
 
-  // The shapes a merge draws, counting those of the merges inside it (each
-  // merge's count once, however often it is held), up to kMaxShapes + 1; a
-  // merge inside itself counts 0 here (load_shape_at reports it).
+  // The shapes a merge (or the shapegroup an instance draws) draws, counting
+  // those of the merges and instances inside it (each container's count once,
+  // however often it is held), up to kMaxShapes + 1; a merge inside itself
+  // counts 0 here (load_shape_at reports it).
   size_t merge_shapes(pugi::xml_node node, size_t depth = 1) {
     if (auto m = merge_counts_.find(node.internal_object()); m != merge_counts_.end()) return m->second;
     if (depth > kMaxNesting) fail(node, "merges nested more than " + std::to_string(kMaxNesting) + " deep");
     merge_counts_[node.internal_object()] = 0;  // while counting: a cycle adds nothing
     size_t n = 0;
-    for (pugi::xml_node child : objects(parse_element(node), "shape")) {
-      const Element c = parse_element(child);
-      n = std::min(n + (c.type == "merge" ? merge_shapes(child, depth + 1) : 1), kMaxShapes + 1);
-    }
+    for (pugi::xml_node child : objects(parse_element(node), "shape"))
+      n = std::min(n + shapes_drawn_by(child, depth + 1), kMaxShapes + 1);
     return merge_counts_[node.internal_object()] = n;
+  }
+
+  // The shapes load_shape_at draws for `node`: a merge's or an instance's
+  // group's (merge_shapes), none for a shapegroup itself, else 1.
+  size_t shapes_drawn_by(pugi::xml_node node, size_t depth = 1) {
+    const Element e = parse_element(node);
+    if (e.type == "merge") return merge_shapes(node, depth);
+    if (e.type == "shapegroup") return 0;
+    if (e.type == "instance") {
+      std::vector<pugi::xml_node> groups = objects(e, "shape");
+      return groups.size() == 1 ? merge_shapes(groups[0], depth) : 0;  // else load_shape_at reports it
+    }
+    return 1;
   }
 
   // A shape, its to_world after `parent` (the instance it is reached through,
@@ -1217,10 +1237,6 @@ class MitsubaLoader {
     if (e.type == "merge") {  // Mitsuba 3's merge: its shapes, drawn as they are (merging only saves memory there)
       if (!in_progress_.insert(node.internal_object()).second) fail(node, "merge shape contains itself");
       if (in_progress_.size() > kMaxNesting) fail(node, "merges nested more than " + std::to_string(kMaxNesting) + " deep");
-      // Merges that each hold the next twice would draw 2^depth copies of what the last holds.
-      if (merge_shapes(node) > kMaxShapes)
-        fail(node, "the merge holds more than " + std::to_string(kMaxShapes) + " shapes (merges that hold each other "
-                   "more than once?)");
       for (pugi::xml_node child : objects(e, "shape")) load_shape_at(child, parent, depth);
       in_progress_.erase(node.internal_object());
       return;
@@ -2636,8 +2652,8 @@ class MitsubaLoader {
   static constexpr int kMaxFiles = 4096;  // scene files opened at most (open)
   int files_opened_ = 0;
   static constexpr size_t kMaxNesting = 64;    // BSDFs within BSDFs, merges within merges (their recursion)
-  static constexpr size_t kMaxShapes = 1u << 20;  // shapes one merge draws (merge_shapes)
-  std::map<const void*, size_t> merge_counts_;    // merge_shapes' counts by merge
+  static constexpr size_t kMaxShapes = 1u << 20;  // shapes the scene draws, instances' copies counted
+  std::map<const void*, size_t> merge_counts_;    // merge_shapes' counts by merge or shapegroup
   std::unordered_map<const void*, const XmlFile*> roots_;              // document node -> its file
   std::map<std::string, pugi::xml_node> ids_;                          // id -> element
   std::vector<pugi::xml_node> aliases_;                                // <alias> elements, resolved after the ids
