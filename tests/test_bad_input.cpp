@@ -451,6 +451,15 @@ TEST_CASE("Bad input: what fuzzing found crashing, hanging or eating memory give
     CHECK(o.run.status == 0);
     CHECK(contains(o.run.output, "4 vertices or indices, not a multiple of 3; the last 1 ignored"));
   }
+  SECTION("a negative area light, and a glTF extensionsRequired entry that is no name") {
+    require_clear_error(render(write("negative.xml", head + "<shape type=\"sphere\"><emitter type=\"area\"><rgb "
+                                                            "name=\"radiance\" value=\"1, -2, 1\"/></emitter></shape>\n"
+                                                            "</scene>\n")),
+                        "negative.xml:2: 'radiance' is negative");
+    require_clear_error(render(write("required.gltf", "{\"asset\": {\"version\": \"2.0\"}, \"extensionsRequired\": "
+                                                      "[7]}")),
+                        "required.gltf: extensionsRequired: an entry is not an extension's name");
+  }
   SECTION("a max_depth below -1, which Mitsuba 3 refuses") {
     require_clear_error(render(write("depth.xml", head + "<integrator type=\"path\"><integer name=\"max_depth\" "
                                                          "value=\"-7\"/></integrator>\n<shape type=\"sphere\"/>\n"

@@ -117,7 +117,9 @@ class GltfLoader {
     // A file that requires an extension cannot be read without it (glTF 2.0,
     // 3.12): its geometry or images are compressed, or its meaning changes.
     for (const std::string& e : model_.extensionsRequired)
-      if (!supported.count(e)) fail("extensionsRequired", "the file requires extension " + e + ", which is not supported");
+      if (!supported.count(e))
+        fail("extensionsRequired", e.empty() ? std::string("an entry is not an extension's name")
+                                             : "the file requires extension " + e + ", which is not supported");
     for (const std::string& e : model_.extensionsUsed)
       if (!supported.count(e)) warn_once("extension " + e + " is not supported; ignored");
     decode_meshopt();

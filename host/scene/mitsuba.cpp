@@ -2499,7 +2499,7 @@ class MitsubaLoader {
     const Property* p = find(e, "radiance");
     if (p && p->kind == Property::Kind::Object && std::string(p->object.name()) == "texture")
       return {glm::vec3(1.0f), texture(p->object, TextureUse::Color, "emitting 1")};
-    return {get_color(e, "radiance", ColorUse::Radiance).value_or(glm::vec3(1.0f)), PSF_NO_TEXTURE};
+    return {emitted(e, "radiance"), PSF_NO_TEXTURE};  // negative: an error, as for the other lights
   }
 
   // --- lights: point, spot, directional, constant, envmap ------------------
