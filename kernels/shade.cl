@@ -211,7 +211,7 @@ inline float3 medium_sigma(__global const Material* materials, uint medium) {
  * every medium; 0 over an infinite distance through one that absorbs). */
 inline float3 medium_transmittance(__global const Material* materials, uint medium, float dist) {
   if (medium == 0u) return (float3)(1.0f);
-  const float3 sigma = materials[medium - 1u].interior.xyz;
+  const float3 sigma = medium_sigma(materials, medium);
   return select(exp(-sigma * dist), (float3)(1.0f), sigma <= (float3)(0.0f));
 }
 

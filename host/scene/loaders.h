@@ -16,6 +16,8 @@ namespace psf::detail {
 // folder" or "is not a regular file" (a device such as /dev/zero or a FIFO,
 // which would never end or never answer).
 std::string unreadable_input(const std::string& path);
+// Throws SceneError(path, 0, "<what> <unreadable_input>") where that is not "".
+void require_readable_input(const std::string& path, const std::string& what);
 
 // A triangle mesh in object space.
 struct TriMesh {

@@ -1211,11 +1211,11 @@ class MitsubaLoader {
   // The shapes load_shape_at draws for `node`: a merge's or an instance's
   // group's (merge_shapes), none for a shapegroup itself, else 1.
   size_t shapes_drawn_by(pugi::xml_node node, size_t depth = 1) {
-    const Element e = parse_element(node);
-    if (e.type == "merge") return merge_shapes(node, depth);
-    if (e.type == "shapegroup") return 0;
-    if (e.type == "instance") {
-      std::vector<pugi::xml_node> groups = objects(e, "shape");
+    const std::string type = attr(node, "type").value_or("");
+    if (type == "merge") return merge_shapes(node, depth);
+    if (type == "shapegroup") return 0;
+    if (type == "instance") {  // only containers are parsed here (load_shape_at parses every shape)
+      std::vector<pugi::xml_node> groups = objects(parse_element(node), "shape");
       return groups.size() == 1 ? merge_shapes(groups[0], depth) : 0;  // else load_shape_at reports it
     }
     return 1;

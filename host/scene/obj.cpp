@@ -141,7 +141,7 @@ std::string trim_newlines(std::string s) {
 }  // namespace
 
 ObjData read_obj(const std::string& path, bool with_materials) {
-  if (const std::string why = unreadable_input(path); !why.empty()) throw SceneError(path, 0, "OBJ file " + why);
+  require_readable_input(path, "OBJ file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open OBJ file");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -181,7 +181,7 @@ enum Role { kX, kY, kZ, kNx, kNy, kNz, kU, kV, kR, kG, kB, kRoles };
 }  // namespace
 
 PlyMesh read_ply(const std::string& path) {
-  if (const std::string why = unreadable_input(path); !why.empty()) throw SceneError(path, 0, "PLY file " + why);
+  require_readable_input(path, "PLY file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open PLY file");
   std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

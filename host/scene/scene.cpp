@@ -19,6 +19,11 @@ std::string unreadable_input(const std::string& path) {
   return std::filesystem::is_directory(st) ? "is a folder" : "is not a regular file";
 }
 
+void require_readable_input(const std::string& path, const std::string& what) {
+  if (const std::string why = unreadable_input(path); !why.empty())
+    throw SceneError(path, 0, what.empty() ? why : what + " " + why);
+}
+
 }  // namespace detail
 
 SceneError::SceneError(const std::string& file, int line, const std::string& message)
@@ -104,7 +109,7 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
   if (std::filesystem::is_directory(path)) throw SceneError(path, 0, "is a folder, not a scene file");
-  if (!detail::unreadable_input(path).empty()) throw SceneError(path, 0, detail::unreadable_input(path));
+  detail::require_readable_input(path, "");
   if (ext == ".xml") return detail::load_mitsuba(path, params);
   Scene scene;
   if (ext == ".obj") scene = detail::load_obj_scene(path);

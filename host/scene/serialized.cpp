@@ -81,8 +81,7 @@ class Inflater {
 }  // namespace
 
 SerializedMesh read_serialized(const std::string& path, int shape_index) {
-  if (const std::string why = unreadable_input(path); !why.empty())
-    throw SceneError(path, 0, "serialized mesh file " + why);
+  require_readable_input(path, "serialized mesh file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open serialized mesh file");
   const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -80,19 +80,16 @@ void check_hdr_runs(const std::string& d) {
   if (std::sscanf(d.substr(at, eol - at).c_str(), "-Y %d +X %d", &height, &width) != 2) return;  // stb refuses it
   at = eol + 1;
   if (height <= 0 || width <= 0) return;  // stb refuses it
-  if (width < 8 || width >= 32768) {       // never run-length encoded: flat, 4 bytes a pixel
-    if ((d.size() - at) / 4 / size_t(width) < size_t(height)) throw std::runtime_error("truncated HDR image");
-    return;
-  }
   auto byte = [&](size_t i) { return static_cast<unsigned char>(d[i]); };
+  // Flat scanlines from `at` on, `rows` of them: 4 bytes a pixel (stb_image reads zeros past the end).
+  auto check_flat = [&](int rows, const std::string& where) {
+    if ((d.size() - at) / 4 / size_t(width) < size_t(rows)) throw std::runtime_error("truncated HDR image" + where);
+  };
+  if (width < 8 || width >= 32768) return check_flat(height, "");  // never run-length encoded
   for (int y = 0; y < height; ++y) {
     if (at + 4 > d.size()) throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
-    if (byte(at) != 2 || byte(at + 1) != 2 || (byte(at + 2) & 0x80)) {
-      // Flat from here on (4 bytes a pixel; stb_image reads zeros past the end).
-      if ((d.size() - at) / 4 / size_t(width) < size_t(height - y))
-        throw std::runtime_error("truncated HDR image (scanline " + std::to_string(y) + ")");
-      return;
-    }
+    if (byte(at) != 2 || byte(at + 1) != 2 || (byte(at + 2) & 0x80))  // flat from here on
+      return check_flat(height - y, " (scanline " + std::to_string(y) + ")");
     if ((byte(at + 2) << 8 | byte(at + 3)) != width)
       throw std::runtime_error("malformed HDR image: scanline " + std::to_string(y) + " has the wrong width");
     at += 4;
