@@ -118,7 +118,7 @@ size_t PathSpaceFilter::bytes_per_tuple(int iterations) {
   // 4 keys per tuple), and for more than one pass the neighbour lists. The
   // arrays' padding is per batch, not per tuple.
   return PSF_SORTED_FIELDS * sizeof(float) + 4 * sizeof(uint32_t) + 2 * 3 * sizeof(float) + sizeof(uint32_t) +
-         4 * sizeof(uint32_t) + (iterations > 1 ? (PSF_FILTER_LIST + 1) * 2 * sizeof(uint32_t) : 0);
+         4 * sizeof(uint32_t) + (iterations > 1 ? PSF_FILTER_LIST_WORDS * sizeof(uint32_t) : 0);
 }
 
 PathSpaceFilter::PathSpaceFilter(Runtime& rt, uint32_t capacity, uint32_t gather_lanes, uint32_t filter_queries)
@@ -170,7 +170,7 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   // every iteration averages the same tuples, so the counts are those of any, and
   // the passes after the first average over the lists the first one recorded.
   if (iterations > 1 && !lists_())
-    lists_ = rt_.buffer(CL_MEM_READ_WRITE, size_t(std::max(capacity_, 1u)) * (PSF_FILTER_LIST + 1) * 2 * sizeof(uint32_t));
+    lists_ = rt_.buffer(CL_MEM_READ_WRITE, size_t(std::max(capacity_, 1u)) * PSF_FILTER_LIST_WORDS * sizeof(uint32_t));
   const size_t items = (n + filter_queries_ - 1) / filter_queries_;
   for (int it = 0; it < std::max(iterations, 1); ++it) {
     if (iterations <= 1)

@@ -125,7 +125,7 @@ class PathSpaceFilter {
   cl::Buffer sorted_;
   cl::Buffer keys_, indices_, tmp_keys_, tmp_indices_;
   cl::Buffer values_a_, values_b_, sorted_counts_, starts_, max_count_, valid_;
-  cl::Buffer lists_;  // each query's records (PSF_FILTER_LIST + 1 uint2s), allocated by a run with iterations > 1
+  cl::Buffer lists_;  // each query's records (PSF_FILTER_LIST_WORDS uints), allocated by a run with iterations > 1
   RadixScratch sort_scratch_;
 };
 

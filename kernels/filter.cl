@@ -92,12 +92,26 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
     sg += select((floatL)(0.0f), cg, take);                                                                        \
     sb += select((floatL)(0.0f), cb, take);                                                                        \
     taken -= take; /* take is -1 where true */                                                                     \
-    if (mode == PSF_FILTER_WRITE_LISTS) { /* record (j, lanes taken) where any is; past the end into the sink */ \
+    if (mode == PSF_FILTER_WRITE_LISTS) { /* record (j - i, lanes taken) where any is; past the end: the sink */  \
       uint m = (uint)filter_lane_isum(take & ((intL)(1) << PSF_FILTER_LANE_INDEX));                                \
-      list[min(listed, PSF_FILTER_LIST)] = (uint2)(j, m);                                                          \
+      int offset = (int)j - (int)i;                                                                                \
+      list[1u + min(listed, PSF_FILTER_LIST)] = filter_record_of(offset, m);                                       \
       listed += m != 0u ? 1u : 0u;                                                                                 \
+      far |= m != 0u && (offset < -PSF_FILTER_OFFSET_LIMIT || offset >= PSF_FILTER_OFFSET_LIMIT);                  \
     }                                                                                                              \
   }
+/* A record's offset j - i, signed, in the bits above the lanes (a test gives it
+ * fewer, to reach the limit with few tuples). */
+#ifndef PSF_FILTER_OFFSET_BITS
+#define PSF_FILTER_OFFSET_BITS (32 - PSF_FILTER_LANES)
+#endif
+#define PSF_FILTER_OFFSET_LIMIT (1 << (PSF_FILTER_OFFSET_BITS - 1))
+inline uint filter_record_of(int offset, uint lanes) {
+  return (((uint)offset & ((1u << PSF_FILTER_OFFSET_BITS) - 1u)) << PSF_FILTER_LANES) | lanes;
+}
+inline int filter_record_offset(uint record) {
+  return (as_int(record) << (32 - PSF_FILTER_LANES - PSF_FILTER_OFFSET_BITS)) >> (32 - PSF_FILTER_OFFSET_BITS);
+}
 #if PSF_FILTER_SKIP
 #define PSF_FILTER_SKIP_TEST \
   if (!any(in | (idx == (intL)((int)i)))) continue;
@@ -116,7 +130,7 @@ inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint s
                                                           __global const float* values,
                                                           __global const uint* starts, __global float* filtered,
                                                           __global uint* counts, const uint mode,
-                                                          __global uint2* lists) {
+                                                          __global uint* lists) {
   const uint nvalid = *valid; /* tuples with a vertex come first in cell order (cell_ranges.cl) */
   const uint i0 = get_global_id(0) * queries;
   if (i0 >= nvalid) return;
@@ -144,20 +158,21 @@ inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint s
   bool cached = false;
   uint my[3], mz[3], by[3], bz[3];
   for (uint i = i0; i < i1; ++i) {
-    __global uint2* list = mode == PSF_FILTER_SEARCH ? lists : lists + (size_t)i * (PSF_FILTER_LIST + 1u);
-    if (mode == PSF_FILTER_READ_LISTS && list[PSF_FILTER_LIST].y <= PSF_FILTER_LIST) {
+    __global uint* list = mode == PSF_FILTER_SEARCH ? lists : lists + (size_t)i * PSF_FILTER_LIST_WORDS;
+    if (mode == PSF_FILTER_READ_LISTS && list[0] <= PSF_FILTER_LIST) {
       /* The vectors of candidates the first pass took any from, with the lanes
        * it took (the ball, the weights and the finiteness tags do not change
        * between passes): the same sums, lane by lane in the same order, as a
        * search (the vectors it took none from only added zeros). */
-      const uint records = list[PSF_FILTER_LIST].y;
+      const uint records = list[0];
       floatL sr = (floatL)(0.0f), sg = (floatL)(0.0f), sb = (floatL)(0.0f);
-      for (uint k = 0u; k < records; ++k) {
-        const uint2 e = list[k];
-        const intL take = -(((intL)((int)e.y) >> PSF_FILTER_LANE_INDEX) & (intL)(1));
-        sr += select((floatL)(0.0f), vloadL(0, vr + e.x), take);
-        sg += select((floatL)(0.0f), vloadL(0, vg + e.x), take);
-        sb += select((floatL)(0.0f), vloadL(0, vb + e.x), take);
+      for (uint k = 1u; k <= records; ++k) {
+        const uint e = list[k];
+        const uint j = (uint)((int)i + filter_record_offset(e));
+        const intL take = -(((intL)(as_int(e)) >> PSF_FILTER_LANE_INDEX) & (intL)(1));
+        sr += select((floatL)(0.0f), vloadL(0, vr + j), take);
+        sg += select((floatL)(0.0f), vloadL(0, vg + j), take);
+        sb += select((floatL)(0.0f), vloadL(0, vb + j), take);
       }
       const float3 mean =
           (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb)) / (float)counts[i];
@@ -167,6 +182,7 @@ inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint s
       continue;
     }
     uint listed = 0u;
+    bool far = false; /* a record's offset does not fit: the later passes search again */
     float r = sorted[PSF_SORTED_R * stride + i];
     float3 x = (float3)(xs[i], ys[i], zs[i]);
     float3 ni = (float3)(nxs[i], nys[i], nzs[i]);
@@ -252,7 +268,7 @@ inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint s
       n = 1u;
       listed = PSF_FILTER_LIST + 1u; /* the later passes search again */
     }
-    if (mode == PSF_FILTER_WRITE_LISTS) list[PSF_FILTER_LIST] = (uint2)(0u, listed);
+    if (mode == PSF_FILTER_WRITE_LISTS) list[0] = far ? PSF_FILTER_LIST + 1u : listed;
     float3 mean = sum / (float)n;
     filtered[i] = mean.x;
     filtered[stride + i] = mean.y;
@@ -262,12 +278,12 @@ inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint s
 }
 
 /* One pass of the average (mode PSF_FILTER_SEARCH; the only pass), the first of
- * several (filter_record: also records, for each query, PSF_FILTER_LIST + 1
- * uint2s in lists: the first index and the lanes taken of each vector of
- * candidates it took any from, then their number in the last's y), or a later
- * one (filter_lists: sums those vectors' lanes again, bit for bit the search's
- * sums, and searches again where the records overflowed). One body,
- * specialised by the constant mode. */
+ * several (filter_record: also records, for each query, a list of
+ * PSF_FILTER_LIST_WORDS uints in lists: the number of vectors of candidates it
+ * took any from, then for each the offset of its first index from the query's
+ * and the lanes taken), or a later one (filter_lists: sums those vectors' lanes
+ * again, bit for bit the search's sums, and searches again where the records
+ * overflowed). One body, specialised by the constant mode. */
 __kernel void filter(FilterParams p, uint stride, uint queries, __global const uint* valid,
                      __global const float* sorted, __global const float* values, __global const uint* starts,
                      __global float* filtered, __global uint* counts) {
@@ -277,14 +293,14 @@ __kernel void filter(FilterParams p, uint stride, uint queries, __global const u
 __kernel void filter_record(FilterParams p, uint stride, uint queries, __global const uint* valid,
                             __global const float* sorted, __global const float* values,
                             __global const uint* starts, __global float* filtered, __global uint* counts,
-                            __global uint2* lists) {
+                            __global uint* lists) {
   filter_queries(p, stride, queries, valid, sorted, values, starts, filtered, counts, PSF_FILTER_WRITE_LISTS,
                  lists);
 }
 
 __kernel void filter_lists(FilterParams p, uint stride, uint queries, __global const uint* valid,
                            __global const float* sorted, __global const float* values, __global const uint* starts,
-                           __global float* filtered, __global uint* counts, __global uint2* lists) {
+                           __global float* filtered, __global uint* counts, __global uint* lists) {
   filter_queries(p, stride, queries, valid, sorted, values, starts, filtered, counts, PSF_FILTER_READ_LISTS, lists);
 }
 

@@ -512,10 +512,14 @@ typedef struct {
 
 /* Records a query's list holds (filter.cl filter_record): with --iterations > 1
  * the first pass records, for each query, the vectors of candidates it took
- * neighbours from (first index, lanes taken), and the later passes sum those
- * again instead of searching; a query with more such vectors searches again. A
- * list takes PSF_FILTER_LIST + 1 uint2s (the last holds the count, and is the
- * sink of the branch-free appends). */
-#define PSF_FILTER_LIST 24u
+ * neighbours from, and the later passes sum those again instead of searching; a
+ * query with more such vectors, or one further from the query in cell order than
+ * a record can say, searches again. A list is PSF_FILTER_LIST_WORDS uints (two
+ * cache lines, so that the few records most queries have share the first line
+ * with the count): the count, PSF_FILTER_LIST records of one uint each (the
+ * vector's first index minus the query's, above the lanes taken), and the sink of
+ * the branch-free appends. */
+#define PSF_FILTER_LIST_WORDS 32u
+#define PSF_FILTER_LIST (PSF_FILTER_LIST_WORDS - 2u)
 
 #endif /* PSF_SHARED_H */

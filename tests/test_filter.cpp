@@ -524,7 +524,7 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     // vectors of candidates hold, so those search again) beside spread tuples
     // (a few neighbours: recorded); four passes over both.
     auto v = random_tuples(2000, 47, 1.0f);
-    auto dense = random_tuples(2000, 48, 0.01f);
+    auto dense = random_tuples(4000, 48, 0.01f);
     for (auto& t : dense) t.position.s[0] += 2.0f;
     v.insert(v.end(), dense.begin(), dense.end());
     auto c = random_values(v.size(), 49);
@@ -542,12 +542,14 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
 
 // The filter's variant that the test device does not use by default (Runtime:
 // CPUs 8 lanes without branches, GPUs 2 lanes skipping empty vectors; gather_tuples:
-// CPUs 8 tuples per work-item, GPUs 1).
+// CPUs 8 tuples per work-item, GPUs 1), with the second pass over the first's
+// lists. Their records' offsets in cell order have 7 bits here, +-64 (24 bits with
+// 8 lanes): the queries with a record further away search again.
 TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force equation", "[filter]") {
   auto& shared = psf::test::runtime();
   const bool gpu = shared.device().type == "GPU";
-  psf::Runtime rt(shared.device(), gpu ? "-DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0"
-                                       : "-DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1");
+  psf::Runtime rt(shared.device(), gpu ? "-DPSF_FILTER_LANES=8 -DPSF_FILTER_SKIP=0 -DPSF_FILTER_OFFSET_BITS=7"
+                                       : "-DPSF_FILTER_LANES=2 -DPSF_FILTER_SKIP=1 -DPSF_FILTER_OFFSET_BITS=7");
   FilterParams p = default_params();
   for (bool cells27 : {false, true}) {
     p.cells27 = cells27;
