@@ -419,8 +419,8 @@ typedef struct {
  * prefix + alpha * c, where c is replaced by its filtered mean c-bar. */
 typedef struct {
   psf_float4 position; /* xyz x_i; w: camera path length d_i to it */
-  psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: visibility, 1 or 0: of the light */
-                       /* sample, or of visibility.cl's hemisphere ray */
+  psf_float4 normal;   /* xyz shading normal n_i facing the camera side; w: visibility, 1 or 0: 0 where */
+                       /* something blocked the light sample, or visibility.cl's hemisphere ray */
   psf_float4 albedo;   /* xyz the BSDF's colour term at x_i; w: 0 for a path without a vertex, else its */
                        /* footprint stretch 1 / sqrt(max(|cos theta_i|, PSF_FOOTPRINT_MIN_COS)) >= 1, */
                        /* theta_i between the arriving ray and the geometric normal */

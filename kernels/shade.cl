@@ -32,8 +32,10 @@
  * raycast.cl's any-hit cast): shadow rays that pass null boundaries and carry
  * the transmittance of the media they cross.
  * shade_shadows: adds the pending contribution of unoccluded shadow rays and
- * records the filtering vertex's light-sample visibility (visibility.cl may
- * replace it by a hemisphere ray's).
+ * records the filtering vertex's light-sample visibility: 0 where something
+ * blocked a sample that would have lit it, else 1, so that samples behind the
+ * surface do not split a lit surface's vertices (visibility.cl may replace it by
+ * a hemisphere ray's).
  * trace_paths (CPU devices, and the wavefront's tail on GPUs): all of the above
  * for one path per work-item, bounce after bounce, from the same inline functions
  * (env_row_slot, env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
@@ -577,8 +579,8 @@ inline void shadow_slot(uint k, uint j, __global const Hit* shadow_hits, __globa
                         __global PathVertex* vertices, uint media) {
   PathState st = states[j];
   const Hit h = shadow_hits[k];
-  bool visible = h.prim == PSF_NO_HIT && max3(st.pending.xyz) > 0.0f;
-  if (st.flags & PSF_PATH_VERTEX_NEW) vertices[j].normal.w = visible ? 1.0f : 0.0f;
+  const bool contributes = max3(st.pending.xyz) > 0.0f, visible = h.prim == PSF_NO_HIT && contributes;
+  if (st.flags & PSF_PATH_VERTEX_NEW) vertices[j].normal.w = visible || !contributes ? 1.0f : 0.0f;
   if (visible) {
     add_radiance(&st, media ? st.pending.xyz * (float3)(h.t, h.u, h.v) : st.pending.xyz);
     st.pending = (float4)(0.0f);

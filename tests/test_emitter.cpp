@@ -1234,6 +1234,50 @@ TEST_CASE("Render: --visibility-ray marks a vertex occluded where its hemisphere
   }
 }
 
+TEST_CASE("Render: a light sample that could not light the vertex does not count as shadowed", "[emitter]") {
+  // A floor (z = 0, facing +z) lit by an upright emitting quad at x = 2 facing it.
+  // Where the quad reaches below the floor's plane, the light samples there lie
+  // behind the floor: they contribute nothing whether or not anything blocks
+  // them, so they must not split the vertices into shadowed and unshadowed (the
+  // filter would then average each with half its neighbours). A wall at x = 1
+  // that blocks every sample above the plane makes the vertices shadowed.
+  auto flags = [](float light_bottom, bool wall) {
+    psf::Scene s;
+    uint32_t floor = add_material(s, 0.5f);
+    add_quad(s, {-1, -1, 0}, {2, 0, 0}, {0, 2, 0}, floor);
+    Material light{};
+    light.type = PSF_MATERIAL_DIFFUSE;
+    light.emission = {{1, 1, 1, 0}};
+    s.materials.push_back(light);
+    s.material_names.push_back("light");
+    add_quad(s, {2, -1, light_bottom}, {0, 0, 1.5f - light_bottom}, {0, 2, 0},
+             uint32_t(s.materials.size() - 1));  // faces -x
+    if (wall) add_quad(s, {1, -5, 0}, {0, 0, 5}, {0, 10, 0}, floor);
+    s.camera.origin = {0, 0, 0.5f};
+    s.camera.target = {0, 0, 0};
+    s.camera.up = {0, 1, 0};
+    s.camera.fov_degrees = 60;
+    s.width = s.height = 32;
+    psf::Renderer renderer(psf::test::runtime(), s);
+    psf::RenderOptions o;
+    o.spp = 4;
+    o.keep_last_batch = true;
+    o.filter.min_removed = 0.0f;
+    psf::RenderResult r = renderer.render(o);
+    size_t unshadowed = 0, total = 0;
+    for (const PathVertex& v : r.last_batch.vertices) {
+      if (v.albedo.s[3] == 0.0f) continue;
+      ++total;
+      unshadowed += v.normal.s[3] == 1.0f ? 1 : 0;
+    }
+    REQUIRE(total == 4096u);  // every camera ray meets the floor
+    return double(unshadowed) / double(total);
+  };
+  CHECK(flags(0.5f, false) == 1.0);   // the light above the plane
+  CHECK(flags(-1.0f, false) == 1.0);  // the light straddling it: 40 % of its samples behind the floor
+  CHECK(flags(0.5f, true) == 0.0);    // every sample blocked
+}
+
 TEST_CASE("Render: a crop window renders the film's pixels as the whole film's render does", "[emitter]") {
   // The envmap floor (a textured sky, a bounce and light samples): a 16x16 film,
   // and the window of 7x5 pixels from (6, 9), bit for bit.
