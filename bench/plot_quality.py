@@ -41,10 +41,10 @@ def main():
 
     os.makedirs(args.out, exist_ok=True)
     labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations",
-              "psf4": "path space filtering, 4 iterations"}
+              "psf4": "path space filtering, 4 iterations", "psf8": "path space filtering, 8 iterations"}
     for scene, methods in curves.items():
         fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
-        for name in ("pt", "psf", "psf2", "psf4"):
+        for name in ("pt", "psf", "psf2", "psf4", "psf8"):
             pts = sorted(methods.get(name, []))
             if not pts:
                 continue
@@ -69,15 +69,15 @@ def main():
         print("wrote", path)
 
     for scene, rows in equal.items():
+        methods = [m for m in ("psf", "psf2", "psf4", "psf8") if all(m + "_relMSE" in b for b in rows)]
         print("\n%s\n" % scene)
-        print("| pt spp | time (s) | pt relMSE | psf spp | time (s) | psf relMSE | gain | psf2 spp | time (s) | "
-              "psf2 relMSE | gain |")
-        print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        print("| plain spp | time | plain relMSE | " + " | ".join("%s (spp) | gain" % m for m in methods) + " |")
+        print("| ---: | ---: | ---: | " + " | ".join("---: | ---:" for _ in methods) + " |")
         for b in sorted(rows, key=lambda b: b["pt_spp"]):
-            print("| %d | %.3f | %.4g | %d | %.3f | %.4g | %.2fx | %d | %.3f | %.4g | %.2fx |" % (
-                b["pt_spp"], b["pt_seconds"], b["pt_relMSE"], b["psf_spp"], b["psf_seconds"], b["psf_relMSE"],
-                b["psf_gain"], b["psf2_spp"], b["psf2_seconds"], b["psf2_relMSE"], b["psf2_gain"]))
-
+            cells = ["%d" % b["pt_spp"], "%.3g s" % b["pt_seconds"], "%.3g" % b["pt_relMSE"]]
+            for m in methods:
+                cells += ["%.3g (%d)" % (b[m + "_relMSE"], b[m + "_spp"]), "%.2f×" % b[m + "_gain"]]
+            print("| " + " | ".join(cells) + " |")
 
 if __name__ == "__main__":
     main()
