@@ -251,6 +251,21 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     CHECK(contains(r.output, (dir / "x.png").string() + ": the output is the OpenEXR image"));
     CHECK_FALSE(fs::exists(dir / "x.png"));
   }
+  SECTION("an output named as another format: never an OpenEXR file under that name") {
+    for (const char* name : {"x.jpg", "x.HDR", "x.png"}) {
+      Run r = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 --no-png -o " +
+                  (dir / name).string());
+      INFO(r.output);
+      CHECK(r.status == 2);
+      CHECK(contains(r.output, (dir / name).string() + ": the output is the OpenEXR image"));
+      CHECK_FALSE(fs::exists(dir / name));
+    }
+    Run upper = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 --no-png -o " +
+                    (dir / "x.EXR").string());
+    INFO(upper.output);
+    CHECK(upper.status == 0);
+    CHECK(psf::read_exr((dir / "x.EXR").string()).width == 8);
+  }
   SECTION("a symbolic link or a device as the output: written through, not replaced") {
     std::ofstream(dir / "target.exr") << "old";
     fs::create_symlink("target.exr", dir / "link.exr");
