@@ -1312,6 +1312,44 @@ TEST_CASE("Textures: NaN and infinite texels read as 0, values beyond a half's r
   CHECK(count_warnings(scene, "hdr-emission.exr: 2 texel values exceed 65504") == 1);
 }
 
+TEST_CASE("Textures: texels are the halfs Imath rounds to, whatever the conversion and the textures before", "[scene]") {
+  // Independent reference: Imath::half of each value, one at a time (beyond
+  // the largest half, of 65504, as the store reads those). The store
+  // converts in chunks (with F16C where the CPU has it) into an array that grows
+  // as textures arrive; every texture's texels must stay where its offset says.
+  psf::Scene scene;
+  psf::detail::TextureStore store(scene);
+  psf::detail::TextureDesc d;
+  auto values = [](uint32_t seed, size_t n) {
+    std::vector<float> v(n);
+    uint32_t x = seed;
+    for (size_t i = 0; i < n; ++i) {
+      x = x * 1664525u + 1013904223u;
+      // Exponents from half's subnormals to its largest, some exact ties
+      // between two halves (11 significant bits and a half), some negative.
+      float mant = 1.0f + float(x >> 9) / float(1u << 23);
+      if (i % 7 == 0) mant = 1.0f + (float((x >> 20) | 1u) + 0.5f) / 2048.0f;  // a tie at 11 bits
+      int e = int((x >> 3) % 42) - 26;
+      v[i] = std::ldexp((x & 1u) ? -mant : mant, e);
+    }
+    return v;
+  };
+  const std::vector<float> a = values(1, 1031 * 4), b = values(2, 3 * 4), c = values(3, 2049 * 4);
+  const uint32_t ta = store.pixels(d, 1031, 1, a), tb = store.pixels(d, 3, 1, b), tc = store.pixels(d, 2049, 1, c);
+  size_t checked = 0, mismatched = 0;
+  for (auto [t, v] : {std::pair{ta, &a}, std::pair{tb, &b}, std::pair{tc, &c}}) {
+    const TextureInfo& info = scene.textures.at(t);
+    for (size_t i = 0; i < v->size(); ++i) {
+      const float x = (*v)[i];
+      const uint16_t want = Imath::half(std::fabs(x) > 65504.0f ? std::copysign(65504.0f, x) : x).bits();
+      mismatched += scene.texels.at(size_t(info.offset) * 4 + i) == want ? 0 : 1;
+      ++checked;
+    }
+  }
+  CHECK(checked == (1031 + 3 + 2049) * 4);
+  CHECK(mismatched == 0);
+}
+
 TEST_CASE("Media: a shape's homogeneous interior and exterior media are its material's; others warn", "[scene]") {
   psf::Scene s = load_text(
       "<integrator type=\"volpath\"/>\n"

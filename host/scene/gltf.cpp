@@ -85,7 +85,7 @@ class GltfLoader {
     // images relative to the file's folder).
     std::ifstream in(path_, std::ios::binary);
     if (!in) throw SceneError(path_, 0, "glTF parse error: cannot read the file");
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string text = read_all(in);
     if (text.empty()) throw SceneError(path_, 0, "glTF parse error: Empty file.");
     if (text.size() > size_t(std::numeric_limits<unsigned int>::max()))
       throw SceneError(path_, 0, "glTF parse error: the file is too large");

@@ -3,6 +3,7 @@
 // analytic shapes and appends meshes to the scene.
 #pragma once
 #include <glm/glm.hpp>
+#include <istream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -18,6 +19,9 @@ namespace psf::detail {
 std::string unreadable_input(const std::string& path);
 // Throws SceneError(path, 0, "<what> <unreadable_input>") where that is not "".
 void require_readable_input(const std::string& path, const std::string& what);
+// The rest of `in` as a string, copied a buffer at a time (std::string from
+// istreambuf_iterators copies a character at a time).
+std::string read_all(std::istream& in);
 
 // A triangle mesh in object space.
 struct TriMesh {

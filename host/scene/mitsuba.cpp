@@ -390,7 +390,7 @@ class MitsubaLoader {
       if (from) fail(from, "cannot open included file '" + path + "'");
       throw SceneError(path, 0, "cannot open file");
     }
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text = read_all(in);
     auto file = std::make_unique<XmlFile>();
     file->path = path;
     file->line_starts.push_back(0);

@@ -144,7 +144,7 @@ ObjData read_obj(const std::string& path, bool with_materials) {
   require_readable_input(path, "OBJ file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open OBJ file");
-  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string text = read_all(in);
   check_finite_vertices(text, path);
 
   tinyobj::attrib_t attrib;
@@ -315,7 +315,7 @@ ObjData read_obj(const std::string& path, bool with_materials) {
         std::string mtl = (std::filesystem::path(base_dir) / name).string();
         std::ifstream m(mtl, std::ios::binary);
         if (!m) continue;
-        std::string mtext((std::istreambuf_iterator<char>(m)), std::istreambuf_iterator<char>());
+        std::string mtext = read_all(m);
         for_each_keyword_line(mtext, "newmtl", [&](int line, const char* nb, const char* ne) {
           std::string mname(nb, ne);
           while (!mname.empty() && std::isspace(static_cast<unsigned char>(mname.back()))) mname.pop_back();

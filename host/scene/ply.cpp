@@ -184,7 +184,7 @@ PlyMesh read_ply(const std::string& path) {
   require_readable_input(path, "PLY file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open PLY file");
-  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string data = read_all(in);
 
   // --- header ---
   std::vector<PlyElement> elements;

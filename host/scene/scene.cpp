@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <sstream>
 
 #include "scene/formats.h"
 #include "scene/loaders.h"
@@ -22,6 +23,12 @@ std::string unreadable_input(const std::string& path) {
 void require_readable_input(const std::string& path, const std::string& what) {
   if (const std::string why = unreadable_input(path); !why.empty())
     throw SceneError(path, 0, what.empty() ? why : what + " " + why);
+}
+
+std::string read_all(std::istream& in) {
+  std::ostringstream out;
+  if (in.peek() != std::char_traits<char>::eof()) out << in.rdbuf();
+  return out.str();
 }
 
 }  // namespace detail
@@ -104,14 +111,35 @@ Camera make_camera(const CameraDesc& desc, int image_width, int image_height) {
   return c;
 }
 
+namespace {
+
+// The loaders grow the geometry and texel arrays geometrically (append_mesh,
+// TextureStore::append): the spare capacity goes once the scene is complete.
+void trim(Scene& s) {
+  s.positions.shrink_to_fit();
+  s.triangles.shrink_to_fit();
+  s.normals.shrink_to_fit();
+  s.uvs.shrink_to_fit();
+  s.tangents.shrink_to_fit();
+  s.colors.shrink_to_fit();
+  s.tri_material.shrink_to_fit();
+  s.texels.shrink_to_fit();
+}
+
+}  // namespace
+
 Scene load_scene(const std::string& path, const std::vector<std::pair<std::string, std::string>>& params) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (!std::filesystem::exists(path)) throw SceneError(path, 0, "no such file");
   if (std::filesystem::is_directory(path)) throw SceneError(path, 0, "is a folder, not a scene file");
   detail::require_readable_input(path, "");
-  if (ext == ".xml") return detail::load_mitsuba(path, params);
   Scene scene;
+  if (ext == ".xml") {
+    scene = detail::load_mitsuba(path, params);
+    trim(scene);
+    return scene;
+  }
   if (ext == ".obj") scene = detail::load_obj_scene(path);
   else if (ext == ".ply") scene = detail::load_ply_scene(path);
   else if (ext == ".gltf" || ext == ".glb") scene = detail::load_gltf_scene(path);
@@ -119,6 +147,7 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for " + ext + " files");
   // A bare mesh file without any emitter is lit by the default sky.
   if (!detail::has_emitters(scene)) scene.lights.push_back(default_sky());
+  trim(scene);
   return scene;
 }
 

@@ -84,7 +84,7 @@ SerializedMesh read_serialized(const std::string& path, int shape_index) {
   require_readable_input(path, "serialized mesh file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path, 0, "cannot open serialized mesh file");
-  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string data = read_all(in);
   auto bytes = [&](size_t at) { return reinterpret_cast<const unsigned char*>(data.data() + at); };
   if (data.size() < 4 || read_le<uint16_t>(bytes(0)) != kMagic)
     throw SceneError(path, 0, "not a Mitsuba serialized mesh file (no 0x041C header)");

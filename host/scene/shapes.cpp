@@ -284,7 +284,8 @@ void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, u
       scene.colors.push_back(ok ? glm::clamp(c, 0.0f, 1.0f) : none);
     }
   }
-  scene.positions.reserve(scene.positions.size() + mesh.positions.size());
+  // The arrays grow geometrically (reserving each mesh's exact size copied every
+  // earlier mesh's vertices again); load_scene trims them once.
   for (const glm::vec3& p : mesh.positions) {
     glm::vec4 w = to_world * glm::vec4(p, 1.0f);
     glm::vec3 q = glm::vec3(w) / w.w;
@@ -292,7 +293,6 @@ void append_mesh(Scene& scene, const TriMesh& mesh, const glm::mat4& to_world, u
       throw SceneError(file, line, "transformed vertex position is not finite (check to_world)");
     scene.positions.push_back(q);
   }
-  scene.triangles.reserve(scene.triangles.size() + mesh.triangles.size());
   for (const glm::uvec3& t : mesh.triangles) {
     glm::uvec3 tri = t + glm::uvec3(base);
     scene.triangles.push_back(flip ? glm::uvec3(tri.x, tri.z, tri.y) : tri);

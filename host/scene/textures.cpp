@@ -6,6 +6,9 @@
 #include <Imath/half.h>
 #include <ImfArray.h>
 #include <ImfRgbaFile.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cctype>
@@ -115,7 +118,7 @@ Pixels load_stb(const std::string& path, bool raw) {
   if (const std::string why = unreadable_input(path); !why.empty()) throw std::runtime_error("the image file " + why);
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot decode image: can't fopen");
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = read_all(in);
   if (bytes.size() > size_t(std::numeric_limits<int>::max())) throw std::runtime_error("the image file is too large");
   const auto* b = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int len = int(bytes.size());
@@ -221,6 +224,30 @@ float stored_x(const Scene& scene, const TextureInfo& t, size_t i) {
   return float(h);
 }
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define PSF_F16C 1
+// Eight at a time with the F16C instructions (rounding to nearest even, as
+// Imath::half does: the same bits for every float that to_halfs takes).
+__attribute__((target("avx,f16c"))) void to_halfs_f16c(const float* in, uint16_t* out, size_t n) {
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i),
+                     _mm256_cvtps_ph(_mm256_loadu_ps(in + i), _MM_FROUND_TO_NEAREST_INT));
+  for (; i < n; ++i) out[i] = Imath::half(in[i]).bits();
+}
+#endif
+
+// Finite floats of at most 65504 in magnitude as the bits of halfs: Imath's
+// conversion, one at a time (about a tenth of loading a scene of large
+// textures), or F16C's where the CPU has it.
+void to_halfs(const float* in, uint16_t* out, size_t n) {
+#ifdef PSF_F16C
+  static const bool f16c = __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
+  if (f16c) return to_halfs_f16c(in, out, n);
+#endif
+  for (size_t i = 0; i < n; ++i) out[i] = Imath::half(in[i]).bits();
+}
+
 }  // namespace
 
 uint32_t TextureStore::append(const TextureDesc& d, int width, int height, const std::vector<float>& rgba) {
@@ -242,26 +269,43 @@ uint32_t TextureStore::append(const TextureDesc& d, int width, int height, const
   t.width = uint32_t(width);
   t.height = uint32_t(height);
   t.flags = (d.bilinear ? PSF_TEX_BILINEAR : 0u) | d.wrap;
-  scene_.texels.reserve(scene_.texels.size() + n * 4);
+  // Room for the texels: at least double the capacity, so that a scene of many
+  // textures copies its texels a bounded number of times (growing to the exact
+  // size copied every earlier texture's texels at each one: seconds for
+  // Bitterli's staircase); load_scene trims the spare capacity once.
+  const size_t base = scene_.texels.size();
+  if (scene_.texels.capacity() < base + n * 4)
+    scene_.texels.reserve(std::max(base + n * 4, scene_.texels.capacity() * 2));
+  scene_.texels.resize(base + n * 4);
+  uint16_t* out = scene_.texels.data() + base;
   glm::dvec3 sum(0.0);
   // Texels are halfs: a NaN or infinite value reads as 0 and one beyond the
   // largest half (65504) as that, with a warning each, where the half would
   // have been NaN or infinite and every path reading it lost.
   size_t nonfinite = 0, clamped = 0;
-  for (size_t i = 0; i < n; ++i) {
-    float v[4];
-    for (int c = 0; c < 4; ++c) {
-      v[c] = rgba[i * 4 + c];
-      if (!std::isfinite(v[c])) {
-        v[c] = 0.0f;
+  constexpr size_t kChunk = 1024;  // texels made representable, then converted together
+  float v[kChunk * 4];
+  for (size_t first = 0; first < n; first += kChunk) {
+    const size_t count = std::min(kChunk, n - first);
+    for (size_t k = 0; k < count * 4; ++k) {
+      float x = rgba[first * 4 + k];
+      if (!std::isfinite(x)) {
+        x = 0.0f;
         ++nonfinite;
-      } else if (std::fabs(v[c]) > 65504.0f) {
-        v[c] = std::copysign(65504.0f, v[c]);
+      } else if (std::fabs(x) > 65504.0f) {
+        x = std::copysign(65504.0f, x);
         ++clamped;
       }
-      scene_.texels.push_back(Imath::half(v[c]).bits());
+      v[k] = x;
     }
-    sum += glm::dvec3(v[0], v[1], v[2]);
+    double r = 0.0, g = 0.0, b = 0.0;  // in registers (a dvec3 sum went through memory every texel)
+    for (size_t k = 0; k < count; ++k) {
+      r += v[k * 4];
+      g += v[k * 4 + 1];
+      b += v[k * 4 + 2];
+    }
+    sum += glm::dvec3(r, g, b);
+    to_halfs(v, out + first * 4, count * 4);
   }
   const std::string name = d.path.empty() ? "a texture" : d.path;
   if (nonfinite)
