@@ -168,13 +168,15 @@ int run_render(const RenderArgs& a) {
   std::string out = a.output.empty() ? "out/" + fs::path(a.scene).stem().string() + ".exr" : a.output;
   std::string png = fs::path(out).replace_extension(".png").string();
   // The output is OpenEXR whatever its name: one named .png (whose preview
-  // would overwrite it) or .jpg would be an OpenEXR file under another format's
-  // name. A name without an extension (/dev/null) is taken as it is.
+  // would overwrite it) or .jpg would be an OpenEXR file under another image
+  // format's name. Other names (/dev/null, mktemp's tmp.XXXXXXXXXX) are taken as they are.
   std::string ext = fs::path(out).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (!ext.empty() && ext != ".exr") {
-    std::cerr << "psf: --output " << out << ": the output is the OpenEXR image, and its PNG preview goes beside it "
-              << "with the extension .png; name it .exr\n";
+  const std::vector<std::string> other_formats = {".png", ".jpg", ".jpeg", ".hdr", ".pfm", ".ppm", ".pgm", ".tga",
+                                                  ".bmp", ".tif", ".tiff", ".webp", ".gif", ".rgbe", ".dds"};
+  if (std::find(other_formats.begin(), other_formats.end(), ext) != other_formats.end()) {
+    std::cerr << "psf: --output " << out << ": the output is the OpenEXR image"
+              << (a.no_png ? "" : ", and its PNG preview goes beside it with the extension .png") << "; name it .exr\n";
     return kExitBadInput;
   }
   if (a.output.empty()) fs::create_directories("out");
@@ -361,7 +363,8 @@ int main(int argc, char** argv) {
   CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML, OBJ, PLY or glTF) to OpenEXR and PNG");
   render->add_option("scene", ra.scene, "Scene file (.xml, .obj, .ply, .gltf, .glb); mesh files without emitters get a default sky")->required();
   render->add_option("-o,--output", ra.output,
-                     "Output OpenEXR file, .exr or no extension (default out/<scene>.exr); a PNG is written beside it");
+                     "Output OpenEXR file, not named as another image format (default out/<scene>.exr); a PNG is "
+                     "written beside it");
   render->add_option("--spp", ra.spp, "Samples per pixel (default: the scene's, else 16)")->check(CLI::PositiveNumber);
   render->add_option("--width", ra.width, "Image width (default: the scene's film)")->check(CLI::Range(1, 65536));
   render->add_option("--height", ra.height, "Image height (default: the scene's film)")->check(CLI::Range(1, 65536));

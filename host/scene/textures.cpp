@@ -7,6 +7,7 @@
 #include <ImfArray.h>
 #include <ImfRgbaFile.h>
 #if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
@@ -242,7 +243,12 @@ __attribute__((target("avx,f16c"))) void to_halfs_f16c(const float* in, uint16_t
 // textures), or F16C's where the CPU has it.
 void to_halfs(const float* in, uint16_t* out, size_t n) {
 #ifdef PSF_F16C
-  static const bool f16c = __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
+  // F16C from CPUID (clang before 18 does not know __builtin_cpu_supports("f16c")),
+  // AVX (whose registers it uses) from the builtin, which also asks the OS.
+  static const bool f16c = [] {
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    return __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C) != 0 && __builtin_cpu_supports("avx");
+  }();
   if (f16c) return to_halfs_f16c(in, out, n);
 #endif
   for (size_t i = 0; i < n; ++i) out[i] = Imath::half(in[i]).bits();
