@@ -9,9 +9,11 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <future>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 namespace psf {
 namespace {
@@ -58,11 +60,15 @@ class BinaryBuilder {
   }
 
   // Builds over the given triangle ids; returns the root (binary node 0).
-  void build(std::vector<uint32_t> ids) {
+  // `threads` > 1: the subtrees of the top splits are built on threads of their
+  // own (the same tree whatever the count; only the nodes' numbering differs).
+  void build(std::vector<uint32_t> ids, unsigned threads) {
     index_ = std::move(ids);
     nodes_.reserve(2 * index_.size());
     nodes_.emplace_back();
-    build_node(0, 0, static_cast<uint32_t>(index_.size()), 1);
+    int parallel_levels = 0;
+    while ((2u << parallel_levels) <= threads && parallel_levels < 4) ++parallel_levels;
+    build_node(nodes_, 0, 0, static_cast<uint32_t>(index_.size()), 1, parallel_levels);
   }
 
   const std::vector<BinaryNode>& nodes() const { return nodes_; }
@@ -127,26 +133,30 @@ class BinaryBuilder {
     return best;
   }
 
-  void make_leaf(uint32_t node, uint32_t first, uint32_t count) {
-    nodes_[node].first = first;
-    nodes_[node].count = count;
+  static void make_leaf(std::vector<BinaryNode>& nodes, uint32_t node, uint32_t first, uint32_t count) {
+    nodes[node].first = first;
+    nodes[node].count = count;
   }
 
-  void build_node(uint32_t node, uint32_t first, uint32_t count, int depth) {
+  // Node `node` of `nodes` over index_[first, first + count). parallel_levels > 0:
+  // the left subtree goes to another thread, into a vector of its own that is
+  // then appended to `nodes` (the two threads partition disjoint ranges of index_).
+  void build_node(std::vector<BinaryNode>& nodes, uint32_t node, uint32_t first, uint32_t count, int depth,
+                  int parallel_levels) {
     Box box, cbox;
     for (uint32_t i = first; i < first + count; ++i) {
       box.grow(boxes_[index_[i]]);
       cbox.grow(centroids_[index_[i]]);
     }
-    nodes_[node].box = box;
-    if (count <= 1) return make_leaf(node, first, count);
+    nodes[node].box = box;
+    if (count <= 1) return make_leaf(nodes, node, first, count);
 
     // Balanced splits from here on must still end within PSF_BVH_MAX_DEPTH levels.
     int levels_needed = static_cast<int>(std::ceil(std::log2(double(count)))) + 1;
     bool force_median = depth + levels_needed >= PSF_BVH_MAX_DEPTH;
 
     uint32_t mid = first;
-    if (force_median && count <= params_.max_leaf) return make_leaf(node, first, count);
+    if (force_median && count <= params_.max_leaf) return make_leaf(nodes, node, first, count);
     if (!force_median) {
       Split s = find_split(first, count, cbox);
       float area = box.half_area();
@@ -154,7 +164,7 @@ class BinaryBuilder {
       float split_cost = params_.traversal_cost +
                          (area > 0.0f ? params_.intersection_cost * s.cost / area : 0.0f);
       if (count <= params_.max_leaf && (s.axis < 0 || leaf_cost <= split_cost))
-        return make_leaf(node, first, count);
+        return make_leaf(nodes, node, first, count);
       if (s.axis >= 0) {
         const int bins = std::max(2, params_.bins);
         float lo = cbox.lo[s.axis], scale = bins / (cbox.hi[s.axis] - cbox.lo[s.axis]);
@@ -173,14 +183,40 @@ class BinaryBuilder {
       std::nth_element(index_.begin() + first, index_.begin() + mid, index_.begin() + first + count,
                        [&](uint32_t a, uint32_t b) { return centroids_[a][axis] < centroids_[b][axis]; });
     }
-    uint32_t left = static_cast<uint32_t>(nodes_.size());
-    nodes_.emplace_back();
-    nodes_.emplace_back();
-    nodes_[node].left = left;
-    nodes_[node].right = left + 1;
-    build_node(left, first, mid - first, depth + 1);
-    build_node(left + 1, mid, first + count - mid, depth + 1);
+    uint32_t left = static_cast<uint32_t>(nodes.size());
+    nodes.emplace_back();
+    nodes.emplace_back();
+    nodes[node].left = left;
+    nodes[node].right = left + 1;
+    const uint32_t left_count = mid - first, right_count = first + count - mid;
+    if (parallel_levels <= 0 || std::min(left_count, right_count) < kParallelMin) {
+      build_node(nodes, left, first, left_count, depth + 1, 0);
+      build_node(nodes, left + 1, mid, right_count, depth + 1, 0);
+      return;
+    }
+    std::vector<BinaryNode> sub;
+    sub.reserve(2 * size_t(left_count));
+    sub.emplace_back();
+    std::future<void> done = std::async(std::launch::async, [&] {
+      build_node(sub, 0, first, left_count, depth + 1, parallel_levels - 1);
+    });
+    build_node(nodes, left + 1, mid, right_count, depth + 1, parallel_levels - 1);
+    done.get();  // rethrows what the thread threw
+    // sub[0] becomes nodes[left], sub[k] (k >= 1) nodes[base + k - 1]; an inner
+    // node's children are never node 0, so left == 0 marks a leaf.
+    const uint32_t base = static_cast<uint32_t>(nodes.size());
+    auto place = [&](uint32_t k) { return k == 0 ? left : base + k - 1; };
+    for (BinaryNode& n : sub)
+      if (n.left != 0) {
+        n.left = place(n.left);
+        n.right = place(n.right);
+      }
+    nodes[left] = sub[0];
+    nodes.insert(nodes.end(), sub.begin() + 1, sub.end());
   }
+
+  // Subtrees smaller than this are built on the thread that split them.
+  static constexpr uint32_t kParallelMin = 4096;
 
   const std::vector<Box>& boxes_;
   const BvhParams& params_;
@@ -333,7 +369,8 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
     bvh.depth = 1;
   } else {
     BinaryBuilder builder(boxes, params);
-    builder.build(std::move(ids));
+    builder.build(std::move(ids), params.threads > 0 ? unsigned(params.threads)
+                                                     : std::max(1u, std::thread::hardware_concurrency()));
     const std::vector<uint32_t>& order = builder.index();
     // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, then its spheres in
     // packs of their own, appended in leaf order.

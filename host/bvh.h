@@ -18,6 +18,7 @@ struct BvhParams {
   float traversal_cost = 1.0f;            // SAH cost of a binary split, in pack tests
   float intersection_cost = 1.0f;         // SAH cost of testing one BvhTriPack
   unsigned max_leaf = PSF_LEAF_MAX_TRIS;  // a node with more triangles is always split
+  int threads = 0;                        // build threads (0: the machine's); the BVH is the same for any
 };
 
 // An analytic sphere for the BVH: its prim index is the number of triangles

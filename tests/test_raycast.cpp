@@ -648,6 +648,26 @@ TEST_CASE("Raycast: BVH structure references every triangle once inside its boxe
   CHECK(leaves >= bvh.triangle_count / PSF_LEAF_MAX_TRIS);
 }
 
+TEST_CASE("Raycast: the BVH is the same whatever the number of build threads", "[raycast]") {
+  // Subtrees of at least 4096 triangles on both sides of a top split are built
+  // on threads of their own and their nodes spliced in: the wide nodes and packs
+  // must come out byte for byte as from one thread (images never depend on cores).
+  Mesh m = random_soup(91, 40000, 0.02f);
+  for (int k = 0; k < 6000; ++k)  // a cluster of equal centroids: median splits below a parallel level
+    m.add_triangle({0.7f, 0.7f, 0.7f}, {0.71f, 0.7f, 0.7f}, {0.7f, 0.71f, 0.7f});
+  psf::BvhParams one, many;
+  one.threads = 1;
+  many.threads = 8;
+  const psf::Bvh a = psf::build_bvh(m.positions, m.triangles, {}, one);
+  const psf::Bvh b = psf::build_bvh(m.positions, m.triangles, {}, many);
+  REQUIRE(a.nodes.size() > 500);
+  REQUIRE(a.nodes.size() == b.nodes.size());
+  REQUIRE(a.packs.size() == b.packs.size());
+  CHECK(a.depth == b.depth);
+  CHECK(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0);
+  CHECK(std::memcmp(a.packs.data(), b.packs.data(), a.packs.size() * sizeof(BvhTriPack)) == 0);
+}
+
 TEST_CASE("Raycast: one leaf's worth of triangles gives a root with one leaf", "[raycast]") {
   Mesh m;
   for (int k = 0; k < 3; ++k) m.add_triangle({0, 0, float(k)}, {1, 0, float(k)}, {0, 1, float(k)});
