@@ -311,7 +311,8 @@ uint64_t Accumulator::nonfinite() const {
 
 struct Renderer::Batch {
   RenderOptions o;       // the options prepare() was given
-  uint32_t size = 0;     // paths per batch
+  uint32_t size = 0;      // paths per batch
+  uint32_t capacity = 0;  // paths the buffers hold: size, or fewer where the render traces fewer
   cl::Buffer states, vertices, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
   cl::Buffer rays[2], queue[2];  // the live paths' rays and path indices, this bounce and the next
   cl::Buffer env_samples;        // environment light samples drawn ahead of shade (PSF_ENV_RECORD float4 per path)
@@ -369,16 +370,20 @@ uint64_t Renderer::fixed_bytes() const {
   return uint64_t(s.triangles.size()) * 256 + uint64_t(s.texels.size()) * 2 + (64u << 20);
 }
 
-void Renderer::prepare(const RenderOptions& o, int batch_log2) {
+void Renderer::prepare(const RenderOptions& o, int batch_log2, uint64_t paths) {
   Runtime& rt = impl_->rt;
+  // Buffers for at most the paths the render traces: an 8x8 preview does not
+  // allocate (and zero) those of 2^20 paths. The batch size stays 2^batch_log2.
+  const uint32_t size = uint32_t(1) << batch_log2;
+  const uint32_t capacity = paths > 0 && paths < size ? uint32_t(paths) : size;
   // A later render of the same batch size keeps the buffers: a new buffer on a
   // CPU device is new memory, whose first touch by the kernels faults in and
   // zeroes every page (about 400 MB at 2^20 paths, a tenth of a 4-batch render
   // of Mitsuba's cbox in `perf`). The kernels write every buffer before reading
   // it within a batch, so nothing carries over from the last render.
-  if (batch_ && batch_->size == (uint32_t(1) << batch_log2)) {
+  if (batch_ && batch_->size == size && batch_->capacity >= capacity) {
     batch_->o = o;
-    if (o.filter.enabled && !batch_->filter) batch_->filter = std::make_unique<PathSpaceFilter>(rt, batch_->size);
+    if (o.filter.enabled && !batch_->filter) batch_->filter = std::make_unique<PathSpaceFilter>(rt, batch_->capacity);
     batch_->footprint = footprint(o);
     return;
   }
@@ -386,8 +391,9 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   if (batch_) b->spare = std::move(batch_->spare);  // download vectors already paged in, for the next render
   batch_.reset();
   b->o = o;
-  b->size = uint32_t(1) << batch_log2;
-  const size_t n = b->size;
+  b->size = size;
+  b->capacity = capacity;
+  const size_t n = capacity;
   b->states = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathState));
   b->vertices = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(PathVertex));
   for (int q = 0; q < 2; ++q) {
@@ -406,7 +412,7 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2) {
   b->contrib = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->contrib_unfiltered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
-  if (o.filter.enabled) b->filter = std::make_unique<PathSpaceFilter>(rt, b->size);
+  if (o.filter.enabled) b->filter = std::make_unique<PathSpaceFilter>(rt, b->capacity);
   b->footprint = footprint(o);
   rt.finish();  // surfaces allocation failures here
   batch_ = std::move(b);
@@ -446,6 +452,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.first_path_lo = uint32_t(first);
   p.first_path_hi = uint32_t(first >> 32);
   p.batch_size = uint32_t(std::min<uint64_t>(b.size, total - first));
+  if (p.batch_size > b.capacity)  // prepare() was told the render traces fewer paths
+    throw std::logic_error("batch of " + std::to_string(p.batch_size) + " paths in buffers for " +
+                           std::to_string(b.capacity));
   p.num_emitters = s.num_emitters;
   p.rr_depth = uint32_t(std::max(o.rr_depth, 1));
   p.dim_bounce0 = s.camera.aperture > 0.0f ? PSF_DIM_BOUNCE0_LENS : PSF_DIM_BOUNCE0;
@@ -578,7 +587,7 @@ void Renderer::recycle(BatchImages&& done) {
   if (!batch_) return;
   std::lock_guard<std::mutex> lock(batch_->spare_mu);
   for (auto* v : {&done.filtered, &done.unfiltered})
-    if (v->capacity() >= batch_->size && batch_->spare.size() < 8) batch_->spare.push_back(std::move(*v));
+    if (v->capacity() >= batch_->capacity && batch_->spare.size() < 8) batch_->spare.push_back(std::move(*v));
 }
 
 RenderResult Renderer::render(const RenderOptions& o) {
@@ -589,7 +598,7 @@ RenderResult Renderer::render(const RenderOptions& o) {
   bool filtering = o.filter.enabled;
   BatchPlan plan = plan_batch(batch_needs(filtering, o.aovs, o.filter.iterations), fixed_bytes(), rt.device().global_mem,
                               rt.device().max_alloc, 0, o.batch_log2, std::min(o.batch_log2, 6));
-  prepare(o, plan.log2);
+  prepare(o, plan.log2, total);
   RenderResult r;
   Accumulator acc;
   acc.reset(scene.width, scene.height, o.aovs);

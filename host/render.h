@@ -123,8 +123,10 @@ class Renderer {
   RenderResult render(const RenderOptions& options);
 
   // Allocates the buffers for batches of 2^batch_log2 paths (throws ClError, e.g.
-  // CL_MEM_OBJECT_ALLOCATION_FAILURE, when the device cannot hold them).
-  void prepare(const RenderOptions& options, int batch_log2);
+  // CL_MEM_OBJECT_ALLOCATION_FAILURE, when the device cannot hold them); `paths`
+  // > 0: the render traces no more than that many, and the buffers hold no more
+  // (the batches are still of 2^batch_log2 paths).
+  void prepare(const RenderOptions& options, int batch_log2, uint64_t paths = 0);
   // Device bytes per path of a batch, and bytes independent of the batch (scene, image).
   static std::vector<BufferNeed> batch_needs(bool filtering, bool aovs, int iterations = 1);
   uint64_t fixed_bytes() const;

@@ -305,7 +305,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   }
   for (;;) {
     try {
-      for (auto& r : renderers) r->prepare(ro, plan.log2);
+      for (auto& r : renderers) r->prepare(ro, plan.log2, time_only ? 0 : total);
       break;
     } catch (const ClError& e) {
       bool memory = e.code() == CL_MEM_OBJECT_ALLOCATION_FAILURE || e.code() == CL_OUT_OF_RESOURCES ||
@@ -322,7 +322,10 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
               << (scene.spheres.empty() ? std::string() : std::to_string(scene.spheres.size()) + " spheres, ")
               << scene.width << "x" << scene.height << ", "
               << (time_only ? std::string("until --time") : std::to_string(spp) + " spp") << "; batches of 2^"
-              << plan.log2 << " = " << batch << " paths, " << format_bytes(plan.bytes) << " of batch buffers\n";
+              << plan.log2 << " = " << batch << " paths, "
+              << (!time_only && total < batch ? "buffers for the " + std::to_string(total) + " it traces"
+                                              : format_bytes(plan.bytes) + " of batch buffers")
+              << "\n";
 
   // Batches are handed to the devices round-robin and added in index order.
   const uint64_t batches = (total + batch - 1) / batch;

@@ -147,6 +147,21 @@ TEST_CASE("Render: the image is a function of the seed alone, not of the batch s
   CHECK(fresh.render(o).image.rgb == f2.image.rgb);
   o.filter.enabled = false;
   CHECK(fresh.render(o).image.rgb == a.image.rgb);
+  // A render of fewer paths than a batch gets buffers for those alone; a later,
+  // longer render on the same renderer needs larger ones: the same images as a
+  // renderer that never rendered the short one, filtered and not.
+  o.batch_log2 = 12;  // 4096 paths: both renders are one batch
+  o.filter.enabled = true;
+  o.spp = 1;  // 169 paths
+  psf::Renderer reused(rt, s);
+  REQUIRE(reused.render(o).paths == 169);
+  o.spp = 20;  // 3380 paths
+  const psf::RenderResult longer = reused.render(o);
+  psf::Renderer once(rt, s);
+  const psf::RenderResult direct = once.render(o);
+  CHECK(longer.batch_size == 4096);
+  CHECK(longer.image.rgb == direct.image.rgb);
+  CHECK(longer.unfiltered.rgb == direct.unfiltered.rgb);
 }
 
 TEST_CASE("Render: the accumulator's threads add each pixel's paths in path order", "[render]") {
