@@ -137,16 +137,15 @@ Scene load_scene(const std::string& path, const std::vector<std::pair<std::strin
   Scene scene;
   if (ext == ".xml") {
     scene = detail::load_mitsuba(path, params);
-    trim(scene);
-    return scene;
+  } else {
+    if (ext == ".obj") scene = detail::load_obj_scene(path);
+    else if (ext == ".ply") scene = detail::load_ply_scene(path);
+    else if (ext == ".gltf" || ext == ".glb") scene = detail::load_gltf_scene(path);
+    else throw SceneError(path, 0, "unknown scene format '" + ext + "' (expected .xml, .obj, .ply, .gltf or .glb)");
+    if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for " + ext + " files");
+    // A bare mesh file without any emitter is lit by the default sky.
+    if (!detail::has_emitters(scene)) scene.lights.push_back(default_sky());
   }
-  if (ext == ".obj") scene = detail::load_obj_scene(path);
-  else if (ext == ".ply") scene = detail::load_ply_scene(path);
-  else if (ext == ".gltf" || ext == ".glb") scene = detail::load_gltf_scene(path);
-  else throw SceneError(path, 0, "unknown scene format '" + ext + "' (expected .xml, .obj, .ply, .gltf or .glb)");
-  if (!params.empty()) scene.warnings.push_back(path + ": scene parameters are ignored for " + ext + " files");
-  // A bare mesh file without any emitter is lit by the default sky.
-  if (!detail::has_emitters(scene)) scene.lights.push_back(default_sky());
   trim(scene);
   return scene;
 }
