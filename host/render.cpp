@@ -313,7 +313,7 @@ struct Renderer::Batch {
   RenderOptions o;       // the options prepare() was given
   uint32_t size = 0;      // paths per batch
   uint32_t capacity = 0;  // paths the buffers hold: size, or fewer where the render traces fewer
-  cl::Buffer states, vertices, hits, shadow_rays, shadow_hits, values, filtered, counts, ones;
+  cl::Buffer states, vertices, hits, shadow_rays, shadow_hits, values, filtered, counts;
   cl::Buffer rays[2], queue[2];  // the live paths' rays and path indices, this bounce and the next
   cl::Buffer env_samples;        // environment light samples drawn ahead of shade (PSF_ENV_RECORD float4 per path)
   cl::Buffer contrib, contrib_unfiltered, alive;
@@ -350,7 +350,7 @@ std::vector<BufferNeed> Renderer::batch_needs(bool filtering, bool aovs, int ite
       {"rays (two queues)", 2 * sizeof(Ray)}, {"hits", sizeof(Hit)},
       {"path queues", 2 * sizeof(uint32_t)},      {"environment samples", PSF_ENV_RECORD * sizeof(cl_float4)},
       {"shadow rays", sizeof(Ray)},       {"shadow hits", sizeof(Hit)},
-      {"values c", sizeof(cl_float4)},    {"counts", 2 * sizeof(uint32_t)},
+      {"values c", sizeof(cl_float4)},    {"counts", sizeof(uint32_t)},
       {"contributions", 2 * sizeof(cl_float4)},
   };
   if (filtering) {
@@ -408,7 +408,6 @@ void Renderer::prepare(const RenderOptions& o, int batch_log2, uint64_t paths) {
   b->values = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->filtered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->counts = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(uint32_t));
-  b->ones = rt.upload(std::vector<uint32_t>(n, 1u));
   b->contrib = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->contrib_unfiltered = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_float4));
   b->alive = rt.buffer(CL_MEM_READ_WRITE, sizeof(uint32_t));
@@ -534,13 +533,13 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     }
   }
 
-  // The tuple store, then path space filtering of the batch's c_i, then each
-  // path's contribution, filtered and not, for the host to add in path order.
+  // Path space filtering of the batch's c_i, then each path's contribution,
+  // unfiltered and (where filtered) filtered, for the host to add in path order.
   BatchImages out;
   out.index = index;
   out.first = first;
-  rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
-  rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.values, b.ones, b.contrib_unfiltered);
+  // The tuple store for the filter (and a test's look at the last batch).
+  if (filtering || o.keep_last_batch) rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
   const float visibility_ray = this->visibility_ray(o.filter.visibility_ray);
   if (filtering && visibility_ray > 0.0f) {
     // Each vertex's visibility from one hemisphere ray instead of its light
@@ -570,8 +569,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     fp.stretch = o.filter.foreshortening && !(o.filter.r0 > 0.0f) ? 1u : 0u;
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
-    rt.launch("accumulate", p.batch_size, L, p.batch_size, states, vertices, b.filtered, b.counts, b.contrib);
   }
+  rt.launch("accumulate", p.batch_size, L, p.batch_size, cl_uint(filtering ? 1 : 0), states, vertices, b.filtered,
+            b.counts, b.contrib_unfiltered, b.contrib);
   rt.finish();
   const auto t1 = std::chrono::steady_clock::now();
   out.trace_seconds = std::chrono::duration<double>(t1 - t0).count();
