@@ -41,6 +41,9 @@
  * (env_row_slot, env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
+#ifndef PSF_SHADE_PREFETCH
+#define PSF_SHADE_PREFETCH 1
+#endif
 
 inline float max3(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
 
@@ -139,12 +142,24 @@ inline void env_texel_slot(uint k, Environment env, __global const float* env_da
   env_samples[PSF_ENV_RECORD * k + 1u] = (float4)(radiance, 1.0f);
 }
 
+/* The state of the path in slot k + PSF_PREFETCH_AHEAD (its two cache lines; the
+ * paths' states are read in queue order, at random after the first bounce). */
+inline void prefetch_state_ahead(__global const PathState* states, __global const uint* queue_in, uint k,
+                                 uint count) {
+  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
+    __global const PathState* ahead = states + queue_in[k + PSF_PREFETCH_AHEAD];
+    psf_prefetch(ahead);
+    psf_prefetch((__global const float4*)ahead + 5);
+  }
+}
+
 __kernel void shade_env_samples(FrameParams params, __global const uint* sobol, __global const Emitter* emitters,
                                 __global const float* emitter_cdf, Environment env, __global const float* env_data,
                                 uint count, __global const uint* queue_in, __global const PathState* states,
                                 __global float4* env_samples) {
   uint k = get_global_id(0);
   if (k >= count) return;
+  prefetch_state_ahead(states, queue_in, k, count);
   env_row_slot(k, queue_in[k], params, sobol, emitters, emitter_cdf, env, env_data, states, env_samples);
 }
 
@@ -556,6 +571,21 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   __local uint group_count, group_base;
   uint k = get_global_id(0), l = get_local_id(0);
   uint j = k < count ? queue_in[k] : 0u;
+  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
+    /* The hit triangle's positions, attributes and material index of the slot
+     * PSF_PREFETCH_AHEAD on, and below its path's state: random reads into arrays
+     * of the whole scene, which shade_path otherwise waits on in turn (PoCL,
+     * living room: the positions' load alone was a seventh of its samples). */
+    const uint prim = hits[k + PSF_PREFETCH_AHEAD].prim;
+    if (prim != PSF_NO_HIT) {
+      psf_prefetch(tri_pos + 3u * prim);
+      psf_prefetch(tri_pos + 3u * prim + 2u);
+      psf_prefetch(tri_attribs + prim);
+      psf_prefetch((__global const float4*)(tri_attribs + prim) + 5);
+      psf_prefetch(tri_material + prim);
+    }
+  }
+  prefetch_state_ahead(states, queue_in, k, count);
   Ray next;
   bool go = k < count && shade_path(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
                                     tri_light_pdf, env, env_data, hits, rays_in, states, vertices, shadow_rays,
@@ -592,6 +622,7 @@ __kernel void shade_shadows(uint count, __global const uint* queue_in, __global 
                             __global PathState* states, __global PathVertex* vertices, uint media) {
   uint k = get_global_id(0);
   if (k >= count) return;
+  prefetch_state_ahead(states, queue_in, k, count);
   shadow_slot(k, queue_in[k], shadow_hits, states, vertices, media);
 }
 
