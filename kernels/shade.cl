@@ -585,6 +585,24 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
       psf_prefetch(tri_material + prim);
     }
   }
+  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD / 2u < count) {
+    /* Half as far on, where the triangle's attributes and material index have
+     * arrived: the two rows of texels its colour texture's bilinear lookup reads
+     * (texture.cl texture_eval), at random in a large texture. */
+    const Hit h = hits[k + PSF_PREFETCH_AHEAD / 2u];
+    if (h.prim < params.first_sphere) { /* PSF_NO_HIT is above every prim */
+      const uint tex = materials[tri_material[h.prim]].tex_color;
+      if (tex != PSF_NO_TEXTURE) {
+        const TextureInfo t = textures[tex];
+        const float2 st = texture_uv(t, surface_uv(tri_attribs + h.prim, h.u, h.v));
+        const int x = texture_wrap((int)floor(st.x * (float)t.width - 0.5f), (int)t.width, t.flags);
+        const int y = (int)floor(st.y * (float)t.height - 0.5f);
+        const int y0 = texture_wrap(y, (int)t.height, t.flags), y1 = texture_wrap(y + 1, (int)t.height, t.flags);
+        psf_prefetch(texels + 4u * (t.offset + (uint)y0 * t.width + (uint)x));
+        psf_prefetch(texels + 4u * (t.offset + (uint)y1 * t.width + (uint)x));
+      }
+    }
+  }
   prefetch_state_ahead(states, queue_in, k, count);
   Ray next;
   bool go = k < count && shade_path(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,
