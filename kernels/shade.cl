@@ -193,9 +193,13 @@ __kernel void shade_env_texels(Environment env, __global const float* env_data, 
   uint k = get_global_id(0);
   if (k >= count) return;
   if (PSF_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
+    /* Two texels of 12 bytes in each of two rows: their 24 bytes cross a cache
+     * line's end three times in eight. */
     __global const float* texel = env_data + env_ahead(env_samples, k + PSF_PREFETCH_AHEAD)[1];
     psf_prefetch(texel);
+    psf_prefetch(texel + 5);
     psf_prefetch(texel + 3u * env.width); /* the next row */
+    psf_prefetch(texel + 3u * env.width + 5u);
   }
   env_texel_slot(k, env, env_data, env_samples);
 }
