@@ -7,8 +7,8 @@
  * on. Kernels that read at random, one line per work-item, wait on memory in
  * each work-item in turn where PoCL runs them as a loop; a prefetch issued
  * PSF_PREFETCH_AHEAD work-items earlier overlaps those waits (the environment's
- * sampling kernels in shade.cl, gather_tuples and scatter_values in tuples.cl; the
- * latter's writes with psf_prefetch_write). PSF_PREFETCH (set
+ * sampling kernels, shade and shade_shadows in shade.cl, gather_tuples and
+ * scatter_values in tuples.cl; the latter's writes with psf_prefetch_write). PSF_PREFETCH (set
  * by the host for CPU devices): Clang's __builtin_prefetch, since OpenCL's
  * prefetch() is empty on PoCL; elsewhere nothing. */
 #ifndef PSF_PREFETCH

@@ -25,9 +25,11 @@
  * on memory: the row's block guide and block cdf, a block's texel cdf, then
  * texels, all at random. In short kernels of their own each is prefetched for
  * the path 16 slots on (on CPUs; program.cl psf_prefetch), so that the waits of
- * many paths overlap, which the long shade kernel cannot do (PoCL, living room
- * at 2 spp: the kernels but the first 0.80-0.85 s of device time where the two
- * without prefetches took 1.16-1.26 s).
+ * many paths overlap (PoCL, living room at 2 spp: the kernels but the first
+ * 0.80-0.85 s of device time where the two without prefetches took 1.16-1.26 s).
+ * shade itself prefetches only what it can address cheaply ahead of time: the
+ * hit triangle, the path's state and the colour texture's texels (16 and 8
+ * slots on).
  * cast_shadows_media (scenes with a medium behind a null boundary, in place of
  * raycast.cl's any-hit cast): shadow rays that pass null boundaries and carry
  * the transmittance of the media they cross.
@@ -194,7 +196,7 @@ __kernel void shade_env_texels(Environment env, __global const float* env_data, 
   if (k >= count) return;
   if (PSF_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
     /* Two texels of 12 bytes in each of two rows: their 24 bytes cross a cache
-     * line's end three times in eight. */
+     * line's end five times in sixteen. */
     __global const float* texel = env_data + env_ahead(env_samples, k + PSF_PREFETCH_AHEAD)[1];
     psf_prefetch(texel);
     psf_prefetch(texel + 5);
@@ -602,8 +604,12 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
         const int x = texture_wrap((int)floor(st.x * (float)t.width - 0.5f), (int)t.width, t.flags);
         const int y = (int)floor(st.y * (float)t.height - 0.5f);
         const int y0 = texture_wrap(y, (int)t.height, t.flags), y1 = texture_wrap(y + 1, (int)t.height, t.flags);
+        /* Texels x and x + 1 of each row (8 bytes each: the pair crosses a line
+         * one time in eight). */
         psf_prefetch(texels + 4u * (t.offset + (uint)y0 * t.width + (uint)x));
+        psf_prefetch(texels + 4u * (t.offset + (uint)y0 * t.width + (uint)x) + 7u);
         psf_prefetch(texels + 4u * (t.offset + (uint)y1 * t.width + (uint)x));
+        psf_prefetch(texels + 4u * (t.offset + (uint)y1 * t.width + (uint)x) + 7u);
       }
     }
   }
