@@ -16,14 +16,14 @@ __kernel void accumulate(uint count, uint filtered_too, __global const PathState
                          __global const uint* counts, __global float4* out_unfiltered, __global float4* out) {
   uint j = get_global_id(0);
   if (j >= count) return;
-  const float4 prefix = states[j].radiance;
+  const float3 prefix = states[j].radiance.xyz;
   const bool vertex = (states[j].flags & PSF_PATH_VERTEX) != 0u;
   const float3 alpha = vertex ? vertices[j].alpha.xyz : (float3)(0.0f);
-  float3 c = prefix.xyz;
+  float3 c = prefix;
   if (vertex) c += alpha * states[j].vertex_radiance.xyz;
   out_unfiltered[j] = (float4)(c, 1.0f);
   if (!filtered_too) return;
-  float3 f = prefix.xyz;
+  float3 f = prefix;
   if (vertex) f += alpha * filtered[j].xyz;
   out[j] = (float4)(f, (float)counts[j]);
 }

@@ -43,9 +43,6 @@
  * (env_row_slot, env_block_slot, env_cell_slot, env_texel_slot, shade_path, shadow_slot). */
 
 #define PSF_RAY_EPS 1e-4f
-#ifndef PSF_SHADE_PREFETCH
-#define PSF_SHADE_PREFETCH 1
-#endif
 
 inline float max3(float3 v) { return fmax(v.x, fmax(v.y, v.z)); }
 
@@ -148,10 +145,49 @@ inline void env_texel_slot(uint k, Environment env, __global const float* env_da
  * paths' states are read in queue order, at random after the first bounce). */
 inline void prefetch_state_ahead(__global const PathState* states, __global const uint* queue_in, uint k,
                                  uint count) {
-  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
+  if (PSF_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
     __global const PathState* ahead = states + queue_in[k + PSF_PREFETCH_AHEAD];
     psf_prefetch(ahead);
     psf_prefetch((__global const float4*)ahead + 5);
+  }
+}
+
+/* For shade: the hit triangle's positions, attributes and material index of
+ * the slot PSF_PREFETCH_AHEAD on (random reads into arrays of the whole scene,
+ * which shade_path otherwise waits on in turn; PoCL, living room: the
+ * positions' load alone was a seventh of its samples), and half as far on,
+ * where those have arrived, texels x and x + 1 of both rows its colour
+ * texture's bilinear lookup reads (texture.cl texture_eval). */
+inline void prefetch_hit_ahead(FrameParams params, __global const float4* tri_pos, __global const uint* tri_material,
+                               __global const Material* materials, __global const Hit* hits,
+                               __global const TriAttrib* tri_attribs, __global const TextureInfo* textures,
+                               __global const half* texels, uint k, uint count) {
+  if (!PSF_PREFETCH) return;
+  if (k + PSF_PREFETCH_AHEAD < count) {
+    const uint prim = hits[k + PSF_PREFETCH_AHEAD].prim;
+    if (prim != PSF_NO_HIT) {
+      psf_prefetch(tri_pos + 3u * prim);
+      psf_prefetch(tri_pos + 3u * prim + 2u);
+      psf_prefetch(tri_attribs + prim);
+      psf_prefetch((__global const float4*)(tri_attribs + prim) + 5);
+      psf_prefetch(tri_material + prim);
+    }
+  }
+  if (k + PSF_PREFETCH_AHEAD / 2u < count) {
+    const Hit h = hits[k + PSF_PREFETCH_AHEAD / 2u];
+    if (h.prim >= params.first_sphere) return; /* a sphere, or PSF_NO_HIT (above every prim) */
+    const uint tex = materials[tri_material[h.prim]].tex_color;
+    if (tex == PSF_NO_TEXTURE) return;
+    const TextureInfo t = textures[tex];
+    const float2 st = texture_uv(t, surface_uv(tri_attribs + h.prim, h.u, h.v));
+    const int x = (int)floor(st.x * (float)t.width - 0.5f), y = (int)floor(st.y * (float)t.height - 0.5f);
+    /* 8 bytes a texel: texels x and x + 1 cross a line one time in eight. */
+    __global const half* row0 = texels + 4u * texture_texel_index(t, x, y);
+    __global const half* row1 = texels + 4u * texture_texel_index(t, x, y + 1);
+    psf_prefetch(row0);
+    psf_prefetch(row0 + 7u);
+    psf_prefetch(row1);
+    psf_prefetch(row1 + 7u);
   }
 }
 
@@ -577,42 +613,7 @@ __kernel void shade(FrameParams params, __global const uint* sobol, __global con
   __local uint group_count, group_base;
   uint k = get_global_id(0), l = get_local_id(0);
   uint j = k < count ? queue_in[k] : 0u;
-  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD < count) {
-    /* The hit triangle's positions, attributes and material index of the slot
-     * PSF_PREFETCH_AHEAD on, and below its path's state: random reads into arrays
-     * of the whole scene, which shade_path otherwise waits on in turn (PoCL,
-     * living room: the positions' load alone was a seventh of its samples). */
-    const uint prim = hits[k + PSF_PREFETCH_AHEAD].prim;
-    if (prim != PSF_NO_HIT) {
-      psf_prefetch(tri_pos + 3u * prim);
-      psf_prefetch(tri_pos + 3u * prim + 2u);
-      psf_prefetch(tri_attribs + prim);
-      psf_prefetch((__global const float4*)(tri_attribs + prim) + 5);
-      psf_prefetch(tri_material + prim);
-    }
-  }
-  if (PSF_PREFETCH && PSF_SHADE_PREFETCH && k + PSF_PREFETCH_AHEAD / 2u < count) {
-    /* Half as far on, where the triangle's attributes and material index have
-     * arrived: the two rows of texels its colour texture's bilinear lookup reads
-     * (texture.cl texture_eval), at random in a large texture. */
-    const Hit h = hits[k + PSF_PREFETCH_AHEAD / 2u];
-    if (h.prim < params.first_sphere) { /* PSF_NO_HIT is above every prim */
-      const uint tex = materials[tri_material[h.prim]].tex_color;
-      if (tex != PSF_NO_TEXTURE) {
-        const TextureInfo t = textures[tex];
-        const float2 st = texture_uv(t, surface_uv(tri_attribs + h.prim, h.u, h.v));
-        const int x = texture_wrap((int)floor(st.x * (float)t.width - 0.5f), (int)t.width, t.flags);
-        const int y = (int)floor(st.y * (float)t.height - 0.5f);
-        const int y0 = texture_wrap(y, (int)t.height, t.flags), y1 = texture_wrap(y + 1, (int)t.height, t.flags);
-        /* Texels x and x + 1 of each row (8 bytes each: the pair crosses a line
-         * one time in eight). */
-        psf_prefetch(texels + 4u * (t.offset + (uint)y0 * t.width + (uint)x));
-        psf_prefetch(texels + 4u * (t.offset + (uint)y0 * t.width + (uint)x) + 7u);
-        psf_prefetch(texels + 4u * (t.offset + (uint)y1 * t.width + (uint)x));
-        psf_prefetch(texels + 4u * (t.offset + (uint)y1 * t.width + (uint)x) + 7u);
-      }
-    }
-  }
+  prefetch_hit_ahead(params, tri_pos, tri_material, materials, hits, tri_attribs, textures, texels, k, count);
   prefetch_state_ahead(states, queue_in, k, count);
   Ray next;
   bool go = k < count && shade_path(k, j, params, sobol, tri_pos, tri_material, materials, emitters, emitter_cdf,

@@ -24,10 +24,15 @@ inline int texture_wrap(int i, int n, uint flags) {
   return r < 0 ? r + n : r;
 }
 
-inline float4 texture_texel(__global const half* texels, TextureInfo t, int x, int y) {
+/* The index in the texel buffer of texel (x, y), wrapped. */
+inline uint texture_texel_index(TextureInfo t, int x, int y) {
   x = texture_wrap(x, (int)t.width, t.flags);
   y = texture_wrap(y, (int)t.height, t.flags);
-  return vload_half4(t.offset + (uint)y * t.width + (uint)x, texels);
+  return t.offset + (uint)y * t.width + (uint)x;
+}
+
+inline float4 texture_texel(__global const half* texels, TextureInfo t, int x, int y) {
+  return vload_half4(texture_texel_index(t, x, y), texels);
 }
 
 /* The texture's uv transform applied to the surface uv. */
