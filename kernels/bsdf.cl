@@ -93,8 +93,11 @@
  * above this roughness sqrt(alpha_u alpha_v) ... */
 #define PSF_DIFFUSE_ALPHA 0.3f
 /* ... and plastics when the base reflects at least this many times as much as
- * the coating under uniform illumination (80 % of the reflected light). */
-#define PSF_PLASTIC_DIFFUSE_RATIO 4.0f
+ * the coating under uniform illumination: 1, at least half of the reflected
+ * light. (4, which psf used before, left textured floors' glossy rough plastics,
+ * the living room's and the staircase's, to the next vertex: their filtering
+ * vertices lay scattered over the room and found few neighbours.) */
+#define PSF_PLASTIC_DIFFUSE_RATIO 1.0f
 
 /* An orthonormal frame: s, t tangents and n the shading normal. */
 typedef struct {
@@ -318,7 +321,7 @@ inline float3 bsdf_albedo(Material m) {
 /* Whether a vertex with this material is diffuse enough to be the filtering
  * vertex: diffuse always; rough conductors and dielectrics when their roughness
  * sqrt(alpha_u alpha_v) exceeds PSF_DIFFUSE_ALPHA; plastics when that holds or
- * when the base dominates the coating, mean(albedo) (1 - F_ext) >=
+ * when the base reflects at least as much as the coating, mean(albedo) (1 - F_ext) >=
  * PSF_PLASTIC_DIFFUSE_RATIO mean(specular) F_ext (F_ext, in eta.w: the coating's
  * reflectance under uniform illumination; pplastic's likewise); principled likewise, its base
  * weighted by (1 - M)(1 - T) against the specular lobes' reflectance under

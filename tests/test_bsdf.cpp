@@ -1492,7 +1492,8 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   }
   for (const auto& e : rig.eval(mat, wo, wi)) CHECK(glm::length(e) == 0.0);
 
-  // bsdf_is_diffuse: diffuse; rough lobes above alpha 0.3; plastics whose base dominates.
+  // bsdf_is_diffuse: diffuse; rough lobes above alpha 0.3; plastics whose base
+  // reflects at least as much as the coating under uniform light.
   Rig r2;
   struct Want {
     Params p;
@@ -1520,8 +1521,12 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   wants.push_back({p, true});
   p = {};
   p.type = PSF_MATERIAL_PLASTIC;
-  p.albedo = dvec3(0.8);  // 0.8 (1 - 0.092) >= 4 * 0.092
+  p.albedo = dvec3(0.8);  // 0.8 (1 - 0.092) >= 0.092
   wants.push_back({p, true});
+  p.albedo = dvec3(0.12);  // 0.12 (1 - 0.092) = 0.109 >= 0.092
+  wants.push_back({p, true});
+  p.albedo = dvec3(0.09);  // 0.082 < 0.092
+  wants.push_back({p, false});
   p.albedo = dvec3(0.05);
   wants.push_back({p, false});
   p.type = PSF_MATERIAL_ROUGH_PLASTIC;
@@ -1529,15 +1534,15 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   wants.push_back({p, false});
   p.au = p.av = 0.5;
   wants.push_back({p, true});
-  // principled: its base (1 - M)(1 - T) mean(base) against 4 times the specular
-  // lobes' Schlick reflectance under uniform light (0.0857 for eta 1.5), or rough.
+  // principled: its base (1 - M)(1 - T) mean(base) against the specular lobes'
+  // Schlick reflectance under uniform light (0.0857 for eta 1.5), or rough.
   p = {};
   p.type = PSF_MATERIAL_PRINCIPLED;
   p.eta = dvec3(1.5);
   p.roughness = 0.5;  // alpha 0.25: not rough enough alone
-  wants.push_back({p, true});  // 0.5 >= 0.343
-  p.albedo = dvec3(0.2);
-  wants.push_back({p, false});  // 0.2 < 0.343
+  wants.push_back({p, true});  // 0.5 >= 0.0857
+  p.albedo = dvec3(0.07);
+  wants.push_back({p, false});  // 0.07 < 0.0857
   p.roughness = 0.6;  // alpha 0.36
   wants.push_back({p, true});
   p = {};
@@ -1556,13 +1561,13 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   p.eta = dvec3(1.5);
   p.albedo = dvec3(0.8);
   p.au = p.av = 0.1;
-  wants.push_back({p, true});  // 0.8 (1 - 0.092) >= 4 * 0.092
+  wants.push_back({p, true});  // 0.8 (1 - 0.092) >= 0.092
   p.albedo = dvec3(0.05);
   wants.push_back({p, false});
   p.au = p.av = 0.5;
   wants.push_back({p, true});  // rough
   const size_t first_pplastic = wants.size() - 3;
-  // principledthin: its diffuse lobes (1 - T) mean(base) against 4 T times the
+  // principledthin: its diffuse lobes (1 - T) mean(base) against T times the
   // specular reflection's Schlick mean and the transmission's base (1 - R0), or rough.
   p = {};
   p.type = PSF_MATERIAL_PRINCIPLED_THIN;
@@ -1570,12 +1575,14 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   p.roughness = 0.5;
   wants.push_back({p, true});  // no specular lobes: T = 0
   p.spec_trans = 0.1;
-  wants.push_back({p, true});  // 0.9 * 0.5 >= 4 * 0.1 * (0.04 + 0.96 / 21 + 0.96 * 0.5) = 0.226
-  p.spec_trans = 0.3;
-  wants.push_back({p, false});  // 0.35 < 0.678
+  wants.push_back({p, true});  // 0.9 * 0.5 >= 0.1 * (0.04 + 0.96 / 21 + 0.96 * 0.5) = 0.0566
+  p.spec_trans = 0.45;
+  wants.push_back({p, true});  // 0.275 >= 0.255
+  p.spec_trans = 0.5;
+  wants.push_back({p, false});  // 0.25 < 0.283
   p.roughness = 0.6;            // alpha 0.36
   wants.push_back({p, true});
-  const size_t first_thin = wants.size() - 4;
+  const size_t first_thin = wants.size() - 5;
   for (const Want& w : wants) r2.add(w.p);
   auto props = r2.props();
   for (size_t i = 0; i < wants.size(); ++i) {
@@ -1586,9 +1593,9 @@ TEST_CASE("BSDF: one-sided reflection, the filtering-vertex rule and the albedo"
   CHECK(dvec3(props[0]).x == Approx(0.5));
   CHECK(dvec3(props[1]).x == Approx(1.0).margin(1e-5));
   CHECK(dvec3(props[7]).x == Approx(0.8));
-  CHECK(dvec3(props[first_principled + 1]).x == Approx(0.2));  // principled: the base colour
-  CHECK(dvec3(props[first_pplastic]).x == Approx(0.8));        // pplastic: the diffuse reflectance
-  CHECK(dvec3(props[first_thin]).x == Approx(0.5));            // principledthin: the base colour
+  CHECK(dvec3(props[first_principled + 1]).x == Approx(0.07));  // principled: the base colour
+  CHECK(dvec3(props[first_pplastic]).x == Approx(0.8));         // pplastic: the diffuse reflectance
+  CHECK(dvec3(props[first_thin]).x == Approx(0.5));             // principledthin: the base colour
 }
 
 TEST_CASE("Textures: lookups match a scalar bilinear reference", "[bsdf]") {
