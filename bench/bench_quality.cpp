@@ -1,6 +1,6 @@
 // bench_quality: equal-time image quality of plain path tracing (pt), path space
 // filtering (psf, 1 averaging pass) and path space filtering with 2, 4 and 8 passes (psf2,
-// psf4, psf8), as relMSE against a reference.
+// psf4, psf8), and any --method's, as relMSE against a reference.
 //
 // relMSE = mean over pixels and channels of (x - y)^2 / (y^2 + 0.01) (x the
 // render, y the reference).
@@ -17,7 +17,7 @@
 //   (bench/plot_quality.py plots it).
 //   The curve is measured interleaved (every method at 1 spp, then at 2, ...).
 // equal_time/<scene>/spp:<N> for N in --equal (default 4,16,64,1024): the wall
-//   time t of pt at N spp (the fastest repeat); psf, psf2, psf4 and psf8 get the largest spp
+//   time t of pt at N spp (the fastest repeat); the filtered methods get the largest spp
 //   count s whose time stays within 1.1 t (first guess s = N t / t_method(N), then
 //   refined by measured times, up to 5 renders; 1 spp if even that takes longer);
 //   reported: s, the actual times, relMSE and relMSE(pt) / relMSE(method).
@@ -32,6 +32,7 @@
 //
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
 //                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64] [--time=wall|cpu]
+//                      [--method=NAME:PASSES[:demodulate][:batch=N] ...]
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -64,13 +65,41 @@ struct Options {
 };
 
 struct Method {
-  const char* name;  // pt, psf, psf2, psf4, psf8
-  bool filter;       // path space filtering on
-  int iterations;    // averaging passes
+  std::string name;         // pt, psf, psf2, psf4, psf8, or a --method's
+  bool filter;              // path space filtering on
+  int iterations;           // averaging passes
+  bool demodulate = false;  // --demodulate
+  int batch_log2 = 0;       // --batch-log2; 0: the renderer's default
 };
 // psf4, psf8: 4 and 8 passes, since the passes after the first average over the
 // first's records instead of searching (filter.cl filter_lists) and cost a fraction of it.
-const Method kMethods[] = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
+// --method=NAME:PASSES[:demodulate][:batch=N] adds a filtered method with those options.
+std::vector<Method> g_methods = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
+
+// Parses --method's value; false (with a message) when it is malformed.
+bool parse_method(const std::string& spec, Method& m) {
+  std::vector<std::string> parts;
+  std::stringstream in(spec);
+  std::string item;
+  while (std::getline(in, item, ':')) parts.push_back(item);
+  m = {"", true, 1};
+  bool ok = parts.size() >= 2 && !parts[0].empty() && parts[0] != "pt";
+  try {
+    if (ok) m.name = parts[0], m.iterations = std::stoi(parts[1]);
+    for (size_t k = 2; ok && k < parts.size(); ++k) {
+      if (parts[k] == "demodulate") m.demodulate = true;
+      else if (parts[k].rfind("batch=", 0) == 0) m.batch_log2 = std::stoi(parts[k].substr(6));
+      else ok = false;
+    }
+  } catch (const std::exception&) {
+    ok = false;
+  }
+  ok = ok && m.iterations >= 1 && m.iterations <= 64 && (m.batch_log2 == 0 || (m.batch_log2 >= 6 && m.batch_log2 <= 26));
+  if (!ok)
+    std::fprintf(stderr, "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N] (PASSES 1-64, N 6-26)\n",
+                 spec.c_str());
+  return ok;
+}
 
 // --time=cpu: equal time means equal CPU time of the process instead of wall time.
 bool g_cpu_time = false;
@@ -128,6 +157,8 @@ psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t se
   o.rr_depth = b.scene.rr_depth;
   o.filter.enabled = m.filter;
   o.filter.iterations = m.iterations;
+  o.filter.demodulate = m.demodulate;
+  if (m.batch_log2 > 0) o.batch_log2 = m.batch_log2;
   return o;
 }
 
@@ -199,6 +230,11 @@ int main(int argc, char** argv) {
   opt.ref_refresh = refresh != 0;
   opt.images = (bench::fs::path(PSF_BINARY_DIR) / "quality").string();
   args.take("images", opt.images);
+  for (const std::string& spec : args.take_all("method")) {
+    Method m;
+    if (!parse_method(spec, m)) return 2;
+    g_methods.push_back(m);
+  }
   if (args.take("time", s)) {
     if (s != "wall" && s != "cpu") {
       std::fprintf(stderr, "bench_quality: --time=%s: expected wall or cpu\n", s.c_str());
@@ -253,7 +289,7 @@ int main(int argc, char** argv) {
         b->reference_source = ref + " (cached)";
       } else {
         report("%s: rendering the reference, %d spp plain path tracing...\n", b->name.c_str(), opt.ref_spp);
-        psf::RenderResult r = b->renderer->render(options(*b, kMethods[0], opt.ref_spp, 0x5eed1234u));
+        psf::RenderResult r = b->renderer->render(options(*b, g_methods[0], opt.ref_spp, 0x5eed1234u));
         rt.finish();
         psf::write_exr(ref, r.image, {{"psf:spp", std::to_string(opt.ref_spp)}, {"psf:seed", "0x5eed1234"}});
         b->reference = std::move(r.image);
@@ -270,7 +306,7 @@ int main(int argc, char** argv) {
            b->reference_source.c_str(), b->max_spp);
     benchmark::AddCustomContext("reference_" + b->name, b->reference_source);
     // Warm-up: first launches of every kernel.
-    for (const Method& m : kMethods) b->renderer->render(options(*b, m, 1));
+    for (const Method& m : g_methods) b->renderer->render(options(*b, m, 1));
     rt.finish();
     benches.push_back(std::move(b));
   }
@@ -280,7 +316,7 @@ int main(int argc, char** argv) {
     // Interleaved (1 spp of every method, then 2, ...), so load from other processes
     // on the machine falls on all methods alike.
     for (int spp = 1; spp <= b->max_spp; spp *= 2)
-      for (const Method& m : kMethods) {
+      for (const Method& m : g_methods) {
         std::string bname = "quality/" + b->name + "/" + m.name + "/spp:" + std::to_string(spp);
         benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, m, spp, bname](benchmark::State& state) {
           Point p;
@@ -304,11 +340,11 @@ int main(int argc, char** argv) {
       std::string bname = "equal_time/" + b->name + "/spp:" + std::to_string(n);
       benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, &opt, n, bname](benchmark::State& state) {
         auto& pts = b->points;
-        if (!pts["pt"].count(n)) pts["pt"][n] = render(rt, *b, kMethods[0], n, repeats_for(n));
+        if (!pts["pt"].count(n)) pts["pt"][n] = render(rt, *b, g_methods[0], n, repeats_for(n));
         const Point& pt = pts["pt"][n];
         std::map<std::string, Point> best;
         for (auto _ : state) {
-          for (const Method& m : kMethods) {
+          for (const Method& m : g_methods) {
             if (!m.filter) continue;
             auto& mp = pts[m.name];
             if (!mp.count(n)) mp[n] = render(rt, *b, m, n, repeats_for(n));
@@ -340,7 +376,7 @@ int main(int argc, char** argv) {
         state.counters["pt_cpu_seconds"] = pt.cpu_seconds;
         std::string line;
         char buf[256];
-        for (const Method& m : kMethods) {
+        for (const Method& m : g_methods) {
           if (!m.filter) continue;
           const Point& q = best[m.name];
           std::string k = m.name;
@@ -350,7 +386,7 @@ int main(int argc, char** argv) {
           state.counters[k + "_relMSE"] = q.relmse;
           state.counters[k + "_cpu_seconds"] = q.cpu_seconds;
           state.counters[k + "_gain"] = gain;
-          std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s (CPU %.3f s) relMSE %.5g (%.2fx lower)", m.name, q.spp,
+          std::snprintf(buf, sizeof buf, "; %s %d spp %.3f s (CPU %.3f s) relMSE %.5g (%.2fx lower)", m.name.c_str(), q.spp,
                         q.min_seconds, q.cpu_seconds, q.relmse, gain);
           line += buf;
         }
@@ -358,7 +394,7 @@ int main(int argc, char** argv) {
                pt.relmse, line.c_str());
         auto goal = [&](const char* what, double target) {
           std::string verdicts;
-          for (const Method& m : kMethods)
+          for (const Method& m : g_methods)
             if (m.filter)
               verdicts += std::string(verdicts.empty() ? " " : ", ") + m.name +
                           (state.counters[std::string(m.name) + "_gain"] >= target ? " met" : " NOT met");

@@ -42,13 +42,14 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations",
               "psf4": "path space filtering, 4 iterations", "psf8": "path space filtering, 8 iterations"}
+    order = ["pt", "psf", "psf2", "psf4", "psf8"]  # then bench_quality --method's, by name
     for scene, methods in curves.items():
         fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
-        for name in ("pt", "psf", "psf2", "psf4", "psf8"):
+        for name in order + sorted(set(methods) - set(order)):
             pts = sorted(methods.get(name, []))
             if not pts:
                 continue
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, label=labels[name])
+            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, label=labels.get(name, name))
             for t, e, spp in pts:
                 if name == "pt" and spp in (1, 4, 16, 64, 256, 1024):
                     ax.annotate("%d spp" % spp, (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7)
@@ -69,7 +70,9 @@ def main():
         print("wrote", path)
 
     for scene, rows in equal.items():
-        methods = [m for m in ("psf", "psf2", "psf4", "psf8") if all(m + "_relMSE" in b for b in rows)]
+        names = sorted({k[: -len("_relMSE")] for b in rows for k in b if k.endswith("_relMSE")} - {"pt"})
+        names = [m for m in order[1:] if m in names] + [m for m in names if m not in order]
+        methods = [m for m in names if all(m + "_relMSE" in b for b in rows)]
         print("\n%s\n" % scene)
         print("| plain spp | time | plain relMSE | " + " | ".join("%s (spp) | gain" % m for m in methods) + " |")
         print("| ---: | ---: | ---: | " + " | ".join("---: | ---:" for _ in methods) + " |")
