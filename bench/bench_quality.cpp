@@ -37,6 +37,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <cctype>
 #include <optional>
 #include <chrono>
 #include <cmath>
@@ -73,7 +74,8 @@ struct Method {
 };
 // psf4, psf8: 4 and 8 passes, since the passes after the first average over the
 // first's records instead of searching (filter.cl filter_lists) and cost a fraction of it.
-// --method=NAME:PASSES[:demodulate][:batch=N] adds a filtered method with those options.
+// --method=NAME:PASSES[:demodulate][:batch=N] adds a filtered method with those options
+// (batch=N: batches of 2^N paths, --batch-log2 N).
 std::vector<Method> g_methods = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
 
 // Parses --method's value; false (with a message) when it is malformed.
@@ -83,20 +85,27 @@ bool parse_method(const std::string& spec, Method& m) {
   std::string item;
   while (std::getline(in, item, ':')) parts.push_back(item);
   m = {"", true, 1};
-  bool ok = parts.size() >= 2 && !parts[0].empty() && parts[0] != "pt";
-  try {
-    if (ok) m.name = parts[0], m.iterations = std::stoi(parts[1]);
-    for (size_t k = 2; ok && k < parts.size(); ++k) {
-      if (parts[k] == "demodulate") m.demodulate = true;
-      else if (parts[k].rfind("batch=", 0) == 0) m.batch_log2 = std::stoi(parts[k].substr(6));
-      else ok = false;
-    }
-  } catch (const std::exception&) {
-    ok = false;
+  // A whole decimal number, or -1.
+  auto number = [](const std::string& t) {
+    if (t.empty() || t.size() > 3 || t.find_first_not_of("0123456789") != std::string::npos) return -1;
+    return std::stoi(t);
+  };
+  // Names are letters and digits (they become parts of benchmark and counter
+  // names) and differ from every other method's: a shared name would mix their results.
+  bool ok = parts.size() >= 2 && !parts[0].empty() &&
+            std::all_of(parts[0].begin(), parts[0].end(), [](unsigned char c) { return std::isalnum(c) != 0; }) &&
+            std::none_of(g_methods.begin(), g_methods.end(), [&](const Method& o) { return o.name == parts[0]; });
+  if (ok) m.name = parts[0], m.iterations = number(parts[1]);
+  for (size_t k = 2; ok && k < parts.size(); ++k) {
+    if (parts[k] == "demodulate") m.demodulate = true;
+    else if (parts[k].rfind("batch=", 0) == 0) ok = (m.batch_log2 = number(parts[k].substr(6))) >= 6 && m.batch_log2 <= 26;
+    else ok = false;
   }
-  ok = ok && m.iterations >= 1 && m.iterations <= 64 && (m.batch_log2 == 0 || (m.batch_log2 >= 6 && m.batch_log2 <= 26));
+  ok = ok && m.iterations >= 1 && m.iterations <= 64;
   if (!ok)
-    std::fprintf(stderr, "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N] (PASSES 1-64, N 6-26)\n",
+    std::fprintf(stderr,
+                 "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N], NAME letters and digits "
+                 "and not another method's, PASSES 1-64, batches of 2^N paths with N 6-26\n",
                  spec.c_str());
   return ok;
 }
@@ -234,6 +243,9 @@ int main(int argc, char** argv) {
     Method m;
     if (!parse_method(spec, m)) return 2;
     g_methods.push_back(m);
+    benchmark::AddCustomContext("method_" + m.name, std::to_string(m.iterations) + " passes" +
+                                                        (m.demodulate ? ", --demodulate" : "") +
+                                                        (m.batch_log2 ? ", batches of 2^" + std::to_string(m.batch_log2) : ""));
   }
   if (args.take("time", s)) {
     if (s != "wall" && s != "cpu") {
