@@ -409,7 +409,7 @@ int main(int argc, char** argv) {
           for (const Method& m : g_methods)
             if (m.filter)
               verdicts += std::string(verdicts.empty() ? " " : ", ") + m.name +
-                          (state.counters[std::string(m.name) + "_gain"] >= target ? " met" : " NOT met");
+                          (state.counters[m.name + "_gain"] >= target ? " met" : " NOT met");
           report("%s: goal %s:%s\n", bname.c_str(), what, verdicts.c_str());
         };
         if (n == 4) goal(">= 10x lower relMSE at 4 spp", 10);
