@@ -32,7 +32,11 @@
 //
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
 //                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64] [--time=wall|cpu]
-//                      [--method=NAME:PASSES[:demodulate][:batch=N] ...]
+//                      [--method=NAME:PASSES[:demodulate][:batch=N] ...] [--methods=psf,psf2,...]
+//                      [--repeats=N]
+// --methods keeps only the named ones of the default filtered methods (psf, psf2,
+// psf4, psf8; pt always runs); --repeats sets the renders per point up to 64 spp
+// (default 3; one above): the living room at 64 spp takes minutes per render.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -193,9 +197,11 @@ Point render(psf::Runtime& rt, Bench& b, const Method& m, int spp, int repeats) 
   return p;
 }
 
-int repeats_for(int spp) { return spp <= 64 ? 3 : 1; }
+int g_repeats = 3;  // --repeats: renders per point up to 64 spp
 
-// Side by side, 4 px white gaps: pt | psf | psf2 | reference, the whole image when
+int repeats_for(int spp) { return spp <= 64 ? g_repeats : 1; }
+
+// Side by side, 4 px white gaps: pt | psf | psf2 | reference (by default), the whole image when
 // it is at most 320 px wide, else a 320 x 240 crop about the centre.
 void write_side_by_side(const std::string& path, const std::vector<const psf::Image*>& images) {
   const psf::Image& first = *images.front();
@@ -239,6 +245,24 @@ int main(int argc, char** argv) {
   opt.ref_refresh = refresh != 0;
   opt.images = (bench::fs::path(PSF_BINARY_DIR) / "quality").string();
   args.take("images", opt.images);
+  if (args.take("methods", s)) {
+    // The default filtered methods to keep (pt always runs).
+    std::set<std::string> keep;
+    for (std::stringstream in(s); std::getline(in, s, ',');) keep.insert(s);
+    for (const std::string& name : keep)
+      if (name == "pt" || std::none_of(g_methods.begin(), g_methods.end(), [&](const Method& m) { return m.name == name; })) {
+        std::fprintf(stderr, "bench_quality: --methods: %s is not one of psf, psf2, psf4, psf8\n", name.c_str());
+        return 2;
+      }
+    g_methods.erase(std::remove_if(g_methods.begin() + 1, g_methods.end(),
+                                   [&](const Method& m) { return !keep.count(m.name); }),
+                    g_methods.end());
+  }
+  args.take_number("repeats", g_repeats);
+  if (g_repeats < 1) {
+    std::fprintf(stderr, "bench_quality: --repeats=%d: expected at least 1\n", g_repeats);
+    return 2;
+  }
   for (const std::string& spec : args.take_all("method")) {
     Method m;
     if (!parse_method(spec, m)) return 2;
@@ -417,9 +441,17 @@ int main(int argc, char** argv) {
         if (std::find(opt.crops.begin(), opt.crops.end(), n) != opt.crops.end()) {
           std::string png = opt.images + "/quality_" + b->name + "_" + std::to_string(n) + "spp" +
                             (g_cpu_time ? "_cputime" : "") + ".png";
-          write_side_by_side(png, {&pt.image, &best["psf"].image, &best["psf2"].image, &b->reference});
-          report("%s: wrote %s (pt %d spp | psf %d spp | psf2 %d spp | reference)\n", bname.c_str(), png.c_str(), n,
-                 best["psf"].spp, best["psf2"].spp);
+          // pt, the first two filtered methods (psf and psf2 unless --methods drops them), the reference.
+          std::vector<const psf::Image*> images = {&pt.image};
+          std::string names = "pt " + std::to_string(n) + " spp";
+          for (const Method& m : g_methods)
+            if (m.filter && images.size() < 3) {
+              images.push_back(&best[m.name].image);
+              names += " | " + m.name + " " + std::to_string(best[m.name].spp) + " spp";
+            }
+          images.push_back(&b->reference);
+          write_side_by_side(png, images);
+          report("%s: wrote %s (%s | reference)\n", bname.c_str(), png.c_str(), names.c_str());
         }
       })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
     }

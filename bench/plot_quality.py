@@ -49,14 +49,17 @@ def main():
             pts = sorted(methods.get(name, []))
             if not pts:
                 continue
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, label=labels.get(name, name))
+            # A --method's options are in the context block (method_NAME).
+            extra = data.get("context", {}).get("method_" + name)
+            label = labels.get(name, "%s: %s" % (name, extra) if extra else name)
+            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, label=label)
             for t, e, spp in pts:
                 if name == "pt" and spp in (1, 4, 16, 64, 256, 1024):
                     ax.annotate("%d spp" % spp, (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7)
         ax.set_xlabel("wall time of the render (s)" if args.time == "wall" else "CPU time of the render (s)")
         ax.set_ylabel("relMSE")
         ctx = data.get("context", {})
-        ax.set_title("%s: relMSE against %s time (%s compute units, %s)" % (
+        ax.set_title("%s: relMSE against %s time\n(%s compute units, %s)" % (
             scene, args.time, ctx.get("psf_compute_units", "?"), ctx.get("psf_device", "").split(" / ")[-1]),
             fontsize=9)
         ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
