@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -140,10 +141,23 @@ class Args {
     }
     return v;
   }
+  // A malformed number is reported and exits with status 2.
   template <class T>
   void take_number(const char* key, T& out) {
     std::string s;
-    if (take(key, s)) out = T(std::stod(s));
+    if (!take(key, s)) return;
+    size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(s, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != s.size()) {
+      std::fprintf(stderr, "%s: --%s=%s: expected a number\n", program_, key, s.c_str());
+      std::exit(2);
+    }
+    out = T(v);
   }
   // Reports arguments nobody took; false if there were any.
   bool done() const {

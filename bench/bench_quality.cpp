@@ -153,12 +153,20 @@ double relmse(const psf::Image& x, const psf::Image& y) {
   return x.rgb.empty() ? 0 : sum / x.rgb.size();
 }
 
-std::vector<int> parse_list(const std::string& s) {
+// A comma-separated list of spp counts (--equal, --crops); a malformed one exits with status 2.
+std::vector<int> parse_list(const char* key, const std::string& s) {
   std::vector<int> v;
   std::stringstream in(s);
   std::string item;
-  while (std::getline(in, item, ','))
-    if (!item.empty()) v.push_back(std::stoi(item));
+  while (std::getline(in, item, ',')) {
+    if (item.empty()) continue;
+    if (item.size() > 9 || item.find_first_not_of("0123456789") != std::string::npos || std::stoi(item) < 1) {
+      std::fprintf(stderr, "bench_quality: --%s=%s: expected spp counts (1 or more) separated by commas\n", key,
+                   s.c_str());
+      std::exit(2);
+    }
+    v.push_back(std::stoi(item));
+  }
   return v;
 }
 
@@ -236,8 +244,8 @@ int main(int argc, char** argv) {
   bench::Args args(argc, argv, "bench_quality");
   opt.scenes = args.take_all("scene");
   std::string s;
-  if (args.take("equal", s)) opt.equal = parse_list(s);
-  if (args.take("crops", s)) opt.crops = parse_list(s);
+  if (args.take("equal", s)) opt.equal = parse_list("equal", s);
+  if (args.take("crops", s)) opt.crops = parse_list("crops", s);
   args.take_number("max_spp", opt.max_spp);
   args.take_number("ref_spp", opt.ref_spp);
   int refresh = 0;
