@@ -107,6 +107,23 @@ inline const std::vector<std::string>& filter_kernels() {
   return k;
 }
 
+// The number in --key=s; a malformed one is reported and exits with status 2.
+template <class T>
+T number(const char* program, const char* key, const std::string& s) {
+  size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(s, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != s.size()) {
+    std::fprintf(stderr, "%s: --%s=%s: expected a number\n", program, key, s.c_str());
+    std::exit(2);
+  }
+  return T(v);
+}
+
 // "--key=value" arguments after Google Benchmark has taken its own.
 class Args {
  public:
@@ -141,23 +158,11 @@ class Args {
     }
     return v;
   }
-  // A malformed number is reported and exits with status 2.
+  // A malformed number is reported and exits with status 2 (bench::number).
   template <class T>
   void take_number(const char* key, T& out) {
     std::string s;
-    if (!take(key, s)) return;
-    size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(s, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != s.size()) {
-      std::fprintf(stderr, "%s: --%s=%s: expected a number\n", program_, key, s.c_str());
-      std::exit(2);
-    }
-    out = T(v);
+    if (take(key, s)) out = number<T>(program_, key, s);
   }
   // Reports arguments nobody took; false if there were any.
   bool done() const {

@@ -224,11 +224,11 @@ int main(int argc, char** argv) {
     if (const char* v = value("--scene=")) {
       opt.scenes.push_back(v);
     } else if (const char* v = value("--local=")) {
-      opt.local = std::stoul(v);
+      opt.local = bench::number<size_t>("bench_raycast", "local", v);
     } else if (const char* v = value("--rays_log2=")) {
-      opt.rays_log2 = std::stoi(v);
+      opt.rays_log2 = bench::number<int>("bench_raycast", "rays_log2", v);
     } else if (const char* v = value("--trials=")) {
-      opt.trials = std::max(1, std::stoi(v));
+      opt.trials = std::max(1, bench::number<int>("bench_raycast", "trials", v));
     } else {
       std::fprintf(stderr, "bench_raycast: unknown argument '%s'\n", a.c_str());
       return 2;

@@ -87,7 +87,7 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   Options opt;
   bench::Args args(argc, argv, "bench_sort");
-  for (const std::string& s : args.take_all("log2")) opt.log2s.push_back(std::stoi(s));
+  for (const std::string& s : args.take_all("log2")) opt.log2s.push_back(bench::number<int>("bench_sort", "log2", s));
   args.take_number("trials", opt.trials);
   args.take_number("peer_trials", opt.peer_trials);
   if (!args.done()) return 2;
