@@ -256,7 +256,8 @@ int main(int argc, char** argv) {
   if (args.take("methods", s)) {
     // The default filtered methods to keep (pt always runs).
     std::set<std::string> keep;
-    for (std::stringstream in(s); std::getline(in, s, ',');) keep.insert(s);
+    for (std::stringstream in(s); std::getline(in, s, ',');)
+      if (!s.empty()) keep.insert(s);
     for (const std::string& name : keep)
       if (name == "pt" || std::none_of(g_methods.begin(), g_methods.end(), [&](const Method& m) { return m.name == name; })) {
         std::fprintf(stderr, "bench_quality: --methods: %s is not one of psf, psf2, psf4, psf8\n", name.c_str());
@@ -271,6 +272,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_quality: --repeats=%d: expected at least 1\n", g_repeats);
     return 2;
   }
+  benchmark::AddCustomContext("repeats", std::to_string(g_repeats) + " render(s) per point up to 64 spp, 1 above");
   for (const std::string& spec : args.take_all("method")) {
     Method m;
     if (!parse_method(spec, m)) return 2;
