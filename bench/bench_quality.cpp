@@ -25,7 +25,7 @@
 //   shared with other work, wall time depends on their load, CPU time much less.
 // Goals: >= 10x lower relMSE than pt at equal time at 4 spp; never worse at 1024.
 // Side-by-side images (pt | psf | psf2 | reference, the whole image or a crop)
-// at the --crops spp counts go to --images (default <build>/quality).
+// at the --crops spp counts (--crops= for none) go to --images (default <build>/quality).
 //
 // A scene is skipped when it has no light (e.g. the living-room while its envmap
 // is not supported) or no reference.
