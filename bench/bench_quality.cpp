@@ -82,6 +82,12 @@ struct Method {
 // (batch=N: batches of 2^N paths, --batch-log2 N).
 std::vector<Method> g_methods = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
 
+// A whole decimal number of at most `digits` digits, or -1.
+int whole_number(const std::string& t, size_t digits) {
+  if (t.empty() || t.size() > digits || t.find_first_not_of("0123456789") != std::string::npos) return -1;
+  return std::stoi(t);
+}
+
 // Parses --method's value; false (with a message) when it is malformed.
 bool parse_method(const std::string& spec, Method& m) {
   std::vector<std::string> parts;
@@ -89,11 +95,7 @@ bool parse_method(const std::string& spec, Method& m) {
   std::string item;
   while (std::getline(in, item, ':')) parts.push_back(item);
   m = {"", true, 1};
-  // A whole decimal number, or -1.
-  auto number = [](const std::string& t) {
-    if (t.empty() || t.size() > 3 || t.find_first_not_of("0123456789") != std::string::npos) return -1;
-    return std::stoi(t);
-  };
+  auto number = [](const std::string& t) { return whole_number(t, 3); };
   // Names are letters and digits (they become parts of benchmark and counter
   // names) and differ from every other method's: a shared name would mix their results.
   bool ok = parts.size() >= 2 && !parts[0].empty() &&
@@ -160,12 +162,13 @@ std::vector<int> parse_list(const char* key, const std::string& s) {
   std::string item;
   while (std::getline(in, item, ',')) {
     if (item.empty()) continue;
-    if (item.size() > 9 || item.find_first_not_of("0123456789") != std::string::npos || std::stoi(item) < 1) {
+    const int n = whole_number(item, 9);
+    if (n < 1) {
       std::fprintf(stderr, "bench_quality: --%s=%s: expected spp counts (1 or more) separated by commas\n", key,
                    s.c_str());
       std::exit(2);
     }
-    v.push_back(std::stoi(item));
+    v.push_back(n);
   }
   return v;
 }

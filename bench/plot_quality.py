@@ -43,6 +43,7 @@ def main():
     labels = {"pt": "path tracing", "psf": "path space filtering", "psf2": "path space filtering, 2 iterations",
               "psf4": "path space filtering, 4 iterations", "psf8": "path space filtering, 8 iterations"}
     order = ["pt", "psf", "psf2", "psf4", "psf8"]  # then bench_quality --method's, by name
+    ctx = data.get("context", {})
     for scene, methods in curves.items():
         fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=110)
         for name in order + sorted(set(methods) - set(order)):
@@ -50,7 +51,7 @@ def main():
             if not pts:
                 continue
             # A --method's options are in the context block (method_NAME).
-            extra = data.get("context", {}).get("method_" + name)
+            extra = ctx.get("method_" + name)
             label = labels.get(name, "%s: %s" % (name, extra) if extra else name)
             ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", ms=3, label=label)
             for t, e, spp in pts:
@@ -58,7 +59,6 @@ def main():
                     ax.annotate("%d spp" % spp, (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7)
         ax.set_xlabel("wall time of the render (s)" if args.time == "wall" else "CPU time of the render (s)")
         ax.set_ylabel("relMSE")
-        ctx = data.get("context", {})
         ax.set_title("%s: relMSE against %s time\n(%s compute units, %s)" % (
             scene, args.time, ctx.get("psf_compute_units", "?"), ctx.get("psf_device", "").split(" / ")[-1]),
             fontsize=9)
