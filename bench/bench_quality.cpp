@@ -13,7 +13,8 @@
 // quality/<scene>/<method>/spp:<N>: one render of N spp (N = 1, 2, 4, ... up to
 //   the scene's maximum: --max_spp, default 1024, living-room 16), its wall time
 //   (RenderResult::seconds, median of 3 renders for N <= 64; also the process's
-//   CPU time, which shows contention) and relMSE: the convergence curve
+//   CPU time, which shows contention) and relMSE (the mean over the renders,
+//   each with its own seed, and their range): the convergence curve
 //   (bench/plot_quality.py plots it).
 //   The curve is measured interleaved (every method at 1 spp, then at 2, ...).
 // equal_time/<scene>/spp:<N> for N in --equal (default 4,16,64,1024): the wall
@@ -32,11 +33,15 @@
 //
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
 //                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64] [--time=wall|cpu]
-//                      [--method=NAME:PASSES[:demodulate][:batch=N] ...] [--methods=psf,psf2,...]
+//                      [--method=NAME:PASSES[:demodulate][:batch=N][:visibility=off] ...] [--methods=psf,psf2,...]
 //                      [--repeats=N]
 // --methods keeps only the named ones of the default filtered methods (psf, psf2,
 // psf4, psf8; pt always runs); --repeats sets the renders per point up to 64 spp
 // (default 3; one above): the living room at 64 spp takes minutes per render.
+// Repeat k renders with --seed k, and a point's relMSE is the mean over its
+// repeats: a filtered render's relMSE at a few spp varies by up to 1.5x from seed
+// to seed (the Cornell box's 16 passes at 3 spp: 0.0031-0.0045 over 8 seeds),
+// plain path tracing's by a few per cent.
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
 
@@ -75,11 +80,12 @@ struct Method {
   int iterations;           // averaging passes
   bool demodulate = false;  // --demodulate
   int batch_log2 = 0;       // --batch-log2; 0: the renderer's default
+  bool visibility_off = false;  // --visibility-ray off
 };
 // psf4, psf8: 4 and 8 passes, since the passes after the first average over the
 // first's records instead of searching (filter.cl filter_lists) and cost a fraction of it.
-// --method=NAME:PASSES[:demodulate][:batch=N] adds a filtered method with those options
-// (batch=N: batches of 2^N paths, --batch-log2 N).
+// --method=NAME:PASSES[:demodulate][:batch=N][:visibility=off] adds a filtered method
+// with those options (batch=N: batches of 2^N paths, --batch-log2 N).
 std::vector<Method> g_methods = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
 
 // A whole decimal number of at most `digits` digits, or -1.
@@ -105,12 +111,14 @@ bool parse_method(const std::string& spec, Method& m) {
   for (size_t k = 2; ok && k < parts.size(); ++k) {
     if (parts[k] == "demodulate") m.demodulate = true;
     else if (parts[k].rfind("batch=", 0) == 0) ok = (m.batch_log2 = number(parts[k].substr(6))) >= 6 && m.batch_log2 <= 26;
+    else if (parts[k] == "visibility=off") m.visibility_off = true;
     else ok = false;
   }
   ok = ok && m.iterations >= 1 && m.iterations <= 64;
   if (!ok)
     std::fprintf(stderr,
-                 "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N], NAME letters and digits "
+                 "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N][:visibility=off], NAME "
+                 "letters and digits "
                  "and not another method's, PASSES 1-64, batches of 2^N paths with N 6-26\n",
                  spec.c_str());
   return ok;
@@ -126,8 +134,9 @@ struct Point {
   double cpu_seconds = 0;  // CPU time of this process (all threads), the least of the repeats: less
                            // sensitive to other processes on the machine (contention shows as cpu << wall * cores)
   double cost = 0;         // what equal time compares: min_seconds, or cpu_seconds with --time=cpu
-  double relmse = 0;
-  psf::Image image;
+  double relmse = 0;      // mean over the repeats (seeds 0, 1, ...)
+  double relmse_min = 0, relmse_max = 0;  // the repeats' least and largest
+  psf::Image image;       // seed 0's
 };
 
 struct Bench {
@@ -183,28 +192,35 @@ psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t se
   o.filter.iterations = m.iterations;
   o.filter.demodulate = m.demodulate;
   if (m.batch_log2 > 0) o.batch_log2 = m.batch_log2;
+  if (m.visibility_off) o.filter.visibility_ray = psf::kVisibilityRayOff;
   return o;
 }
 
-// Renders `spp` with method m (median time of `repeats` renders; they are identical images).
+// Renders `spp` with method m `repeats` times, repeat k with seed k: the median
+// and least times, and the mean relMSE.
 Point render(psf::Runtime& rt, Bench& b, const Method& m, int spp, int repeats) {
   std::vector<std::pair<double, double>> t;  // (wall, cpu)
   Point p;
   p.spp = spp;
+  double sum = 0;
   for (int k = 0; k < repeats; ++k) {
     double c0 = cpu_seconds();
-    psf::RenderResult r = b.renderer->render(options(b, m, spp));
+    psf::RenderResult r = b.renderer->render(options(b, m, spp, uint32_t(k)));
     rt.finish();
     t.push_back({r.seconds, cpu_seconds() - c0});
+    const double e = relmse(r.image, b.reference);
+    sum += e;
+    p.relmse_min = k == 0 ? e : std::min(p.relmse_min, e);
+    p.relmse_max = k == 0 ? e : std::max(p.relmse_max, e);
     if (k == 0) p.image = std::move(r.image);
   }
+  p.relmse = sum / repeats;
   std::sort(t.begin(), t.end());
   p.seconds = t[t.size() / 2].first;
   p.min_seconds = t.front().first;
   p.cpu_seconds = t.front().second;
   for (const auto& w : t) p.cpu_seconds = std::min(p.cpu_seconds, w.second);
   p.cost = g_cpu_time ? p.cpu_seconds : p.min_seconds;
-  p.relmse = relmse(p.image, b.reference);
   return p;
 }
 
@@ -275,14 +291,17 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_quality: --repeats=%d: expected at least 1\n", g_repeats);
     return 2;
   }
-  benchmark::AddCustomContext("repeats", std::to_string(g_repeats) + " render(s) per point up to 64 spp, 1 above");
+  benchmark::AddCustomContext("repeats", std::to_string(g_repeats) +
+                                             " render(s) per point up to 64 spp (seeds 0, 1, ...; relMSE their mean), "
+                                             "1 above"); 
   for (const std::string& spec : args.take_all("method")) {
     Method m;
     if (!parse_method(spec, m)) return 2;
     g_methods.push_back(m);
     benchmark::AddCustomContext("method_" + m.name, std::to_string(m.iterations) + " passes" +
                                                         (m.demodulate ? ", --demodulate" : "") +
-                                                        (m.batch_log2 ? ", batches of 2^" + std::to_string(m.batch_log2) : ""));
+                                                        (m.batch_log2 ? ", batches of 2^" + std::to_string(m.batch_log2) : "") +
+                                                        (m.visibility_off ? ", --visibility-ray off" : ""));
   }
   if (args.take("time", s)) {
     if (s != "wall" && s != "cpu") {
@@ -378,8 +397,10 @@ int main(int argc, char** argv) {
           state.counters["relMSE"] = p.relmse;
           state.counters["min_seconds"] = p.min_seconds;
           state.counters["cpu_seconds"] = p.cpu_seconds;
-          report("%s: wall %.3f s (min %.3f s), CPU %.3f s, relMSE %.5g\n", bname.c_str(), p.seconds, p.min_seconds,
-                 p.cpu_seconds, p.relmse);
+          state.counters["relMSE_min"] = p.relmse_min;
+          state.counters["relMSE_max"] = p.relmse_max;
+          report("%s: wall %.3f s (min %.3f s), CPU %.3f s, relMSE %.5g (seeds: %.5g-%.5g)\n", bname.c_str(),
+                 p.seconds, p.min_seconds, p.cpu_seconds, p.relmse, p.relmse_min, p.relmse_max);
           b->points[m.name][spp] = std::move(p);
         })->UseManualTime()->Iterations(1)->Unit(benchmark::kMillisecond);
       }

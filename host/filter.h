@@ -13,6 +13,8 @@ namespace psf {
 // FilterOptions::visibility_ray chosen by the scene: a hemisphere ray where the only
 // light is an environment, the light sample otherwise (--visibility-ray auto).
 constexpr float kVisibilityRayAuto = -1.0f;
+// FilterOptions::visibility_ray for no visibility test at all (--visibility-ray off).
+constexpr float kVisibilityRayOff = -2.0f;
 
 struct FilterOptions {
   bool enabled = true;            // --filter psf (true) or off
@@ -37,7 +39,10 @@ struct FilterOptions {
   bool cells27 = false;           // cells of size r (3x3 rows along x searched) instead of 2r (2x2 rows)
   // > 0: similar vertices agree on whether one hemisphere ray of this length (scene
   // units) hits something (kernels/visibility.cl); 0: on their light sample's
-  // visibility; kVisibilityRayAuto: by the scene (Renderer::visibility_ray).
+  // visibility; kVisibilityRayAuto: by the scene (Renderer::visibility_ray);
+  // kVisibilityRayOff: similar vertices need not agree on visibility (shadows blur
+  // over the ball, and penumbrae lose the noise of their light samples'
+  // visibility, which the test keeps: each vertex averages only those that agree).
   float visibility_ray = kVisibilityRayAuto;
   // Filtering switches itself off for the rest of the render after a batch in
   // which it removed less than this fraction of the noise (render.h

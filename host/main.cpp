@@ -245,6 +245,7 @@ int run_render(const RenderArgs& a) {
   if (a.fopt.demodulate && a.albedo_threshold_given) opt.filter.albedo_log2_tol = a.fopt.albedo_tol;
   opt.filter.visibility_ray = a.visibility_ray == "auto"    ? psf::kVisibilityRayAuto
                               : a.visibility_ray == "light" ? 0.0f
+                              : a.visibility_ray == "off"   ? psf::kVisibilityRayOff
                                                             : float(std::strtod(a.visibility_ray.c_str(), nullptr));
   opt.filter.enabled = a.filter == "psf";
   opt.filter.foreshortening = a.foreshortening == "on";
@@ -403,8 +404,9 @@ int main(int argc, char** argv) {
   render->add_option("--visibility-ray", ra.visibility_ray,
                      "Similar vertices agree on: LENGTH, whether one hemisphere ray of this length (scene units) "
                      "hits something; light, their light sample's visibility; auto (default): a ray of 1 % of the "
-                     "scene's size where the only light is an environment, else light")
-      ->check(CLI::IsMember({"auto", "light"}) | finite_number(0.0, kFloatMax, true));
+                     "scene's size where the only light is an environment, else light; off: they need not agree "
+                     "(no shadow edge stops the average; penumbrae lose their light samples' noise)")
+      ->check(CLI::IsMember({"auto", "light", "off"}) | finite_number(0.0, kFloatMax, true));
   render->add_flag("--demodulate", ra.fopt.demodulate,
                    "Texture-preserving averaging: of c / albedo, times the vertex's own albedo, over neighbours "
                    "whose albedo differs by a ratio (--albedo-threshold in log2 units)");

@@ -567,6 +567,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     fp.count = p.batch_size;
     fp.cells27 = o.filter.cells27 ? 1u : 0u;
     fp.stretch = o.filter.foreshortening && !(o.filter.r0 > 0.0f) ? 1u : 0u;
+    fp.ignore_visibility = o.filter.visibility_ray == kVisibilityRayOff ? 1u : 0u;
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
   }

@@ -58,6 +58,7 @@ std::string options_text(const RenderOptions& o) {
   if (o.filter.enabled) {
     s << " visibility_ray=";
     if (o.filter.visibility_ray == kVisibilityRayAuto) s << "auto";
+    else if (o.filter.visibility_ray == kVisibilityRayOff) s << "off";
     else s << o.filter.visibility_ray;
   }
   s << " aovs=" << o.aovs;

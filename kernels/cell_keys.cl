@@ -151,8 +151,11 @@ inline int3 cell_of(float3 x, float size, float split) {
 }
 
 /* The filter's tag of a vertex with radius r > 0: 4 level + 2 light-sample
- * visibility (filter.cl adds the bit of a finite value). */
-inline int vertex_tag(float r, float4 normal) { return 4 * vertex_level(r) + (normal.w != 0.0f ? 2 : 0); }
+ * visibility (filter.cl adds the bit of a finite value); the visibility counts
+ * as 0 for all with FilterParams.ignore_visibility. */
+inline int vertex_tag(FilterParams p, float r, float4 normal) {
+  return 4 * vertex_level(r) + (normal.w != 0.0f && !p.ignore_visibility ? 2 : 0);
+}
 
 /* The key's class of a vertex: 2 level + visibility, the tag's upper bits. */
 inline int tag_key_class(int tag) { return tag >> 1; }
@@ -187,7 +190,7 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
     }
     int level = vertex_level(r);
     int3 c = cell_of(x.xyz, cell_size(level, p.cells27), cell_x_split(p.cells27));
-    keys[i] = cell_key(tag_key_class(vertex_tag(r, vertices[i].normal)), c.x, c.y, c.z,
+    keys[i] = cell_key(tag_key_class(vertex_tag(p, r, vertices[i].normal)), c.x, c.y, c.z,
                        cell_key_layout(p.key_bits, p.cells27), p.key_bits);
     return;
   }
@@ -206,7 +209,7 @@ __kernel void cell_keys(FilterParams p, uint lanes, __global const PathVertex* v
   float8 r = vertex_radius8(p, d, s);
   int8 level = vertex_level8(r);
   float8 inv = 1.0f / cell_size8(level, p.cells27);
-  int8 key_class = 2 * level + (v != 0.0f ? 1 : 0); /* tag_key_class */
+  int8 key_class = 2 * level + (p.ignore_visibility ? (int8)(0) : (v != 0.0f ? 1 : 0)); /* tag_key_class */
   uint8 key = cell_key8(key_class, cell_coord8(x, inv * cell_x_split(p.cells27)), cell_coord8(y, inv),
                         cell_coord8(z, inv), cell_key_layout(p.key_bits, p.cells27), p.key_bits);
   key = r == 0.0f ? (uint8)(1u << p.key_bits) : key;

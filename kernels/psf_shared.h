@@ -472,7 +472,7 @@ typedef struct {
   psf_uint key_bits; /* cell keys lie in [0, 2^key_bits) */
   psf_uint cells27;  /* 1: cells of size r searched 3x3x3; 0: cells of size 2r searched 2x2x2 */
   psf_uint stretch;  /* 1: r0_i is multiplied by the vertex's footprint stretch (albedo.w; --foreshortening) */
-  psf_uint pad0;     /* padding */
+  psf_uint ignore_visibility; /* 1: similar vertices need not agree on visibility (--visibility-ray off) */
   psf_uint demodulate; /* 1: average c_j / albedo_j and compare albedos as log2 ratios (PSF_DEMODULATE_MIN) */
   psf_uint pad2;
 } FilterParams;

@@ -58,7 +58,7 @@ inline void demodulate_tuple(float4* a, float4* c) {
     ag.s##k = aj.y;                                                                      \
     ab.s##k = aj.z;                                                                      \
     r.s##k = rj;                                                                         \
-    tag.s##k = vertex_tag(rj, nj) | finite;                                              \
+    tag.s##k = vertex_tag(p, rj, nj) | finite;                                           \
     cr.s##k = cj.x;                                                                      \
     cg.s##k = cj.y;                                                                      \
     cb.s##k = cj.z;                                                                      \
@@ -87,7 +87,7 @@ __kernel void gather_tuples(FilterParams p, uint stride, uint lanes, __global co
     sorted[PSF_SORTED_AR * stride + i] = aj.x;
     sorted[PSF_SORTED_AG * stride + i] = aj.y;
     sorted[PSF_SORTED_AB * stride + i] = aj.z;
-    sorted_tags[i] = vertex_tag(rj, nj) | finite;
+    sorted_tags[i] = vertex_tag(p, rj, nj) | finite;
     sorted[PSF_SORTED_R * stride + i] = rj;
     sorted_values[i] = cj.x;
     sorted_values[stride + i] = cj.y;

@@ -28,7 +28,7 @@ struct Reference {
 // (r0 > 0 ? r0 : d_i footprint) (stretch ? s_i : 1) n_scale, s_i the vertex's
 // footprint stretch (albedo.w); the grid level ceil(log2 r_i) must
 // match; |x_j - x_i| < r_i; <n_i, n_j> >= cos; |albedo_i - albedo_j| <= tol;
-// equal visibility; finite c_j; the centre always counts. With p.demodulate:
+// equal visibility (unless p.ignore_visibility); finite c_j; the centre always counts. With p.demodulate:
 // m = max(albedo, 0.01) per channel; the average is of c_j / m_j, times m_i at
 // the end, and |log2 m_i - log2 m_j| <= tol replaces the albedo test.
 Reference brute_force(const std::vector<PathVertex>& v, const std::vector<cl_float4>& c, const FilterParams& p,
@@ -73,7 +73,7 @@ Reference brute_force(const std::vector<PathVertex>& v, const std::vector<cl_flo
           bool finite = std::isfinite(ref.values[j].s[0]) && std::isfinite(ref.values[j].s[1]) &&
                         std::isfinite(ref.values[j].s[2]);
           use = d2 < r[i] * r[i] && n_dot >= p.normal_cos && a2 <= p.albedo_tol * p.albedo_tol &&
-                v[j].normal.s[3] == v[i].normal.s[3] && finite;
+                (p.ignore_visibility || v[j].normal.s[3] == v[i].normal.s[3]) && finite;
         }
         if (use) {
           for (int k = 0; k < 3; ++k) sum[k] += ref.values[j].s[k];
@@ -317,6 +317,30 @@ TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation"
           p.footprint = footprint;
           check_same(brute_force(v, c, p, 1), run_filter(v, c, p, 1));
         }
+      }
+    }
+  }
+}
+
+TEST_CASE("Filter: without the visibility test (--visibility-ray off) averages equal the brute-force equation",
+          "[filter]") {
+  // A fifth of random_tuples' vertices do not see their light: with the test off
+  // they count as neighbours of those that do, and the counts grow.
+  FilterParams p = default_params();
+  p.ignore_visibility = 1;
+  for (int iterations : {1, 3}) {
+    for (auto [n, seed] : {std::pair{3001, 41u}, std::pair{1, 42u}, std::pair{200, 43u}}) {
+      INFO("n " << n << " iterations " << iterations);
+      auto v = random_tuples(n, seed, 1.0f);
+      auto c = random_values(n, seed + 100);
+      const Reference ref = brute_force(v, c, p, iterations);
+      check_same(ref, run_filter(v, c, p, iterations));
+      if (n > 1000) {
+        FilterParams with_test = p;
+        with_test.ignore_visibility = 0;
+        const Reference r = brute_force(v, c, with_test, iterations);
+        CHECK(std::accumulate(ref.counts.begin(), ref.counts.end(), size_t(0)) >
+              std::accumulate(r.counts.begin(), r.counts.end(), size_t(0)) * 11 / 10);
       }
     }
   }
