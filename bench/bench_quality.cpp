@@ -33,7 +33,8 @@
 //
 // Usage: bench_quality [benchmark flags] [--scene=PATH ...] [--equal=4,16,64,1024] [--max_spp=N]
 //                      [--ref_spp=N] [--ref_refresh=1] [--images=DIR] [--crops=4,64] [--time=wall|cpu]
-//                      [--method=NAME:PASSES[:demodulate][:batch=N][:visibility=off] ...] [--methods=psf,psf2,...]
+//                      [--method=NAME:PASSES[:demodulate][:batch=N][:visibility=off][:emission=K] ...]
+//                      [--methods=psf,psf2,...]
 //                      [--repeats=N]
 // --methods keeps only the named ones of the default filtered methods (psf, psf2,
 // psf4, psf8; pt always runs); --repeats sets the renders per point up to 64 spp
@@ -81,11 +82,13 @@ struct Method {
   bool demodulate = false;  // --demodulate
   int batch_log2 = 0;       // --batch-log2; 0: the renderer's default
   bool visibility_off = false;  // --visibility-ray off
+  int emission_rays = 0;        // --emission-rays
 };
 // psf4, psf8: 4 and 8 passes, since the passes after the first average over the
 // first's records instead of searching (filter.cl filter_lists) and cost a fraction of it.
-// --method=NAME:PASSES[:demodulate][:batch=N][:visibility=off] adds a filtered method
-// with those options (batch=N: batches of 2^N paths, --batch-log2 N).
+// --method=NAME:PASSES[:demodulate][:batch=N][:visibility=off][:emission=K] adds a
+// method with those options (batch=N: batches of 2^N paths, --batch-log2 N;
+// emission=K: --emission-rays K); 0 passes: plain path tracing with them.
 std::vector<Method> g_methods = {{"pt", false, 1}, {"psf", true, 1}, {"psf2", true, 2}, {"psf4", true, 4}, {"psf8", true, 8}};
 
 // A whole decimal number of at most `digits` digits, or -1.
@@ -112,14 +115,17 @@ bool parse_method(const std::string& spec, Method& m) {
     if (parts[k] == "demodulate") m.demodulate = true;
     else if (parts[k].rfind("batch=", 0) == 0) ok = (m.batch_log2 = number(parts[k].substr(6))) >= 6 && m.batch_log2 <= 26;
     else if (parts[k] == "visibility=off") m.visibility_off = true;
+    else if (parts[k].rfind("emission=", 0) == 0) ok = (m.emission_rays = number(parts[k].substr(9))) >= 1 && m.emission_rays <= 64;
     else ok = false;
   }
-  ok = ok && m.iterations >= 1 && m.iterations <= 64;
+  ok = ok && m.iterations >= 0 && m.iterations <= 64;
+  m.filter = m.iterations > 0;
+  m.iterations = std::max(m.iterations, 1);
   if (!ok)
     std::fprintf(stderr,
-                 "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N][:visibility=off], NAME "
-                 "letters and digits "
-                 "and not another method's, PASSES 1-64, batches of 2^N paths with N 6-26\n",
+                 "bench_quality: --method=%s: expected NAME:PASSES[:demodulate][:batch=N][:visibility=off][:emission=K], "
+                 "NAME letters and digits "
+                 "and not another method's, PASSES 0-64 (0: plain path tracing), batches of 2^N paths with N 6-26, K 1-64\n",
                  spec.c_str());
   return ok;
 }
@@ -193,6 +199,7 @@ psf::RenderOptions options(const Bench& b, const Method& m, int spp, uint32_t se
   o.filter.demodulate = m.demodulate;
   if (m.batch_log2 > 0) o.batch_log2 = m.batch_log2;
   if (m.visibility_off) o.filter.visibility_ray = psf::kVisibilityRayOff;
+  o.emission_rays = m.emission_rays;
   return o;
 }
 
@@ -298,10 +305,11 @@ int main(int argc, char** argv) {
     Method m;
     if (!parse_method(spec, m)) return 2;
     g_methods.push_back(m);
-    benchmark::AddCustomContext("method_" + m.name, std::to_string(m.iterations) + " passes" +
+    benchmark::AddCustomContext("method_" + m.name, (m.filter ? std::to_string(m.iterations) + " passes" : "plain") +
                                                         (m.demodulate ? ", --demodulate" : "") +
                                                         (m.batch_log2 ? ", batches of 2^" + std::to_string(m.batch_log2) : "") +
-                                                        (m.visibility_off ? ", --visibility-ray off" : ""));
+                                                        (m.visibility_off ? ", --visibility-ray off" : "") +
+                                                        (m.emission_rays ? ", --emission-rays " + std::to_string(m.emission_rays) : ""));
   }
   if (args.take("time", s)) {
     if (s != "wall" && s != "cpu") {
@@ -415,7 +423,7 @@ int main(int argc, char** argv) {
         std::map<std::string, Point> best;
         for (auto _ : state) {
           for (const Method& m : g_methods) {
-            if (!m.filter) continue;
+            if (m.name == "pt") continue;  // the baseline
             auto& mp = pts[m.name];
             if (!mp.count(n)) mp[n] = render(rt, *b, m, n, repeats_for(n));
             // s: the largest spp count whose wall time stays within 1.1x pt's (at
@@ -447,7 +455,7 @@ int main(int argc, char** argv) {
         std::string line;
         char buf[256];
         for (const Method& m : g_methods) {
-          if (!m.filter) continue;
+          if (m.name == "pt") continue;
           const Point& q = best[m.name];
           std::string k = m.name;
           double gain = q.relmse > 0 ? pt.relmse / q.relmse : 0;
@@ -465,7 +473,7 @@ int main(int argc, char** argv) {
         auto goal = [&](const char* what, double target) {
           std::string verdicts;
           for (const Method& m : g_methods)
-            if (m.filter)
+            if (m.name != "pt")
               verdicts += std::string(verdicts.empty() ? " " : ", ") + m.name +
                           (state.counters[m.name + "_gain"] >= target ? " met" : " NOT met");
           report("%s: goal %s:%s\n", bname.c_str(), what, verdicts.c_str());

@@ -92,6 +92,7 @@ struct RenderArgs {
   int width = 0, height = 0;           // 0: the scene's film
   int max_depth = -2;                  // -2: the scene's integrator
   uint32_t seed = 0;
+  int emission_rays = 0;               // --emission-rays K
   bool stats = false, quiet = false, no_png = false;
   double time = 0;                     // --time seconds
   double checkpoint_seconds = 30;      // --checkpoint-seconds
@@ -238,6 +239,7 @@ int run_render(const RenderArgs& a) {
   psf::RenderOptions opt;
   opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
   opt.seed = a.seed;
+  opt.emission_rays = a.emission_rays;
   opt.per_path = a.path_kernels == "per-path" ? 1 : a.path_kernels == "wavefront" ? 0 : -1;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.rr_depth = scene.rr_depth;
@@ -379,6 +381,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(-1, 1 << 16));
   render->add_option("--seed", ra.seed, "Sampling seed: the image is a deterministic function of it");
   render->add_option("--device", ra.device, "Device index or name substring (default: first GPU, else CPU)");
+  render->add_option("--emission-rays", ra.emission_rays,
+                     "K more camera rays per path that only add the emission they see (lights, the sky): the "
+                     "edges of lights and windows get (K + 1) times the samples, filtered or not (0)")
+      ->check(CLI::Range(0, 64));
   render->add_option("--filter", ra.filter, "psf: path space filtering (default); off: plain path tracing")
       ->check(CLI::IsMember({"psf", "off"}));
   render->add_option("--alpha", ra.fopt.alpha, "Radius exponent: r(n) = r0 / n^alpha, n paths per pixel so far (0.25)")

@@ -26,6 +26,8 @@ struct RenderOptions {
                              // many are left (0: never; -1: by device kind, 1/16 of the batch on GPUs, never
                              // on CPUs). The image is the same either way.
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
+  int emission_rays = 0;     // more camera rays per path for the emission seen directly (kernels/emission.cl;
+                             // none where the camera sits in a medium)
   bool keep_last_batch = false;  // return the last batch's tuples (tests)
   bool aovs = false;         // also accumulate albedo, normal and depth of the filtering vertices
 };

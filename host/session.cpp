@@ -48,6 +48,7 @@ std::string options_text(const RenderOptions& o) {
   std::ostringstream s;
   s << "seed=" << o.seed << " max_depth=" << o.max_depth << " rr_depth=" << o.rr_depth
     << " filter=" << (o.filter.enabled ? "psf" : "off");
+  if (o.emission_rays > 0) s << " emission_rays=" << o.emission_rays;
   if (o.filter.enabled)
     s << " alpha=" << o.filter.alpha << " r0=" << o.filter.r0 << " footprint=" << o.filter.footprint_pixels
       << " foreshortening=" << o.filter.foreshortening

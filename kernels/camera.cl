@@ -55,27 +55,28 @@ inline float pixel_filter_offset(Camera c, float u) {
   return (2.0f * u - 1.0f) * (c.filter_a > 0.0f ? c.filter_a : 0.5f);
 }
 
-__kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
-                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays,
-                          __global uint* queue) {
-  uint j = get_global_id(0);
-  if (j >= params.batch_size) return;
+/* A path's place on the film: its pixel in the batch's image, that pixel's
+ * sample number, and the film pixel's coordinates (the image's pixel offset by
+ * its crop window's corner). A pixel's samples are keyed by its place in the
+ * film, so that a crop window renders the film's pixels as a render of the whole
+ * film does. */
+inline uint camera_film_pixel(FrameParams params, Camera camera, uint j, uint* sample, uint* fx, uint* fy) {
   ulong pixels = (ulong)params.width * (ulong)params.height;
   ulong g = frame_first_path(params) + (ulong)j;
   uint pixel = (uint)(g % pixels);
-  uint sample = (uint)(g / pixels);
-  /* Film coordinates: the image's pixel, offset by its crop window's corner. A
-   * pixel's samples are keyed by its place in the film, so that a crop window
-   * renders the film's pixels as a render of the whole film does. */
-  uint fx = pixel % params.width + (uint)camera.right.w, fy = pixel / params.width + (uint)camera.down.w;
-  uint film_pixel = fy * camera.width + fx;
-  const uint key = pixel_seed(params.seed, film_pixel);
-  /* Dimensions 0-7 drawn together (one pass over the sample index's bits,
-   * sampling.cl): the pixel's two, and the lens's. */
+  *sample = (uint)(g / pixels);
+  *fx = pixel % params.width + (uint)camera.right.w;
+  *fy = pixel / params.width + (uint)camera.down.w;
+  return *fy * camera.width + *fx;
+}
+
+/* The camera ray through film pixel (fx, fy) for the sample's dimensions u8
+ * (PSF_DIM_PIXEL on): s0, s1 place it around the pixel's centre, s2, s3 on the
+ * lens. */
+inline Ray camera_ray(Camera camera, uint fx, uint fy, float8 u8) {
 #if PSF_DIM_LENS != PSF_DIM_PIXEL + 2
 #error "the lens dimensions are read as u8.s2 and u8.s3"
 #endif
-  float8 u8 = sample_8d_keyed(sobol, key, sample, PSF_DIM_PIXEL);
   float u = u8.s0, v = u8.s1;
   float s = ((float)fx + 0.5f + pixel_filter_offset(camera, u)) / (float)camera.width + camera.shift_s;
   float t = ((float)fy + 0.5f + pixel_filter_offset(camera, v)) / (float)camera.height + camera.shift_t;
@@ -99,6 +100,21 @@ __kernel void camera_rays(FrameParams params, Camera camera, __global const uint
   Ray r;
   r.org = (float4)(org, camera.origin.w * inv_cos);
   r.dir = (float4)(d, camera.forward.w * inv_cos);
+  return r;
+}
+
+__kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
+                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays,
+                          __global uint* queue) {
+  uint j = get_global_id(0);
+  if (j >= params.batch_size) return;
+  uint sample, fx, fy;
+  uint film_pixel = camera_film_pixel(params, camera, j, &sample, &fx, &fy);
+  /* Dimensions 0-7 drawn together (one pass over the sample index's bits,
+   * sampling.cl): the pixel's two, and the lens's. */
+  const float8 u8 = sample_8d_keyed(sobol, pixel_seed(params.seed, film_pixel), sample, PSF_DIM_PIXEL);
+  Ray r = camera_ray(camera, fx, fy, u8);
+  float3 org = r.org.xyz;
   rays[j] = r;
   queue[j] = j;
   PathState st;

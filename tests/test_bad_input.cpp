@@ -212,7 +212,8 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
                           "--fov nan", "--alpha nan", "--r0 nan", "--r0 1e40", "--footprint-pixels inf",
                           "--normal-threshold nan", "--albedo-threshold -0.1", "--visibility-ray nan",
                           "--visibility-ray -1", "--visibility-ray 1e-50", "--r0 1e-45", "--min-removed nan",
-                          "--time nan", "--checkpoint-seconds nan"}) {
+                          "--time nan", "--checkpoint-seconds nan", "--emission-rays -1", "--emission-rays 65",
+                          "--visibility-ray of"}) {
     SECTION(opt) {
       Outcome o = render(bad("degenerate.obj"), opt);
       INFO(o.run.output);

@@ -411,3 +411,63 @@ TEST_CASE("Render: a camera inside a medium sees through it", "[render]") {
 )", 4, -1).image;
   for (float v : img.rgb) REQUIRE(v == Approx(std::exp(-0.75f)).epsilon(1e-3));
 }
+
+TEST_CASE("Render: --emission-rays: the emission seen directly from more camera rays, unbiased", "[render]") {
+  // An emitting square [-1, 1]^2 (Le = 4) facing a pinhole camera 5 units away
+  // whose 30 degree field of view spans 2 * 5 tan(15 deg) = 2.679 units: the
+  // square covers (2 / 2.679)^2 = 0.5572 of the film, nothing else is there, and
+  // the box filter keeps each sample in its pixel, so the image's mean is 4 x
+  // that. Its edges cross pixels at fractions of their width.
+  const std::string path = psf::test::temp_dir("render-xml") + "/emission-rays.xml";
+  std::ofstream(path) << R"(<scene version="3.0.0">
+  <sensor type="perspective">
+    <float name="fov" value="30"/>
+    <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="4, 4, 4"/></emitter></shape>
+</scene>
+)";
+  psf::Scene s = psf::load_scene(path);
+  psf::Renderer r(psf::test::runtime(), s);
+  psf::RenderOptions o;
+  o.filter.enabled = false;
+  const double covered = std::pow(2.0 / (10.0 * std::tan(15.0 * M_PI / 180.0)), 2.0);
+
+  // K = 1 at 1 spp: a path's emission is the mean of its own ray's and one more
+  // ray's, so every pixel is 0, 2 or 4; a value between would mean ray 0 was not
+  // the ray the path traced (delta would not cancel its emission).
+  o.spp = 1;
+  o.emission_rays = 1;
+  size_t halves = 0;
+  for (float v : r.render(o).image.rgb) {
+    const bool allowed = std::fabs(v) < 1e-5f || std::fabs(v - 2.0f) < 1e-5f || std::fabs(v - 4.0f) < 1e-5f;
+    REQUIRE(allowed);
+    halves += std::fabs(v - 2.0f) < 1e-5f ? 1 : 0;
+  }
+  CHECK(halves > 0);  // some edge pixel's two rays disagree
+
+  // The reference: 1024 plain samples per pixel; its mean is the covered area's.
+  o.emission_rays = 0;
+  o.spp = 1024;
+  const psf::Image ref = r.render(o).image;
+  CHECK(mean(ref) == Approx(4.0 * covered).epsilon(1e-3));
+  // At 4 spp, 3 more rays per path: the same mean (unbiased), and the edge
+  // pixels' squared error against the reference much lower than plain 4 spp's.
+  o.spp = 4;
+  auto squared_error = [&](const psf::Image& img) {
+    double e = 0.0;
+    for (size_t i = 0; i < img.rgb.size(); ++i) e += (img.rgb[i] - ref.rgb[i]) * (img.rgb[i] - ref.rgb[i]);
+    return e;
+  };
+  const psf::Image plain = r.render(o).image;
+  o.emission_rays = 3;
+  const psf::RenderResult more = r.render(o);
+  CHECK(mean(more.image) == Approx(4.0 * covered).epsilon(5e-3));
+  INFO("squared error, 4 spp: plain " << squared_error(plain) << ", 3 more rays " << squared_error(more.image));
+  CHECK(squared_error(more.image) < 0.4 * squared_error(plain));
+  // Filtered, the unfiltered layer is the plain render's with the same rays.
+  o.filter.enabled = true;
+  CHECK(r.render(o).unfiltered.rgb == more.image.rgb);
+}
