@@ -28,6 +28,8 @@ struct RenderOptions {
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
   int emission_rays = 0;     // more camera rays per path for the emission seen directly (kernels/emission.cl;
                              // none where the camera sits in a medium)
+  bool emission_recast = false;  // tests: cast each path's own camera ray again instead of taking the
+                                 // emission it found from its state (the same image)
   bool keep_last_batch = false;  // return the last batch's tuples (tests)
   bool aovs = false;         // also accumulate albedo, normal and depth of the filtering vertices
 };

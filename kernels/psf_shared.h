@@ -402,7 +402,8 @@ typedef struct {
 /* The state of one path of the wavefront between kernel stages. */
 typedef struct {
   psf_float4 throughput; /* xyz throughput from the filtering vertex (from the camera before it); w: solid-angle pdf of the last BSDF sample */
-  psf_float4 radiance;   /* xyz radiance gathered before the filtering vertex, its own emission included */
+  psf_float4 radiance;   /* xyz radiance gathered before the filtering vertex, its own emission included; */
+                         /* w: 0 while it is only what the camera ray hit emits (shade.cl add_radiance_seen) */
   psf_float4 vertex_radiance; /* xyz c: radiance scattered at the filtering vertex towards the camera */
   psf_float4 pending;    /* xyz next-event contribution awaiting its shadow ray; w: with FrameParams.null_media, */
                          /* the medium the shadow ray starts in (as PathState.flags' upper bits; a uint's bits) */

@@ -247,8 +247,20 @@ inline bool depth_allows(FrameParams p, uint segments) { return (int)p.max_depth
 
 /* Adds a contribution to the prefix or, past the filtering vertex, to c. */
 inline void add_radiance(PathState* st, float3 c) {
-  if (st->flags & PSF_PATH_VERTEX) st->vertex_radiance.xyz += c;
-  else st->radiance.xyz += c;
+  if (st->flags & PSF_PATH_VERTEX) {
+    st->vertex_radiance.xyz += c;
+  } else {
+    st->radiance.xyz += c;
+    st->radiance.w = 1.0f; /* more than the camera ray's emission (add_radiance_seen) */
+  }
+}
+
+/* The emission the camera ray adds where it hits a light or escapes: while
+ * radiance.w stays 0, radiance.xyz is exactly that (throughput and MIS weight 1),
+ * which emission.cl takes instead of casting the ray again. */
+inline void add_radiance_seen(PathState* st, float3 c) {
+  if (st->depth == 0u && !(st->flags & (PSF_PATH_VERTEX | PSF_PATH_NULL_CROSSED))) st->radiance.xyz += c;
+  else add_radiance(st, c);
 }
 
 /* The medium (PathState.flags' upper bits) of a path that leaves a surface on
@@ -433,7 +445,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
       bool mis = st.depth > 0u && !(st.flags & PSF_PATH_SPECULAR);
       float3 radiance = env_radiance_pdf(env, env_data, d, mis ? &pdf : 0);
       if (mis) w = power_heuristic(st.throughput.w, env.scale.w * pdf);
-      add_radiance(&st, st.throughput.xyz * radiance * w);
+      add_radiance_seen(&st, st.throughput.xyz * radiance * w);
     }
     st.flags &= ~PSF_PATH_ALIVE;
     shadow_rays[k] = shadow;
@@ -474,7 +486,7 @@ inline __attribute__((always_inline)) bool shade_path_inline(
                                                    st.prev_pos.xyz, light_dist, fabs(dot(ng, wo)))
                               : emitter_pdf_hit(tri_light_pdf, hit.prim, light_dist, fabs(dot(ng, wo))));
     }
-    add_radiance(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
+    add_radiance_seen(&st, beta * surface_emission(m, tri_attribs + hit.prim, hit.u, hit.v, textures, texels) * w);
   }
 
   /* A blend's choice of BSDF (surface.cl), by a hash of the path and bounce (not a

@@ -467,7 +467,23 @@ TEST_CASE("Render: --emission-rays: the emission seen directly from more camera 
   CHECK(mean(more.image) == Approx(4.0 * covered).epsilon(5e-3));
   INFO("squared error, 4 spp: plain " << squared_error(plain) << ", 3 more rays " << squared_error(more.image));
   CHECK(squared_error(more.image) < 0.4 * squared_error(plain));
+  // Ray 0's emission taken from the path's state is what casting it again finds,
+  // bit for bit (shade.cl and emission.cl agree on hits, front faces and values).
+  o.emission_recast = true;
+  CHECK(r.render(o).image.rgb == more.image.rgb);
+  o.emission_recast = false;
   // Filtered, the unfiltered layer is the plain render's with the same rays.
   o.filter.enabled = true;
   CHECK(r.render(o).unfiltered.rgb == more.image.rgb);
+  // So also in the Cornell box (its light's edge, paths that add more than the
+  // light they see), filtered.
+  psf::Scene box =
+      psf::load_scene(psf::test::source_path("scenes/cornell-box.xml"), {{"res", "32"}, {"spp", "4"}});
+  psf::Renderer rb(psf::test::runtime(), box);
+  const psf::RenderResult from_state = rb.render(o);
+  o.emission_recast = true;
+  const psf::RenderResult cast_again = rb.render(o);
+  CHECK(from_state.image.rgb == cast_again.image.rgb);
+  o.emission_rays = 0;
+  CHECK(rb.render(o).image.rgb != cast_again.image.rgb);
 }
