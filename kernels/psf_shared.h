@@ -515,12 +515,15 @@ typedef struct {
  * the first pass records, for each query, the vectors of candidates it took
  * neighbours from, and the later passes sum those again instead of searching; a
  * query with more such vectors, or one further from the query in cell order than
- * a record can say, searches again. A list is PSF_FILTER_LIST_WORDS uints (two
- * cache lines, so that the few records most queries have share the first line
- * with the count): the count, PSF_FILTER_LIST records of one uint each (the
- * vector's first index minus the query's, above the lanes taken), and the sink of
- * the branch-free appends. */
-#define PSF_FILTER_LIST_WORDS 32u
+ * a record can say, searches again. A list is PSF_FILTER_LIST_WORDS uints (four
+ * cache lines; the few records most queries have share the first with the
+ * count): the count, PSF_FILTER_LIST records of one uint each (the vector's
+ * first index minus the query's, above the lanes taken), and the sink of the
+ * branch-free appends. 62 records rather than 30: a batch of 64 spp of the
+ * Cornell box (about 50 neighbours a vertex) overflowed most lists of 30, and
+ * its 15 later passes took 11.1 s instead of 2.6 s; at 3 spp both take the
+ * same (20.5 against 20.9 ms). */
+#define PSF_FILTER_LIST_WORDS 64u
 #define PSF_FILTER_LIST (PSF_FILTER_LIST_WORDS - 2u)
 
 #endif /* PSF_SHARED_H */

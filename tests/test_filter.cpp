@@ -548,7 +548,7 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     // vectors of candidates hold, so those search again) beside spread tuples
     // (a few neighbours: recorded); four passes over both.
     auto v = random_tuples(2000, 47, 1.0f);
-    auto dense = random_tuples(4000, 48, 0.01f);
+    auto dense = random_tuples(10000, 48, 0.01f);
     for (auto& t : dense) t.position.s[0] += 2.0f;
     v.insert(v.end(), dense.begin(), dense.end());
     auto c = random_values(v.size(), 49);
