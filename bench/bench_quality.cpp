@@ -12,7 +12,7 @@
 //   (--ref_refresh=1 renders it again; delete it after renderer changes).
 // quality/<scene>/<method>/spp:<N>: one render of N spp (N = 1, 2, 4, ... up to
 //   the scene's maximum: --max_spp, default 1024, living-room 16), its wall time
-//   (RenderResult::seconds, median of 3 renders for N <= 64; also the process's
+//   (RenderResult::seconds, median of --repeats renders for N <= 64; also the process's
 //   CPU time, which shows contention) and relMSE (the mean over the renders,
 //   each with its own seed, and their range): the convergence curve
 //   (bench/plot_quality.py plots it).
@@ -300,7 +300,7 @@ int main(int argc, char** argv) {
   }
   benchmark::AddCustomContext("repeats", std::to_string(g_repeats) +
                                              " render(s) per point up to 64 spp (seeds 0, 1, ...; relMSE their mean), "
-                                             "1 above"); 
+                                             "1 above");
   for (const std::string& spec : args.take_all("method")) {
     Method m;
     if (!parse_method(spec, m)) return 2;

@@ -541,10 +541,10 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
               cl_uint(o.emission_recast || p.null_media ? 0 : 1), s.tri_pos, s.tri_material, s.materials, s.env,
               s.env_data, s.caster->nodes(), s.caster->packs(), cl_uint(s.caster->masked() ? 1 : 0), s.tri_attribs,
               s.textures, s.texels, states);
+    const float weight = 1.0f / float(k + 1);
     for (uint32_t m = 1; m <= k; ++m) {
       rt.launch("emission_rays", p.batch_size, L, p, s.camera, s.sobol, m, k, b.rays[0]);
       s.caster->closest(b.rays[0], hits, p.batch_size);
-      const float weight = 1.0f / float(k + 1);
       rt.launch("emission_add", p.batch_size, L, p, weight, s.tri_pos, s.tri_material, s.materials, s.env,
                 s.env_data, s.tri_attribs, s.textures, s.texels, b.rays[0], hits, states);
     }

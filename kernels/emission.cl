@@ -78,7 +78,7 @@ __kernel void emission_own(FrameParams params, Camera camera, __global const uin
     const uint key = pixel_seed(params.seed, camera_film_pixel(params, camera, j, &sample, &fx, &fy));
     const Ray ray = camera_ray(camera, fx, fy, sample_8d_keyed(sobol, key, sample, PSF_DIM_PIXEL));
     AlphaScene as = {tri_material, materials, tri_attribs, textures, texels, 0};
-    const Hit hit = masked ? intersect_closest_alpha(nodes, packs, ray, &as) : intersect_closest(nodes, packs, ray);
+    const Hit hit = intersect_closest_alpha(nodes, packs, ray, masked ? &as : 0); /* as trace_paths casts */
     own = emission_seen(params, ray, hit, tri_pos, tri_material, materials, env, env_data, tri_attribs, textures,
                         texels);
   }
