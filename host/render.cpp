@@ -614,8 +614,9 @@ RenderResult Renderer::render(const RenderOptions& o) {
   const uint64_t pixels = uint64_t(scene.width) * scene.height;
   const uint64_t total = pixels * uint64_t(std::max(o.spp, 0));
   bool filtering = o.filter.enabled;
+  const int batch_log2 = o.batch_log2 > 0 ? o.batch_log2 : default_batch_log2(pixels);
   BatchPlan plan = plan_batch(batch_needs(filtering, o.aovs, o.filter.iterations), fixed_bytes(), rt.device().global_mem,
-                              rt.device().max_alloc, 0, o.batch_log2, std::min(o.batch_log2, 6));
+                              rt.device().max_alloc, 0, batch_log2, std::min(batch_log2, 6));
   prepare(o, plan.log2, total);
   RenderResult r;
   Accumulator acc;

@@ -18,7 +18,7 @@ struct RenderOptions {
   uint32_t seed = 0;         // scrambling seed: the render is a function of it
   int max_depth = -1;        // path segments, Mitsuba's convention; -1 unbounded
   int rr_depth = 5;          // Russian roulette from this many segments on
-  int batch_log2 = 20;       // paths per batch: 2^batch_log2 (capped by device memory)
+  int batch_log2 = 0;        // paths per batch: 2^batch_log2 (capped by device memory); 0: default_batch_log2
   int per_path = -1;         // 1: each path in one work-item (trace_paths); 0: the wavefront; -1: per path
                              // on CPU devices for scenes without an environment map, else the wavefront.
                              // The image is the same either way.

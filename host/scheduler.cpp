@@ -69,4 +69,10 @@ BatchPlan plan_batch(const std::vector<BufferNeed>& needs, uint64_t fixed, uint6
                            format_bytes(limit) + (budget ? " (--memory-budget)" : " (device memory)"));
 }
 
+int default_batch_log2(uint64_t pixels) {
+  int m = 20;
+  while (m < 22 && (uint64_t(1) << m) < pixels * kDefaultBatchSpp) ++m;
+  return m;
+}
+
 }  // namespace psf

@@ -298,7 +298,9 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   const auto needs = Renderer::batch_needs(ro.filter.enabled, ro.aovs, ro.filter.iterations);
   BatchPlan plan;
   try {
-    int most = o.resume.empty() ? o.max_batch_log2 : resumed.batch_log2;
+    const int most_default = o.max_batch_log2 > 0 ? o.max_batch_log2
+                                                  : default_batch_log2(uint64_t(scene.width) * scene.height);
+    int most = o.resume.empty() ? most_default : resumed.batch_log2;
     int least = o.resume.empty() ? 6 : resumed.batch_log2;
     plan = plan_batch(needs, renderers[0]->fixed_bytes(), global_mem, max_alloc, o.memory_budget, most, least);
   } catch (const std::runtime_error& e) {

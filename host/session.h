@@ -20,7 +20,7 @@ struct SessionOptions {
   double time_limit = 0;           // --time: stop after the batch that reaches it (0: none)
   double checkpoint_seconds = 30;  // --checkpoint-seconds: rewrite the output this often (0: only at the end)
   uint64_t memory_budget = 0;      // --memory-budget in bytes (0: the device's memory)
-  int max_batch_log2 = 20;         // largest batch: 2^20 paths
+  int max_batch_log2 = 0;          // largest batch: 2^N paths (0: default_batch_log2 of the image)
   std::string output;              // the EXR
   std::string png;                 // the PNG preview ("" none)
   std::string resume;              // --resume: an EXR written by an earlier run

@@ -47,3 +47,13 @@ TEST_CASE("Scheduler: the batch is the largest 2^m that fits every limit", "[sch
                       Catch::Contains("--memory-budget"));
   }
 }
+
+TEST_CASE("Scheduler: the default batch holds 4 spp of the image, 2^20 to 2^22 paths", "[scheduler]") {
+  CHECK(psf::default_batch_log2(1) == 20);
+  CHECK(psf::default_batch_log2(256 * 256) == 20);        // 16 spp per batch
+  CHECK(psf::default_batch_log2(512 * 512) == 20);        // exactly 4 spp
+  CHECK(psf::default_batch_log2(512 * 512 + 1) == 21);
+  CHECK(psf::default_batch_log2(1280 * 720) == 22);       // 3.7 M paths: 4.55 spp per batch
+  CHECK(psf::default_batch_log2(3840 * 2160) == 22);      // capped
+  CHECK(psf::default_batch_log2(uint64_t(1) << 40) == 22);
+}
