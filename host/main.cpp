@@ -431,8 +431,10 @@ int main(int argc, char** argv) {
                      "Rewrite the output (atomically) this often while rendering; 0: only at the end (30)")
       ->check(finite_number(0.0, kFloatMax, false, false));
   render->add_option("--memory-budget", ra.memory_budget, "Device memory for the batch buffers, e.g. 256M, 2G");
-  render->add_option("--batch-log2", ra.batch_log2,
-                    "Largest batch: 2^N paths (default: the smallest holding 4 spp of the image, 2^20 to 2^22)")->check(CLI::Range(6, 26));
+  render
+      ->add_option("--batch-log2", ra.batch_log2,
+                   "Largest batch: 2^N paths (default: the smallest holding 4 spp of the image, 2^20 to 2^22)")
+      ->check(CLI::Range(6, 26));
   render->add_option("--path-kernels", ra.path_kernels,
                      "wavefront: a kernel per stage over the live paths; per-path: each path in one work-item; "
                      "auto: per-path on CPU devices for scenes without an environment map (the same image)")
