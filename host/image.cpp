@@ -118,9 +118,13 @@ void check_writable(const std::string& path_in) {
     return;
   }
   if (p.filename().empty()) throw std::invalid_argument(path + ": output path names a folder, not a file");
-  if (fs::is_directory(p)) throw std::invalid_argument(path + ": output path is a folder");
+  std::error_code ec;  // a name the system refuses (too long, a loop of links): its reason
+  if (fs::is_directory(p, ec)) throw std::invalid_argument(path + ": output path is a folder");
   fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
-  if (!fs::is_directory(dir)) throw std::invalid_argument(path + ": folder " + dir.string() + " does not exist");
+  if (!fs::is_directory(dir, ec))
+    throw std::invalid_argument(path + ": folder " + dir.string() +
+                                (ec && ec != std::errc::no_such_file_or_directory ? ": " + ec.message()
+                                                                                  : std::string(" does not exist")));
   if (access(dir.c_str(), W_OK) != 0) throw std::invalid_argument(path + ": folder " + dir.string() + " is not writable");
   // access() says yes to root and on read-only file systems: create (and remove) the
   // temporary file a write would use, so the check is the write's own.

@@ -153,8 +153,9 @@ std::string override_camera(const RenderArgs& a, psf::CameraDesc& cam) {
 
 int run_render(const RenderArgs& a) {
   namespace fs = std::filesystem;
-  if (!fs::exists(a.scene)) {
-    std::cerr << "psf: " << a.scene << ": no such file\n";
+  std::error_code ec;
+  if (!fs::exists(a.scene, ec)) {
+    std::cerr << "psf: " << a.scene << ": " << (ec ? ec.message() : std::string("no such file")) << "\n";
     return kExitBadInput;
   }
   std::vector<std::pair<std::string, std::string>> params;
@@ -180,7 +181,17 @@ int run_render(const RenderArgs& a) {
               << (a.no_png ? "" : ", and its PNG preview goes beside it with the extension .png") << "; name it .exr\n";
     return kExitBadInput;
   }
-  if (a.output.empty()) fs::create_directories("out");
+  if (a.output.empty() && (fs::create_directories("out", ec), ec)) {
+    std::cerr << "psf: cannot create the output folder out: " << ec.message() << "\n";
+    return kExitBadInput;
+  }
+  // The output replaces its file at the end: never the scene file itself.
+  for (const std::string& written : {out, png})
+    if (fs::equivalent(written, a.scene, ec) && (written == out || !a.no_png)) {
+      std::cerr << "psf: --output " << out << ": " << (written == out ? "the image" : "its PNG preview " + png)
+                << " would replace the scene file " << a.scene << "\n";
+      return kExitBadInput;
+    }
   try {
     psf::check_writable(out);
     if (!a.no_png) psf::check_writable(png);
@@ -474,6 +485,9 @@ int main(int argc, char** argv) {
     return kExitFailure;
   } catch (const std::invalid_argument& e) {
     std::cerr << "psf: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::filesystem::filesystem_error& e) {  // a path given that the system refuses
+    std::cerr << "psf: " << e.path1().string() << ": " << e.code().message() << "\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
     std::cerr << "psf: " << e.what() << "\n";

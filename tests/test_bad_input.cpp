@@ -297,6 +297,53 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     CHECK(contains(again.output, "it already holds 4 spp, more than --spp 2"));
     CHECK(read_file(out) == before);
   }
+  SECTION("the output names the scene file: refused, the scene untouched") {
+    fs::copy_file(bad("degenerate.obj"), dir / "scene.obj");
+    const std::string before = read_file(dir / "scene.obj");
+    for (const std::string& extra : {"--no-png -o " + (dir / "scene.obj").string(),
+                                     "-o " + (dir / "." / "scene.obj").string()}) {
+      Run r = run("render " + (dir / "scene.obj").string() + " --spp 1 --width 8 --height 8 " + extra);
+      INFO(r.output);
+      CHECK(r.status == 2);
+      CHECK(contains(r.output, "would replace the scene file"));
+      CHECK(read_file(dir / "scene.obj") == before);
+    }
+  }
+  SECTION("names the system refuses (too long, a loop of links) give exit 2, not a std::filesystem error") {
+    // From fuzzing: std::filesystem's throwing calls turned these into exit 1
+    // with "filesystem error: status: File name too long".
+    const std::string long_name(300, 'x');
+    Run scene = run("render " + (dir / (long_name + ".xml")).string() + " --spp 1");
+    INFO(scene.output);
+    CHECK(scene.status == 2);
+    CHECK(contains(scene.output, "File name too long"));
+    fs::create_directory_symlink("loop", dir / "loop");
+    Run out = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 -o " +
+                  (dir / "loop" / "x.exr").string());
+    INFO(out.output);
+    CHECK(out.status == 2);
+    CHECK(contains(out.output, "symbolic links"));
+    std::ofstream(dir / "include.xml") << "<scene version=\"3.0.0\">\n<include filename=\"" << long_name
+                                       << ".xml\"/>\n</scene>\n";
+    Outcome inc = render((dir / "include.xml").string());
+    require_clear_error(inc, "include.xml:2: included file");
+    CHECK(contains(inc.run.output, "File name too long"));
+    std::ofstream(dir / "mesh.xml") << "<scene version=\"3.0.0\">\n<shape type=\"ply\"><string name=\"filename\" "
+                                    << "value=\"loop/m.ply\"/></shape>\n</scene>\n";
+    Outcome mesh = render((dir / "mesh.xml").string());
+    require_clear_error(mesh, "mesh.xml:2: cannot open PLY file");
+  }
+  SECTION("the default output folder out/ is a file") {
+    fs::path work = dir / "cwd";
+    fs::create_directories(work);
+    std::ofstream(work / "out") << "a file";
+    Run r = psf::test::run_psf("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8",
+                               "cd " + work.string() + " && timeout -k 10 300");
+    INFO(r.output);
+    CHECK(r.status == 2);
+    CHECK(contains(r.output, "cannot create the output folder out"));
+    CHECK(read_file(work / "out") == "a file");
+  }
   SECTION("--resume of a file that is not OpenEXR") {
     Outcome o = render(bad("degenerate.obj"), "--resume " + bad("not-an-exr.exr"));
     INFO(o.run.output);

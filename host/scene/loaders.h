@@ -14,8 +14,9 @@ namespace psf::detail {
 
 // What is wrong with reading `path` whole as scene input: "" for a regular file
 // (or one that does not exist: the reader's own message names that), else "is a
-// folder" or "is not a regular file" (a device such as /dev/zero or a FIFO,
-// which would never end or never answer).
+// folder", "is not a regular file" (a device such as /dev/zero or a FIFO,
+// which would never end or never answer) or "cannot be read: <reason>" (a name
+// the system refuses: too long, a loop of symbolic links).
 std::string unreadable_input(const std::string& path);
 // Throws SceneError(path, 0, "<what> <unreadable_input>") where that is not "".
 void require_readable_input(const std::string& path, const std::string& what);

@@ -154,6 +154,30 @@ float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c 
 // ---------------------------------------------------------------------------
 namespace {
 
+// Paths named in a scene, asked without throwing: a name the system refuses
+// (too long, a loop of symbolic links) is an error of the scene's, with its
+// file:line, not a std::filesystem exception.
+bool is_file(const std::string& path) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec);
+}
+
+// ": <the system's reason>" where asking about `path` fails for a reason other
+// than its absence, else "".
+std::string why_unopenable(const std::string& path) {
+  std::error_code ec;
+  (void)fs::status(path, ec);
+  return ec && ec != std::errc::no_such_file_or_directory ? ": " + ec.message() : "";
+}
+
+// The path made absolute and free of . and .., for include cycles; the path
+// itself where the system cannot resolve it.
+std::string canonical_name(const std::string& path) {
+  std::error_code ec;
+  fs::path p = fs::weakly_canonical(path, ec);
+  return ec ? path : p.string();
+}
+
 std::string_view trim(std::string_view s) {
   while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
   while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
@@ -315,7 +339,7 @@ class MitsubaLoader {
     version_major_ = std::atoi(version.c_str());
 
     std::vector<pugi::xml_node> top;
-    std::vector<std::string> include_stack = {fs::weakly_canonical(path).string()};
+    std::vector<std::string> include_stack = {canonical_name(path)};
     collect(root, top, include_stack);
     for (pugi::xml_node node : top) index_ids(node);
     resolve_aliases();
@@ -374,7 +398,8 @@ class MitsubaLoader {
   // --- files, locations, messages -----------------------------------------
 
   XmlFile& open(const std::string& path, pugi::xml_node from) {
-    if (fs::is_directory(path)) {
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) {
       if (from) fail(from, "included file '" + path + "' is a folder");
       throw SceneError(path, 0, "is a folder, not a scene file");
     }
@@ -446,9 +471,12 @@ class MitsubaLoader {
     fs::path p(name);
     if (p.is_absolute()) return p.string();
     fs::path local = directory_of(node) / p;
-    if (fs::exists(local)) return local.string();
+    // Paths the system refuses (a name too long, a loop of links) count as
+    // absent here; opening them then fails with file:line.
+    std::error_code ec;
+    if (fs::exists(local, ec)) return local.string();
     fs::path main = fs::path(files_.front()->path).parent_path() / p;
-    return fs::exists(main) ? main.string() : local.string();
+    return fs::exists(main, ec) ? main.string() : local.string();
   }
 
   // --- attributes and $parameters -----------------------------------------
@@ -545,7 +573,7 @@ class MitsubaLoader {
         params_.emplace(name, required_attr(child, "value"));
       } else if (tag == "include") {
         std::string path = resolve(child, required_attr(child, "filename"));
-        std::string canonical = fs::weakly_canonical(path).string();
+        std::string canonical = canonical_name(path);
         if (std::find(include_stack.begin(), include_stack.end(), canonical) != include_stack.end())
           fail(child, "'" + path + "' includes itself");
         XmlFile& file = open(path, child);
@@ -1428,7 +1456,7 @@ class MitsubaLoader {
     std::optional<std::string> name = get_string(e, "filename");
     if (!name) fail(e.node, "<shape type=\"obj\"> needs a 'filename'");
     std::string path = resolve(e.node, *name);
-    if (!fs::is_regular_file(path)) fail(e.node, "cannot open OBJ file '" + path + "'");
+    if (!is_file(path)) fail(e.node, "cannot open OBJ file '" + path + "'" + why_unopenable(path));
     ObjData obj = read_obj(path, false);
     for (const std::string& w : obj.warnings) scene_.warnings.push_back(where(e.node) + ": " + w);
     TriMesh mesh = std::move(obj.mesh);
@@ -1446,7 +1474,7 @@ class MitsubaLoader {
     std::optional<std::string> name = get_string(e, "filename");
     if (!name) fail(e.node, "<shape type=\"serialized\"> needs a 'filename'");
     std::string path = resolve(e.node, *name);
-    if (!fs::is_regular_file(path)) fail(e.node, "cannot open serialized mesh file '" + path + "'");
+    if (!is_file(path)) fail(e.node, "cannot open serialized mesh file '" + path + "'" + why_unopenable(path));
     SerializedMesh s = read_serialized(path, get_int(e, "shape_index", 0));
     // As for OBJ: face normals (asked for by the file or by face_normals) discard
     // the file's normals; without any, Mitsuba computes smooth ones.
@@ -1459,7 +1487,7 @@ class MitsubaLoader {
     std::optional<std::string> name = get_string(e, "filename");
     if (!name) fail(e.node, "<shape type=\"ply\"> needs a 'filename'");
     std::string path = resolve(e.node, *name);
-    if (!fs::is_regular_file(path)) fail(e.node, "cannot open PLY file '" + path + "'");
+    if (!is_file(path)) fail(e.node, "cannot open PLY file '" + path + "'" + why_unopenable(path));
     PlyMesh ply = read_ply(path);
     if (!ply.ignored.empty()) {
       std::string list;

@@ -16,6 +16,9 @@ namespace detail {
 std::string unreadable_input(const std::string& path) {
   std::error_code ec;
   const std::filesystem::file_status st = std::filesystem::status(path, ec);  // through symbolic links
+  // A name the system refuses (too long, a loop of symbolic links): its reason.
+  if (ec && ec != std::errc::no_such_file_or_directory && ec != std::errc::not_a_directory)
+    return "cannot be read: " + ec.message();
   if (ec || !std::filesystem::exists(st) || std::filesystem::is_regular_file(st)) return "";
   return std::filesystem::is_directory(st) ? "is a folder" : "is not a regular file";
 }
