@@ -79,6 +79,7 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"film-zero.xml", "film-zero.xml:5:"},
       {"film-negative.xml", "film-negative.xml:5:"},
       {"nan-transform.xml", "nan-transform.xml:3:"},
+      {"medium-negative.xml", "medium-negative.xml:5: the medium's sigma_a and sigma_s must be >= 0"},
       {"missing-mesh.xml", "no-such-mesh.obj"},
       {"integer-overflow.xml", "integer-overflow.xml:4:"},
       {"bad-serialized.xml", "index-out-of-range.serialized"},

@@ -1548,6 +1548,8 @@ class MitsubaLoader {
     if (find(e, "sigma_a") || find(e, "sigma_s")) {
       const glm::vec3 a = get_color(e, "sigma_a", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
       const glm::vec3 sc = get_color(e, "sigma_s", ColorUse::Unbounded).value_or(glm::vec3(0.0f));
+      if (!glm::all(glm::greaterThanEqual(glm::min(a, sc), glm::vec3(0.0f))))
+        fail(node, "the medium's sigma_a and sigma_s must be >= 0");
       m.sigma_t = a + sc;
       for (int i = 0; i < 3; ++i) m.albedo[i] = sc[i] > 0 ? sc[i] / m.sigma_t[i] : 0.0f;
     } else {
