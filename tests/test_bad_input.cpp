@@ -299,7 +299,7 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     CHECK(read_file(out) == before);
   }
   SECTION("the output names the scene file: refused, the scene untouched") {
-    fs::copy_file(bad("degenerate.obj"), dir / "scene.obj");
+    fs::copy_file(bad("degenerate.obj"), dir / "scene.obj", fs::copy_options::overwrite_existing);
     const std::string before = read_file(dir / "scene.obj");
     for (const std::string& extra : {"--no-png -o " + (dir / "scene.obj").string(),
                                      "-o " + (dir / "." / "scene.obj").string()}) {
@@ -318,6 +318,7 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
     INFO(scene.output);
     CHECK(scene.status == 2);
     CHECK(contains(scene.output, "File name too long"));
+    fs::remove(dir / "loop");  // a folder of an earlier process with this pid
     fs::create_directory_symlink("loop", dir / "loop");
     Run out = run("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8 -o " +
                   (dir / "loop" / "x.exr").string());
@@ -336,6 +337,7 @@ TEST_CASE("Bad input: absurd options and output paths give exit 2 and damage not
   }
   SECTION("the default output folder out/ is a file") {
     fs::path work = dir / "cwd";
+    fs::remove_all(work);
     fs::create_directories(work);
     std::ofstream(work / "out") << "a file";
     Run r = psf::test::run_psf("render " + bad("degenerate.obj") + " --spp 1 --width 8 --height 8",
