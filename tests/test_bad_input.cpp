@@ -98,6 +98,8 @@ TEST_CASE("Bad input: malformed and truncated scene files give exit 2 naming the
       {"nan-vertex.gltf", "nan-vertex.gltf:"},
       {"index-out-of-range.gltf", "index-out-of-range.gltf:"},
       {"accessor-past-buffer.gltf", "accessor-past-buffer.gltf:"},
+      {"accessor-negative-offset.gltf", "accessor-negative-offset.gltf: accessors[0].byteOffset: -12"},
+      {"texture-sampler-missing.gltf", "texture-sampler-missing.gltf: textures[0].sampler: 5 names no sampler"},
       {"missing-buffer.gltf", "missing.bin"},
       // counts and offsets near 2^64, which wrapped around in the bounds check
       {"accessor-count-wrap.gltf", "accessor-count-wrap.gltf: accessors[0]: 6148914691236517206 elements"},

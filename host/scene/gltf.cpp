@@ -90,6 +90,7 @@ class GltfLoader {
     if (text.size() > size_t(std::numeric_limits<unsigned int>::max()))
       throw SceneError(path_, 0, "glTF parse error: the file is too large");
     check_json_depth(text, binary);
+    check_json_fields(text, binary);
     const std::string prepared = prepare_compressed(text, binary);
     loader.SetImageLoader(load_png_or_jpeg, nullptr);
     // External buffers and images: regular files only (a uri "." or /dev/zero
@@ -310,6 +311,50 @@ class GltfLoader {
     std::memcpy(&out[8], &total, 4);
     std::memcpy(&out[12], &length, 4);
     return out + json + rest;
+  }
+
+  // What tinygltf takes without a word though the specification forbids it: a
+  // negative byte offset, length or stride (read as 0: another part of the
+  // buffer) and a texture's sampler index past the samplers (the default
+  // sampler). Each is an error naming the element. Malformed JSON is left for
+  // tinygltf to report.
+  void check_json_fields(const std::string& text, bool binary) const {
+    size_t begin = 0, end = text.size();
+    if (binary) {  // header (12 bytes), the JSON chunk's length and type, its text
+      uint32_t length = 0;
+      if (text.size() < 20) return;
+      std::memcpy(&length, text.data() + 12, 4);
+      begin = 20;
+      end = std::min(text.size(), size_t(20) + length);
+    }
+    const nlohmann::json j = nlohmann::json::parse(text.begin() + std::ptrdiff_t(begin),
+                                                   text.begin() + std::ptrdiff_t(end), nullptr, false);
+    if (!j.is_object()) return;
+    auto elements = [&](const char* key) {
+      auto it = j.find(key);
+      return it != j.end() && it->is_array() ? &*it : nullptr;
+    };
+    auto require_count = [&](const char* array, size_t k, const nlohmann::json& e, const char* field) {
+      auto it = e.find(field);
+      if (it == e.end() || it->is_number_unsigned()) return;
+      throw SceneError(path_, 0, std::string(array) + "[" + std::to_string(k) + "]." + field + ": " + it->dump() +
+                                     " is not a count of bytes (an integer >= 0)");
+    };
+    for (const char* array : {"accessors", "bufferViews"})
+      if (const nlohmann::json* a = elements(array))
+        for (size_t k = 0; k < a->size(); ++k)
+          if ((*a)[k].is_object())
+            for (const char* field : {"byteOffset", "byteLength", "byteStride"}) require_count(array, k, (*a)[k], field);
+    const nlohmann::json* samplers = elements("samplers");
+    if (const nlohmann::json* textures = elements("textures"))
+      for (size_t k = 0; k < textures->size(); ++k) {
+        if (!(*textures)[k].is_object()) continue;
+        auto it = (*textures)[k].find("sampler");
+        if (it == (*textures)[k].end()) continue;
+        if (!it->is_number_unsigned() || it->get<uint64_t>() >= (samplers ? samplers->size() : 0))
+          throw SceneError(path_, 0, "textures[" + std::to_string(k) + "].sampler: " + it->dump() + " names no sampler (" +
+                                         std::to_string(samplers ? samplers->size() : 0) + " in the file)");
+      }
   }
 
   // The JSON parser tinygltf uses recurses once per nested array or object: a
