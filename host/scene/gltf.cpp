@@ -313,20 +313,23 @@ class GltfLoader {
     return out + json + rest;
   }
 
+  // The JSON text's [begin, end) in the file: a .glb's JSON chunk (after the
+  // header's 12 bytes and the chunk's length and type; cut at the file's end),
+  // else the whole file.
+  static std::pair<size_t, size_t> json_range(const std::string& text, bool binary) {
+    if (!binary || text.size() < 20) return {0, text.size()};
+    uint32_t length = 0;
+    std::memcpy(&length, text.data() + 12, 4);
+    return {20, std::min(text.size(), size_t(20) + length)};
+  }
+
   // What tinygltf takes without a word though the specification forbids it: a
   // negative byte offset, length or stride (read as 0: another part of the
   // buffer) and a texture's sampler index past the samplers (the default
   // sampler). Each is an error naming the element. Malformed JSON is left for
   // tinygltf to report.
   void check_json_fields(const std::string& text, bool binary) const {
-    size_t begin = 0, end = text.size();
-    if (binary) {  // header (12 bytes), the JSON chunk's length and type, its text
-      uint32_t length = 0;
-      if (text.size() < 20) return;
-      std::memcpy(&length, text.data() + 12, 4);
-      begin = 20;
-      end = std::min(text.size(), size_t(20) + length);
-    }
+    const auto [begin, end] = json_range(text, binary);
     const nlohmann::json j = nlohmann::json::parse(text.begin() + std::ptrdiff_t(begin),
                                                    text.begin() + std::ptrdiff_t(end), nullptr, false);
     if (!j.is_object()) return;
@@ -363,13 +366,7 @@ class GltfLoader {
   // brackets outside strings in the JSON (a .glb's JSON chunk).
   void check_json_depth(const std::string& text, bool binary) const {
     constexpr int kMaxJsonDepth = 512;
-    size_t begin = 0, end = text.size();
-    if (binary && text.size() >= 20) {  // header (12 bytes), then the JSON chunk's length and type
-      uint32_t length = 0;
-      std::memcpy(&length, text.data() + 12, 4);
-      begin = 20;
-      end = std::min(text.size(), size_t(20) + length);
-    }
+    const auto [begin, end] = json_range(text, binary);
     int depth = 0, line = 1;
     bool in_string = false, escaped = false;
     for (size_t i = begin; i < end; ++i) {

@@ -162,12 +162,11 @@ bool is_file(const std::string& path) {
   return fs::is_regular_file(path, ec);
 }
 
-// ": <the system's reason>" where asking about `path` fails for a reason other
-// than its absence, else "".
+// ": <unreadable_input's reason>" (a folder, a device, a name the system
+// refuses), else "" (a missing file: the message says enough).
 std::string why_unopenable(const std::string& path) {
-  std::error_code ec;
-  (void)fs::status(path, ec);
-  return ec && ec != std::errc::no_such_file_or_directory ? ": " + ec.message() : "";
+  const std::string why = unreadable_input(path);
+  return why.empty() ? why : ": " + why;
 }
 
 // The path made absolute and free of . and .., for include cycles; the path
