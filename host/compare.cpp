@@ -141,4 +141,81 @@ std::string describe(const BlockStats& s) {
   return out;
 }
 
+float auto_exposure(const Image& image) {
+  // Reinhard et al.'s key: the log-average luminance exp(mean log(1e-4 + L)),
+  // which bright windows and lights move far less than the mean.
+  double sum = 0.0;
+  size_t n = 0;
+  for (size_t i = 0; i < size_t(image.width) * image.height; ++i) {
+    double l = pixel_luminance(image, i);
+    if (!std::isfinite(l)) continue;
+    sum += std::log(1e-4 + std::max(l, 0.0));
+    ++n;
+  }
+  const double key = n > 0 ? std::exp(sum / double(n)) : 0.0;
+  return key > 2e-4 && std::isfinite(0.18 / key) ? float(0.18 / key) : 1.0f;
+}
+
+namespace {
+
+// The linear value that write_png's sRGB encoding turns into display value v.
+float srgb_decode(float v) { return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f); }
+
+// The error panel's colour (display values) for signed error e at full scale range.
+void error_colour(double e, double range, float out[3]) {
+  static const float white[3] = {0.96f, 0.96f, 0.96f};
+  static const float red[3] = {0.84f, 0.13f, 0.11f}, dark_red[3] = {0.45f, 0.03f, 0.03f};
+  static const float blue[3] = {0.13f, 0.35f, 0.76f}, dark_blue[3] = {0.04f, 0.10f, 0.40f};
+  const bool beyond = std::abs(e) > range;
+  const float* full = e >= 0.0 ? (beyond ? dark_red : red) : (beyond ? dark_blue : blue);
+  const float t = beyond ? 1.0f : float(std::abs(e) / range);
+  for (int c = 0; c < 3; ++c) out[c] = white[c] + t * (full[c] - white[c]);
+}
+
+}  // namespace
+
+Image comparison_picture(const Image& test, const Image& ref, const BlockStats& stats, double range, float exposure) {
+  const int w = test.width, h = test.height, bx = stats.blocks_x, by = stats.blocks_y;
+  if (w <= 0 || h <= 0 || ref.width <= 0 || ref.height <= 0)
+    throw std::invalid_argument("comparison picture of an empty image");
+  if (!(range > 0.0)) throw std::invalid_argument("comparison picture: the colour scale's range must be positive");
+  if (bx <= 0 || by <= 0 || stats.test_mean.size() != size_t(bx) * by || stats.ref_mean.size() != stats.test_mean.size())
+    throw std::invalid_argument("comparison picture: block statistics do not match their grid");
+  const bool divides = ref.width % w == 0 && ref.height % h == 0 && ref.width / w == ref.height / h;
+  const Image r = divides ? box_downsample(ref, w, h) : Image{};
+  const int gap = std::max(2, w / 64);
+  Image out;
+  out.width = 3 * w + 2 * gap;
+  out.height = h;
+  out.rgb.assign(size_t(out.width) * h * 3, 1.0f);  // white gaps (write_png clamps to 1)
+  auto put = [&](int x, int y, float a, float b, float c) {
+    float* px = &out.rgb[(size_t(y) * out.width + x) * 3];
+    px[0] = a;
+    px[1] = b;
+    px[2] = c;
+  };
+  const double floor = std::max(1e-3 * stats.ref_overall, 1e-30);  // block_stats' floor
+  for (int y = 0; y < h; ++y) {
+    const int j = int(int64_t(y) * by / h);
+    const bool row_edge = y > 0 && int(int64_t(y - 1) * by / h) != j;
+    for (int x = 0; x < w; ++x) {
+      const float* t = &test.rgb[(size_t(y) * w + x) * 3];
+      put(x, y, t[0] * exposure, t[1] * exposure, t[2] * exposure);
+      const float* q = divides ? &r.rgb[(size_t(y) * w + x) * 3]
+                               : &ref.rgb[(size_t((2 * int64_t(y) + 1) * ref.height / (2 * h)) * ref.width +
+                                           size_t((2 * int64_t(x) + 1) * ref.width / (2 * w))) * 3];
+      put(w + gap + x, y, q[0] * exposure, q[1] * exposure, q[2] * exposure);
+      const int i = int(int64_t(x) * bx / w);
+      const bool col_edge = x > 0 && int(int64_t(x - 1) * bx / w) != i;
+      float c[3] = {0.6f, 0.6f, 0.6f};  // grid lines
+      if (!row_edge && !col_edge) {
+        const size_t b = size_t(j) * bx + i;
+        error_colour((stats.test_mean[b] - stats.ref_mean[b]) / std::max(stats.ref_mean[b], floor), range, c);
+      }
+      put(2 * (w + gap) + x, y, srgb_decode(c[0]), srgb_decode(c[1]), srgb_decode(c[2]));
+    }
+  }
+  return out;
+}
+
 }  // namespace psf

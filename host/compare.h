@@ -53,6 +53,19 @@ Image box_downsample(const Image& image, int width, int height);
 // the grid of per-block errors in percent (rows from the top).
 std::string describe(const BlockStats& stats);
 
+// A picture of a comparison, three panels side by side at the test's size with
+// white gaps between them: the test, the reference (box-filtered to the test's
+// size where the sizes divide evenly, else sampled at the test's pixel centres),
+// both scaled by `exposure`, and the blocks of `stats` coloured by their signed
+// relative difference (test - ref) / ref: white at 0, red where the test is
+// brighter, blue where darker, full at +-range, a darker shade beyond it, grey
+// lines between the blocks. Linear RGB, for write_png at exposure 1.
+Image comparison_picture(const Image& test, const Image& ref, const BlockStats& stats, double range, float exposure);
+
+// The exposure that takes the image's log-average luminance (Reinhard et al.
+// 2002's key) to 0.18, middle grey; 1 where the image is black or not finite.
+float auto_exposure(const Image& image);
+
 // Luminance of linear sRGB (ITU-R BT.709).
 inline double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g + 0.0722 * b; }
 

@@ -325,7 +325,21 @@ int run_render(const RenderArgs& a) {
 // `psf compare TEST REFERENCE`: relMSE, MSE, MAE and MAPE (the reference
 // box-filtered to the test's size when it is an integer multiple of it) and
 // block luminance statistics.
-int run_compare(const std::string& test_path, const std::string& ref_path, int blocks_x, int blocks_y) {
+// With `diff_path`, also a PNG of the two images and the blocks' errors
+// (psf::comparison_picture) at full colour for +-diff_range.
+int run_compare(const std::string& test_path, const std::string& ref_path, int blocks_x, int blocks_y,
+                const std::string& diff_path, double diff_range) {
+  namespace fs = std::filesystem;
+  if (!diff_path.empty()) {  // checked before the work, as render checks -o
+    std::string ext = fs::path(diff_path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    if (ext != ".png") throw std::invalid_argument("--diff " + diff_path + ": the picture is a PNG file (.png)");
+    std::error_code ec;
+    for (const std::string& input : {test_path, ref_path})
+      if (fs::equivalent(diff_path, input, ec))
+        throw std::invalid_argument("--diff " + diff_path + ": would overwrite the image " + input);
+    psf::check_writable(diff_path);
+  }
   // An input that is not a readable OpenEXR image is bad input (exit 2), as for render.
   auto read = [](const std::string& path) {
     try {
@@ -354,7 +368,14 @@ int run_compare(const std::string& test_path, const std::string& ref_path, int b
     std::printf("relMSE: not computed (the reference is not an integer multiple of the test's size)\n");
   }
   if (blocks_x <= 0 || blocks_y <= 0) psf::default_grid(ref, blocks_x, blocks_y);
-  std::printf("%s", psf::describe(psf::block_stats(test, ref, blocks_x, blocks_y)).c_str());
+  const psf::BlockStats stats = psf::block_stats(test, ref, blocks_x, blocks_y);
+  std::printf("%s", psf::describe(stats).c_str());
+  if (!diff_path.empty()) {
+    const float exposure = psf::auto_exposure(ref);
+    psf::write_png(diff_path, psf::comparison_picture(test, ref, stats, diff_range / 100.0, exposure));
+    std::printf("wrote %s: test | reference (exposure %.3g) | block errors, full colour at +-%g %%\n",
+                diff_path.c_str(), exposure, diff_range);
+  }
   return 0;
 }
 
@@ -372,6 +393,13 @@ int main(int argc, char** argv) {
   compare->add_option("test", compare_test, "The render (.exr)")->required()->check(CLI::ExistingFile);
   compare->add_option("reference", compare_ref, "The reference (.exr)")->required()->check(CLI::ExistingFile);
   compare->add_option("--blocks", compare_grid, "Block grid WxH (default 16x9, or 9x16 for portrait images)");
+  std::string compare_diff;
+  double compare_range = 10.0;
+  compare->add_option("--diff", compare_diff,
+                      "Also write a PNG: the test, the reference and the blocks' signed relative errors (red: test "
+                      "brighter, blue: darker)");
+  compare->add_option("--diff-range", compare_range, "Percent error drawn at full colour in --diff's block map (10)")
+      ->check(CLI::PositiveNumber);
 
   RenderArgs ra;
   CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML, OBJ, PLY or glTF) to OpenEXR and PNG");
@@ -476,7 +504,7 @@ int main(int argc, char** argv) {
         std::cerr << "psf: --blocks " << compare_grid << ": expected WxH, e.g. 16x9\n";
         return kExitBadInput;
       }
-      return run_compare(compare_test, compare_ref, bx, by);
+      return run_compare(compare_test, compare_ref, bx, by, compare_diff, compare_range);
     }
     ra.albedo_threshold_given = render->count("--albedo-threshold") > 0;
     return run_render(ra);

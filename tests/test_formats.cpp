@@ -1106,6 +1106,29 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   CHECK(run("compare " + pa + " " + pb + " --blocks 4x2", out) == 0);
   CHECK(contains(out, "blocks 4x2"));
   CHECK(run("compare " + pa + " " + pb + " --blocks four", out) == 2);
+  // --diff: a PNG of the two images and the block errors, three 32x18 panels
+  // with gaps of 2; not where it would replace an input, not another format.
+  const std::string diff = (fs::path(pa).parent_path() / "diff.png").string();
+  CHECK(run("compare " + pa + " " + pb + " --diff " + diff, out) == 0);
+  CHECK(contains(out, "wrote " + diff));
+  {
+    std::ifstream png(diff, std::ios::binary);
+    unsigned char head[24] = {};
+    png.read(reinterpret_cast<char*>(head), sizeof head);
+    REQUIRE(png.gcount() == 24);
+    CHECK(std::string(reinterpret_cast<char*>(head + 1), 3) == "PNG");
+    CHECK((head[16] << 24 | head[17] << 16 | head[18] << 8 | head[19]) == 3 * 32 + 2 * 2);  // IHDR width
+    CHECK((head[20] << 24 | head[21] << 16 | head[22] << 8 | head[23]) == 18);              // height
+  }
+  const std::string renamed = (fs::path(pa).parent_path() / "a-copy.png").string();
+  fs::copy_file(pa, renamed);
+  CHECK(run("compare " + renamed + " " + pb + " --diff " + renamed, out) == 2);
+  CHECK(contains(out, "would overwrite"));
+  CHECK(psf::read_exr(renamed).width == 32);  // left as it was
+  CHECK(run("compare " + pa + " " + pb + " --diff " + (fs::path(pa).parent_path() / "d.exr").string(), out) == 2);
+  CHECK(contains(out, "PNG"));
+  CHECK(run("compare " + pa + " " + pb + " --diff " + (fs::path(pa).parent_path() / "no" / "d.png").string(), out) == 2);
+  CHECK(run("compare " + pa + " " + pb + " --diff " + diff + " --diff-range 0", out) == 2);
   // An input that is not OpenEXR: bad input, exit 2, naming it.
   const std::string junk = dir.write("junk.exr", "not an image");
   CHECK(run("compare " + junk + " " + pb, out) == 2);

@@ -108,6 +108,58 @@ TEST_CASE("Compare: relMSE, box filtering and block statistics", "[reference]") 
   CHECK(psf::describe(st).find("worst 10.00 % at block (0, 0)") != std::string::npos);
 }
 
+TEST_CASE("Compare: the comparison picture shows the two images and the blocks' signed errors", "[reference]") {
+  // Test 16x9, reference 32x18 (box-filtered to 16x9): the test 1.1 in its
+  // top-left 4x3 pixels (block (0, 0) of a 4x3 grid) and 0.5 in block (3, 2), 1
+  // elsewhere; the reference 1 everywhere.
+  psf::Image test = constant_image(16, 9, 1, 1, 1), ref = constant_image(32, 18, 1, 1, 1);
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 4; ++x)
+      for (int c = 0; c < 3; ++c) test.rgb[(size_t(y) * 16 + x) * 3 + c] = 1.1f;
+  for (int y = 6; y < 9; ++y)
+    for (int x = 12; x < 16; ++x)
+      for (int c = 0; c < 3; ++c) test.rgb[(size_t(y) * 16 + x) * 3 + c] = 0.5f;
+  psf::BlockStats st = psf::block_stats(test, ref, 4, 3);
+  CHECK(psf::auto_exposure(ref) == Approx(0.18f / 1.0001f));
+  CHECK(psf::auto_exposure(constant_image(4, 4, 0, 0, 0)) == 1.0f);
+  const float exposure = 0.5f;
+  psf::Image pic = psf::comparison_picture(test, ref, st, 0.2, exposure);
+  const int gap = 2;  // max(2, 16 / 64)
+  REQUIRE(pic.width == 3 * 16 + 2 * gap);
+  REQUIRE(pic.height == 9);
+  auto px = [&](int x, int y) { return &pic.rgb[(size_t(y) * pic.width + x) * 3]; };
+  // Panels 1 and 2: the images times the exposure; the gaps white.
+  CHECK(px(1, 1)[0] == Approx(1.1f * exposure));
+  CHECK(px(5, 5)[1] == Approx(1.0f * exposure));
+  CHECK(px(16 + gap + 1, 1)[2] == Approx(1.0f * exposure));
+  CHECK(px(16, 4)[0] == 1.0f);
+  CHECK(px(16 + gap + 16, 4)[1] == 1.0f);
+  // Panel 3: block (0, 0) is 10 % brighter: half the scale towards red (more red
+  // than green or blue, and lighter than full); block (1, 1) matches: white;
+  // block (3, 2) is 50 % darker, beyond the 20 % scale: dark blue.
+  const int e0 = 2 * (16 + gap);
+  const float* brighter = px(e0 + 1, 1);
+  const float* same = px(e0 + 6, 4);
+  const float* darker = px(e0 + 14, 7);
+  CHECK(brighter[0] > brighter[1]);
+  CHECK(brighter[0] > brighter[2]);
+  CHECK(brighter[1] > 0.1f);  // not full red: 10 % of a 20 % scale
+  CHECK(same[0] == Approx(same[1]));
+  CHECK(same[1] == Approx(same[2]));
+  CHECK(same[0] > 0.8f);
+  CHECK(darker[2] > darker[0]);
+  CHECK(darker[2] < 0.3f);  // beyond the scale: the dark shade
+  // Grid lines between blocks: column 4 (blocks 0 | 1) and row 3 are grey.
+  CHECK(px(e0 + 4, 1)[0] == Approx(px(e0 + 4, 1)[2]));
+  CHECK(px(e0 + 1, 3)[0] == Approx(px(e0 + 1, 3)[1]));
+  CHECK(px(e0 + 4, 1)[0] < same[0]);
+  // A reference whose size does not divide: sampled at the test's pixel centres.
+  psf::Image odd = constant_image(20, 11, 2, 2, 2);
+  psf::Image pic2 = psf::comparison_picture(test, odd, psf::block_stats(test, odd, 4, 3), 0.2, 1.0f);
+  CHECK(pic2.rgb[(size_t(4) * pic2.width + 16 + gap + 7) * 3] == 2.0f);
+  CHECK_THROWS_AS(psf::comparison_picture(test, ref, st, 0.0, 1.0f), std::invalid_argument);
+}
+
 // Both comparisons are marked [!mayfail]: they report their figures but cannot
 // pass until every material of the two scenes matches Tungsten's (see the notes
 // in the figures; the lights and the environment map are checked analytically
