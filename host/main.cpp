@@ -399,7 +399,7 @@ int main(int argc, char** argv) {
                       "Also write a PNG: the test, the reference and the blocks' signed relative errors (red: test "
                       "brighter, blue: darker)");
   compare->add_option("--diff-range", compare_range, "Percent error drawn at full colour in --diff's block map (10)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_number(0.0, kFloatMax, true));
 
   RenderArgs ra;
   CLI::App* render = app.add_subcommand("render", "Render a scene (Mitsuba XML, OBJ, PLY or glTF) to OpenEXR and PNG");
@@ -502,6 +502,10 @@ int main(int argc, char** argv) {
       int bx = 0, by = 0;
       if (!compare_grid.empty() && (std::sscanf(compare_grid.c_str(), "%dx%d", &bx, &by) != 2 || bx <= 0 || by <= 0)) {
         std::cerr << "psf: --blocks " << compare_grid << ": expected WxH, e.g. 16x9\n";
+        return kExitBadInput;
+      }
+      if (compare->count("--diff") > 0 && compare_diff.empty()) {
+        std::cerr << "psf: --diff needs a file name (.png)\n";
         return kExitBadInput;
       }
       return run_compare(compare_test, compare_ref, bx, by, compare_diff, compare_range);

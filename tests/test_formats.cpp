@@ -1129,6 +1129,8 @@ TEST_CASE("CLI: psf render of PLY and glTF files, psf compare", "[formats]") {
   CHECK(contains(out, "PNG"));
   CHECK(run("compare " + pa + " " + pb + " --diff " + (fs::path(pa).parent_path() / "no" / "d.png").string(), out) == 2);
   CHECK(run("compare " + pa + " " + pb + " --diff " + diff + " --diff-range 0", out) == 2);
+  CHECK(run("compare " + pa + " " + pb + " --diff " + diff + " --diff-range inf", out) == 2);
+  CHECK(run("compare " + pa + " " + pb + " --diff ''", out) == 2);
   // An input that is not OpenEXR: bad input, exit 2, naming it.
   const std::string junk = dir.write("junk.exr", "not an image");
   CHECK(run("compare " + junk + " " + pb, out) == 2);
