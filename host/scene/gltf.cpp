@@ -158,8 +158,7 @@ class GltfLoader {
     for (size_t i = 0; i < roots.size(); ++i)
       if (std::find(roots.begin(), roots.begin() + ptrdiff_t(i), roots[i]) != roots.begin() + ptrdiff_t(i))
         fail("scene.nodes", "lists node " + std::to_string(roots[i]) + " twice");
-    std::vector<int> stack;
-    for (int r : roots) visit(r, glm::mat4(1.0f), stack, "scene.nodes");
+    for (int r : roots) visit(r, glm::mat4(1.0f), "scene.nodes");
 
     if (!has_camera_) scene_.camera = camera_framing(scene_.positions);
     return std::move(scene_);
@@ -213,28 +212,53 @@ class GltfLoader {
     return t * r * s;
   }
 
+  // The scene's node trees, depth first, each node's children in order: an
+  // explicit stack instead of recursion, so that no file's nesting can exhaust
+  // the thread's stack (a sanitizer's larger frames overflowed 8 MiB at 1024
+  // levels of recursion). The depth limit stays: no scene nests nodes this deep.
   static constexpr size_t kMaxNodeDepth = 1024;
-  void visit(int index, const glm::mat4& parent, std::vector<int>& stack, const std::string& from) {
-    std::string where = "nodes[" + std::to_string(index) + "]";
-    if (index < 0 || size_t(index) >= model_.nodes.size()) fail(from, "node index " + std::to_string(index) + " out of range");
-    if (std::find(stack.begin(), stack.end(), index) != stack.end()) fail(where, "the node hierarchy has a cycle");
-    if (stack.size() >= kMaxNodeDepth)  // the recursion's stack; no scene nests nodes this deep
-      fail(where, "nodes nested more than " + std::to_string(kMaxNodeDepth) + " deep");
-    const tinygltf::Node& node = model_.nodes[size_t(index)];
-    glm::mat4 m = parent * local_transform(node, where);
-    for (int k = 0; k < 16; ++k)
-      if (!std::isfinite(glm::value_ptr(m)[k])) fail(where, "the transform is not finite");
-    // tinygltf marks an absent index -1; any other negative one is malformed.
-    if (node.mesh < -1) fail(where, "mesh index " + std::to_string(node.mesh) + " out of range");
-    if (node.camera < -1) fail(where, "camera index " + std::to_string(node.camera) + " out of range");
-    if (node.mesh >= 0) add_mesh(node.mesh, m, where);
-    if (node.camera >= 0) add_camera(node.camera, m, where);
-    auto ext = node.extensions.find("KHR_lights_punctual");
-    if (ext != node.extensions.end() && ext->second.Has("light"))
-      add_light(ext->second.Get("light").GetNumberAsInt(), m, where);
-    stack.push_back(index);
-    for (int c : node.children) visit(c, m, stack, where + ".children");
-    stack.pop_back();
+  void visit(int root, const glm::mat4& root_parent, const std::string& root_from) {
+    struct Open {
+      int index;
+      glm::mat4 m;  // the node's world transform
+      size_t next;  // the next child to visit
+      std::string where;
+    };
+    std::vector<Open> open;  // the path from the root to the current node
+    auto enter = [&](int index, const glm::mat4& parent, const std::string& from) {
+      std::string where = "nodes[" + std::to_string(index) + "]";
+      if (index < 0 || size_t(index) >= model_.nodes.size())
+        fail(from, "node index " + std::to_string(index) + " out of range");
+      for (const Open& o : open)
+        if (o.index == index) fail(where, "the node hierarchy has a cycle");
+      if (open.size() >= kMaxNodeDepth) fail(where, "nodes nested more than " + std::to_string(kMaxNodeDepth) + " deep");
+      const tinygltf::Node& node = model_.nodes[size_t(index)];
+      glm::mat4 m = parent * local_transform(node, where);
+      for (int k = 0; k < 16; ++k)
+        if (!std::isfinite(glm::value_ptr(m)[k])) fail(where, "the transform is not finite");
+      // tinygltf marks an absent index -1; any other negative one is malformed.
+      if (node.mesh < -1) fail(where, "mesh index " + std::to_string(node.mesh) + " out of range");
+      if (node.camera < -1) fail(where, "camera index " + std::to_string(node.camera) + " out of range");
+      if (node.mesh >= 0) add_mesh(node.mesh, m, where);
+      if (node.camera >= 0) add_camera(node.camera, m, where);
+      auto ext = node.extensions.find("KHR_lights_punctual");
+      if (ext != node.extensions.end() && ext->second.Has("light"))
+        add_light(ext->second.Get("light").GetNumberAsInt(), m, where);
+      open.push_back({index, m, 0, std::move(where)});
+    };
+    enter(root, root_parent, root_from);
+    while (!open.empty()) {
+      Open& top = open.back();
+      const std::vector<int>& children = model_.nodes[size_t(top.index)].children;
+      if (top.next == children.size()) {
+        open.pop_back();
+        continue;
+      }
+      const int child = children[top.next++];
+      const glm::mat4 m = top.m;  // copies: enter() grows `open`, which may move `top`
+      const std::string from = top.where + ".children";
+      enter(child, m, from);
+    }
   }
 
   // Debian's tinygltf is built without Draco and knows nothing of
