@@ -1237,15 +1237,33 @@ TEST_CASE("OBJ: the MTL PBR extension (Pr, Pm) maps as glTF's metallic-roughness
   CHECK(sheen == 1);
 }
 
-TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its material", "[formats]") {
+TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its line", "[formats]") {
   // Ks 1e39 overflows a float; the mirror model would divide by it (NaN).
+  // tinyobjloader reads "nan" or a word as 0 without a word of warning.
   TempDir dir;
   dir.write("m.mtl", "newmtl ok\nKd 0.5 0.5 0.5\n\nnewmtl big\nKd 0.5 0.5 0.5\nKs 1e39 0 0\nillum 5\n");
   std::string obj = dir.write("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl big\nf 1 2 3\n");
   auto [line, message] = error_of([&] { psf::load_scene(obj); });
-  CHECK(line == 4);
+  CHECK(line == 6);
   CHECK(contains(message, "m.mtl"));
-  CHECK(contains(message, "material 'big': Ks is not a finite number"));
+  CHECK(contains(message, "Ks: '1e39' is not a finite number"));
+  const std::pair<std::string, std::string> cases[] = {
+      {"Kd nan 0.5 0.5", "Kd: 'nan' is not a finite number"},
+      {"Ns high", "Ns: 'high' is not a finite number"},
+      {"d 0.5x", "d: '0.5x' is not a finite number"},
+      {"Ke 1 inf 1", "Ke: 'inf' is not a finite number"},
+  };
+  for (const auto& [value, expected] : cases) {
+    INFO(value);
+    dir.write("m.mtl", "newmtl big\nKd 0.5 0.5 0.5 # grey\n" + value + "\n");
+    auto [l, m] = error_of([&] { psf::load_scene(obj); });
+    CHECK(l == 3);
+    CHECK(contains(m, expected));
+  }
+  // Comments, the spectral and xyz forms and exponents stay accepted.
+  dir.write("m.mtl", "newmtl big\nKd 0.5 0.5 0.5 # a comment\nKa spectral ident.rfl 1.0\nKs xyz 0.1 0.1 0.1\n"
+                     "Ns 1.5e+01\nd 1\n");
+  CHECK_NOTHROW(psf::load_scene(obj));
 }
 
 TEST_CASE("Mitsuba mask: a bitmap's opacity is its luminance (Mitsuba 3) or its alpha (0.5 files)", "[formats]") {

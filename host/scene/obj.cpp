@@ -113,6 +113,28 @@ void check_face_index_range(const std::string& text, const std::string& path) {
   });
 }
 
+// Throws at the line of an MTL colour or number whose value is not a finite
+// number ("Kd nan", "Ns high"): tinyobjloader reads such a value as 0 and says
+// nothing. The spectral and CIE XYZ forms of a colour (Kd spectral FILE, Kd xyz
+// X Y Z), which tinyobjloader does not read either, are left alone.
+void check_mtl_numbers(const std::string& text, const std::string& path) {
+  static const char* const keys[] = {"Ka", "Kd", "Ks", "Ke", "Kt", "Tf", "Ns", "Ni", "d", "Tr", "Pr", "Pm", "Pc", "Pcr"};
+  for (const char* key : keys)
+    for_each_keyword_line(text, key, [&](int line, const char* b, const char* e) {
+      std::istringstream tokens(std::string(b, std::find_if(b, e, [](char c) { return c == '#' || c == '\r'; })));
+      bool first = true;
+      for (std::string token; tokens >> token; first = false) {
+        if (first && (token == "spectral" || token == "xyz")) return true;
+        const char* begin = token.c_str();
+        char* end = nullptr;
+        const double v = std::strtod(begin, &end);
+        if (end == begin || *end != '\0' || !std::isfinite(v) || std::abs(v) > double(std::numeric_limits<float>::max()))
+          throw SceneError(path, line, std::string(key) + ": '" + token + "' is not a finite number");
+      }
+      return true;
+    });
+}
+
 // Throws if an mtllib names a folder: reading one throws deep inside the reader.
 void check_mtllib_files(const std::string& text, const std::string& path, const std::string& base_dir) {
   for_each_keyword_line(text, "mtllib", [&](int line, const char* b, const char* e) {
@@ -316,6 +338,7 @@ ObjData read_obj(const std::string& path, bool with_materials) {
         std::ifstream m(mtl, std::ios::binary);
         if (!m) continue;
         std::string mtext = read_all(m);
+        check_mtl_numbers(mtext, mtl);
         for_each_keyword_line(mtext, "newmtl", [&](int line, const char* nb, const char* ne) {
           std::string mname(nb, ne);
           while (!mname.empty() && std::isspace(static_cast<unsigned char>(mname.back()))) mname.pop_back();
