@@ -1262,8 +1262,10 @@ TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its line"
   }
   // Comments, the spectral and xyz forms and exponents stay accepted.
   dir.write("m.mtl", "newmtl big\nKd 0.5 0.5 0.5 # a comment\nKa spectral ident.rfl 1.0\nKs xyz 0.1 0.1 0.1\n"
-                     "Ns 1.5e+01\nd 1\n");
+                     "Ns 1.5e+01\nd -halo 0.5\n");
   CHECK_NOTHROW(psf::load_scene(obj));
+  dir.write("m.mtl", "newmtl big\nd -halo x\n");
+  CHECK_THROWS_WITH(psf::load_scene(obj), Catch::Contains("m.mtl:2") && Catch::Contains("d: 'x' is not a finite number"));
 }
 
 TEST_CASE("Mitsuba mask: a bitmap's opacity is its luminance (Mitsuba 3) or its alpha (0.5 files)", "[formats]") {

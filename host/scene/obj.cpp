@@ -116,7 +116,8 @@ void check_face_index_range(const std::string& text, const std::string& path) {
 // Throws at the line of an MTL colour or number whose value is not a finite
 // number ("Kd nan", "Ns high"): tinyobjloader reads such a value as 0 and says
 // nothing. The spectral and CIE XYZ forms of a colour (Kd spectral FILE, Kd xyz
-// X Y Z), which tinyobjloader does not read either, are left alone.
+// X Y Z), which tinyobjloader does not read either, are left alone, and so is
+// the -halo of a dissolve (d -halo FACTOR).
 void check_mtl_numbers(const std::string& text, const std::string& path) {
   static const char* const keys[] = {"Ka", "Kd", "Ks", "Ke", "Kt", "Tf", "Ns", "Ni", "d", "Tr", "Pr", "Pm", "Pc", "Pcr"};
   for (const char* key : keys)
@@ -125,6 +126,7 @@ void check_mtl_numbers(const std::string& text, const std::string& path) {
       bool first = true;
       for (std::string token; tokens >> token; first = false) {
         if (first && (token == "spectral" || token == "xyz")) return true;
+        if (first && token == "-halo") continue;  // "d -halo FACTOR": its factor is checked
         const char* begin = token.c_str();
         char* end = nullptr;
         const double v = std::strtod(begin, &end);
