@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "scene/loaders.h"  // detail::srgb_to_linear
+
 namespace psf {
 
 namespace {
@@ -158,9 +160,6 @@ float auto_exposure(const Image& image) {
 
 namespace {
 
-// The linear value that write_png's sRGB encoding turns into display value v.
-float srgb_decode(float v) { return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f); }
-
 // The error panel's colour (display values) for signed error e at full scale range.
 void error_colour(double e, double range, float out[3]) {
   static const float white[3] = {0.96f, 0.96f, 0.96f};
@@ -212,7 +211,9 @@ Image comparison_picture(const Image& test, const Image& ref, const BlockStats& 
         const size_t b = size_t(j) * bx + i;
         error_colour((stats.test_mean[b] - stats.ref_mean[b]) / std::max(stats.ref_mean[b], floor), range, c);
       }
-      put(2 * (w + gap) + x, y, srgb_decode(c[0]), srgb_decode(c[1]), srgb_decode(c[2]));
+      // The linear values that write_png's sRGB encoding turns into these display values.
+      put(2 * (w + gap) + x, y, detail::srgb_to_linear(c[0]), detail::srgb_to_linear(c[1]),
+          detail::srgb_to_linear(c[2]));
     }
   }
   return out;

@@ -26,6 +26,13 @@ namespace {
 
 constexpr double kFloatMax = std::numeric_limits<float>::max();
 
+// A path's extension in lower case (".png"), for checks of output names.
+std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext;
+}
+
 // A validator for a floating-point option: a finite number in [lo, hi] (lo
 // excluded when `open_lo`). CLI11's Range, PositiveNumber and NonNegativeNumber
 // let "nan" through (every comparison with NaN is false) and name an unbounded
@@ -172,8 +179,7 @@ int run_render(const RenderArgs& a) {
   // The output is OpenEXR whatever its name: one named .png (whose preview
   // would overwrite it) or .jpg would be an OpenEXR file under another image
   // format's name. Other names (/dev/null, mktemp's tmp.XXXXXXXXXX) are taken as they are.
-  std::string ext = fs::path(out).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  const std::string ext = lower_extension(out);
   const std::vector<std::string> other_formats = {".png", ".jpg", ".jpeg", ".hdr", ".pfm", ".ppm", ".pgm", ".tga",
                                                   ".bmp", ".tif", ".tiff", ".webp", ".gif", ".rgbe", ".dds"};
   if (std::find(other_formats.begin(), other_formats.end(), ext) != other_formats.end()) {
@@ -331,9 +337,7 @@ int run_compare(const std::string& test_path, const std::string& ref_path, int b
                 const std::string& diff_path, double diff_range) {
   namespace fs = std::filesystem;
   if (!diff_path.empty()) {  // checked before the work, as render checks -o
-    std::string ext = fs::path(diff_path).extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-    if (ext != ".png") throw std::invalid_argument("--diff " + diff_path + ": the picture is a PNG file (.png)");
+    if (lower_extension(diff_path) != ".png") throw std::invalid_argument("--diff " + diff_path + ": the picture is a PNG file (.png)");
     std::error_code ec;
     for (const std::string& input : {test_path, ref_path})
       if (fs::equivalent(diff_path, input, ec))
