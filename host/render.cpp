@@ -35,6 +35,23 @@ void in_parallel(uint64_t count, uint64_t threads, F&& f) {
   for (auto& t : pool) t.join();
 }
 
+// Whether trace_lanes (kernels/trace_lanes.cl) renders the scene: every
+// material plain diffuse (untextured, isotropic, no blend, mask, medium, vertex
+// colours or null boundary; two-sided and vertex normals allowed), every emitter
+// a triangle, no analytic spheres and no camera medium.
+bool lanes_supported(const Scene& scene, const std::vector<Material>& materials, const std::vector<Emitter>& emitters) {
+  if (!scene.spheres.empty() || scene.camera_medium != 0) return false;
+  for (const Emitter& e : emitters)
+    if (e.type != PSF_EMITTER_TRIANGLE || e.tex_emission != PSF_NO_TEXTURE) return false;
+  for (const Material& m : materials)
+    if (m.type != PSF_MATERIAL_DIFFUSE || (m.flags & ~PSF_MATFLAG_NORMALS) != 0 || m.tex_color != PSF_NO_TEXTURE ||
+        m.tex_opacity != PSF_NO_TEXTURE || m.tex_bump != PSF_NO_TEXTURE || m.tex_alpha != PSF_NO_TEXTURE ||
+        m.tex_table != PSF_NO_TEXTURE || m.tex_emission != PSF_NO_TEXTURE || m.blend != 0 ||
+        m.interior.s[3] > 0.0f || m.exterior != 0 || m.alpha_u != m.alpha_v)
+      return false;
+  return true;
+}
+
 }  // namespace
 
 struct Renderer::Impl {
@@ -44,6 +61,8 @@ struct Renderer::Impl {
   std::unique_ptr<RayCaster> caster;
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
+  std::vector<Emitter> emitter_table;  // as uploaded (lanes_supported)
+  bool lanes = false;                  // lanes_supported
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -74,7 +93,9 @@ struct Renderer::Impl {
                                   " are supported");
     std::vector<TriAttrib> attributes = triangle_attributes(scene);
     tri_attribs = rt.upload(attributes);
-    materials = rt.upload(device_materials(scene, attributes));  // with PSF_MATFLAG_NORMALS
+    const std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
+    materials = rt.upload(device);
+    lanes = lanes_supported(scene, device, emitter_table);
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);
@@ -118,6 +139,7 @@ struct Renderer::Impl {
       if (lo.x <= hi.x) auto_visibility_ray = 0.01f * glm::length(hi - lo);
     }
     emitters = rt.upload(lights.emitters);
+    emitter_table = lights.emitters;
     emitter_cdf = rt.upload(lights.cdf);
     tri_light_pdf = rt.upload(lights.tri_light_pdf);
     env = lights.env;
@@ -482,7 +504,16 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   // per path cannot (PoCL, living room: 35 % slower per path; Cornell boxes:
   // 8-13 % faster).
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
-  if (per_path) {
+  // Scenes of the diffuse class (lanes_supported) on CPUs: eight paths per
+  // work-item in the lanes of vectors (kernels/trace_lanes.cl), each work-item
+  // over a run of kLanesRun paths.
+  const bool lanes = per_path && s.lanes && o.lanes != 0 && (o.lanes > 0 || rt.device().type == "CPU");
+  if (lanes) {
+    constexpr uint32_t kLanesRun = 32;
+    rt.launch("trace_lanes", (p.batch_size + kLanesRun - 1) / kLanesRun, 8, p, s.sobol, s.tri_pos, s.tri_material,
+              s.materials, s.emitters, s.emitter_cdf, s.tri_light_pdf, s.caster->nodes(), s.caster->packs(),
+              b.rays[0], states, vertices, s.tri_attribs, p.batch_size, kLanesRun, b.queue[0]);
+  } else if (per_path) {
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
               s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
               cl_uint(s.caster->masked() ? 1 : 0), b.rays[0], hits, states, vertices, shadow_rays, shadow_hits,

@@ -33,6 +33,7 @@
 #include "bsdf_test.cl"
 #include "emitter.cl"
 #include "shade.cl"
+#include "trace_lanes.cl"
 #include "emission.cl"
 #include "visibility.cl"
 #include "cell_keys.cl"

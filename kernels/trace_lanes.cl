@@ -1,0 +1,443 @@
+/* trace_lanes.cl: the per-path stage (shade.cl trace_paths) for scenes of plain
+ * diffuse surfaces lit by emissive triangles, with eight paths at a time in the
+ * lanes of float8 vectors.
+ *
+ * PoCL runs a kernel's work-items one after another and vectorises them only
+ * where the kernel has no loops, no vector types and no stores under branches
+ * (docs/performance-notes.md), so trace_paths, which loops over bounces and BVH
+ * nodes, runs one path at a time in scalar code. Here each work-item holds
+ * eight paths in lanes: the shading of a bounce (the hit's triangle and
+ * frame, the emission it adds, the light sample and its MIS weight, the
+ * cosine-weighted direction, Russian roulette) is written with float8 vectors,
+ * so every step is one instruction for the eight; the two casts of a bounce
+ * are the BVH8 traversal of raycast.cl, lane by lane, and so are the loads
+ * of the hit's triangle, material and light. A lane whose path ends stores the
+ * path's state and takes the next path of the work-item's run of
+ * `per_item` queue slots, so the lanes stay full until the run's end.
+ *
+ * The scene class (host/render.cpp lanes_supported): every material diffuse,
+ * untextured and isotropic, without media, blends or masks (two-sided and
+ * vertex normals allowed); every emitter a triangle; no analytic spheres, no
+ * environment. The arithmetic is shade_path_inline's for that class, written
+ * the same way, and the samples are drawn by the same functions, so a path's
+ * result is the same as trace_paths' up to the rounding of a different
+ * instruction order (tests/test_render.cpp compares the two). */
+
+#define PSF_LANES 8
+/* Lane l of a private vector (a scalar view of its memory). */
+#define LANE_F(v, l) (((float *)&(v))[l])
+#define LANE_U(v, l) (((uint *)&(v))[l])
+#define LANE_I(v, l) (((int *)&(v))[l])
+
+/* Eight 3-vectors, one per lane. */
+typedef struct {
+  float8 x, y, z;
+} Vec8;
+
+inline Vec8 vec8(float8 x, float8 y, float8 z) {
+  Vec8 r;
+  r.x = x;
+  r.y = y;
+  r.z = z;
+  return r;
+}
+inline Vec8 vec8_add(Vec8 a, Vec8 b) { return vec8(a.x + b.x, a.y + b.y, a.z + b.z); }
+inline Vec8 vec8_sub(Vec8 a, Vec8 b) { return vec8(a.x - b.x, a.y - b.y, a.z - b.z); }
+inline Vec8 vec8_mul(Vec8 a, Vec8 b) { return vec8(a.x * b.x, a.y * b.y, a.z * b.z); }
+inline Vec8 vec8_scale(Vec8 a, float8 s) { return vec8(a.x * s, a.y * s, a.z * s); }
+inline Vec8 vec8_div(Vec8 a, float8 s) { return vec8(a.x / s, a.y / s, a.z / s); }
+inline Vec8 vec8_neg(Vec8 a) { return vec8(-a.x, -a.y, -a.z); }
+inline float8 vec8_dot(Vec8 a, Vec8 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline float8 vec8_max3(Vec8 a) { return fmax(a.x, fmax(a.y, a.z)); }
+inline Vec8 vec8_cross(Vec8 a, Vec8 b) {
+  return vec8(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+/* Per lane: c ? a : b (c a mask of all ones or zeros per lane). */
+inline Vec8 vec8_select(Vec8 b, Vec8 a, int8 c) {
+  return vec8(select(b.x, a.x, c), select(b.y, a.y, c), select(b.z, a.z, c));
+}
+inline float8 vec8_length(Vec8 a) { return sqrt(vec8_dot(a, a)); }
+inline Vec8 vec8_normalize(Vec8 a) { return vec8_scale(a, rsqrt(vec8_dot(a, a))); }
+inline void vec8_set(Vec8 *v, uint l, float3 a) {
+  LANE_F(v->x, l) = a.x;
+  LANE_F(v->y, l) = a.y;
+  LANE_F(v->z, l) = a.z;
+}
+inline float3 vec8_get(Vec8 v, uint l) { return (float3)(LANE_F(v.x, l), LANE_F(v.y, l), LANE_F(v.z, l)); }
+
+inline float8 power_heuristic8(float8 a, float8 b) {
+  float8 a2 = a * a, b2 = b * b;
+  return select((float8)(0.0f), a2 / (a2 + b2), (a2 + b2) > 0.0f);
+}
+
+/* psf_sincos (sampling.cl), lane by lane the same operations. */
+inline float8 psf_sincos8(float8 x, float8 *c) {
+  float8 ax = fabs(x);
+  int8 j = convert_int8(ax * 1.27323954473516f);
+  j += j & 1;
+  float8 y = convert_float8(j);
+  float8 z = ((ax - y * 0.78515625f) - y * 2.4187564849853515625e-4f) - y * 3.77489497744594108e-8f;
+  float8 zz = z * z;
+  float8 s = ((-1.9515295891e-4f * zz + 8.3321608736e-3f) * zz - 1.6666654611e-1f) * zz * z + z;
+  float8 co =
+      ((2.443315711809948e-5f * zz - 1.388731625493765e-3f) * zz + 4.166664568298827e-2f) * zz * zz - 0.5f * zz + 1.0f;
+  int8 q = (j >> 1) & 3;
+  float8 sv = select(s, co, (q & 1) != 0), cv = select(co, s, (q & 1) != 0);
+  sv = select(sv, -sv, (q & 2) != 0);
+  cv = select(cv, -cv, ((q + 1) & 2) != 0);
+  *c = cv;
+  return select(sv, -sv, x < 0.0f);
+}
+
+/* square_to_cosine_hemisphere (bsdf.cl) per lane. */
+inline Vec8 cosine_hemisphere8(float8 u1, float8 u2) {
+  float8 a = 2.0f * u1 - 1.0f, b = 2.0f * u2 - 1.0f;
+  int8 wide = fabs(a) > fabs(b), centre = a == 0.0f && b == 0.0f;
+  float8 r = select(b, a, wide);
+  float8 q = select(a, b, wide) / select(r, (float8)(1.0f), centre);
+  float8 phi = select((PSF_PI / 2.0f) - (PSF_PI / 4.0f) * q, (PSF_PI / 4.0f) * q, wide);
+  float8 c;
+  float8 s = psf_sincos8(phi, &c);
+  float8 dx = r * c, dy = r * s;
+  return vec8(dx, dy, sqrt(fmax(0.0f, 1.0f - dx * dx - dy * dy)));
+}
+
+/* frame_from_normal (bsdf.cl) per lane: s and t around unit n. */
+inline void frame_from_normal8(Vec8 n, Vec8 *s, Vec8 *t) {
+  float8 sign = select((float8)(-1.0f), (float8)(1.0f), n.z >= 0.0f);
+  float8 a = -1.0f / (sign + n.z);
+  float8 c = n.x * n.y * a;
+  *s = vec8(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  *t = vec8(c, sign + n.y * n.y * a, -n.y);
+}
+
+/* offset_origin (shade.cl) per lane. */
+inline Vec8 offset_origin8(Vec8 p, Vec8 n) {
+  float8 scale = PSF_RAY_EPS * fmax(1.0f, vec8_max3(vec8(fabs(p.x), fabs(p.y), fabs(p.z))));
+  return vec8_add(p, vec8_scale(n, scale));
+}
+
+/* The paths of one work-item's lanes between bounces: PathState's fields, the
+ * next ray, and which lanes hold a live path. */
+typedef struct {
+  Vec8 org, dir; /* the ray to cast */
+  float8 tmin, tmax;
+  Vec8 beta; /* PathState.throughput */
+  float8 bsdf_pdf;
+  Vec8 radiance; /* PathState.radiance */
+  float8 radiance_w;
+  Vec8 vertex_radiance; /* PathState.vertex_radiance */
+  float8 vertex_radiance_w;
+  Vec8 prev; /* PathState.prev_pos */
+  float8 path_length;
+  uint8 pixel, sample, depth, flags, path;
+  int8 live; /* all ones: the lane holds a path */
+} Lanes;
+
+/* Lane l takes the path in queue slot k: its camera ray and state. */
+inline void lanes_load(Lanes *ln, uint l, uint k, __global const uint *queue, __global const Ray *rays,
+                       __global const PathState *states) {
+  const uint j = queue[k];
+  const Ray r = rays[k];
+  const PathState st = states[j];
+  vec8_set(&ln->org, l, r.org.xyz);
+  vec8_set(&ln->dir, l, r.dir.xyz);
+  LANE_F(ln->tmin, l) = r.org.w;
+  LANE_F(ln->tmax, l) = r.dir.w;
+  vec8_set(&ln->beta, l, st.throughput.xyz);
+  LANE_F(ln->bsdf_pdf, l) = st.throughput.w;
+  vec8_set(&ln->radiance, l, st.radiance.xyz);
+  LANE_F(ln->radiance_w, l) = st.radiance.w;
+  vec8_set(&ln->vertex_radiance, l, st.vertex_radiance.xyz);
+  LANE_F(ln->vertex_radiance_w, l) = st.vertex_radiance.w;
+  vec8_set(&ln->prev, l, st.prev_pos.xyz);
+  LANE_F(ln->path_length, l) = st.prev_pos.w;
+  LANE_U(ln->pixel, l) = st.pixel;
+  LANE_U(ln->sample, l) = st.sample;
+  LANE_U(ln->depth, l) = st.depth;
+  LANE_U(ln->flags, l) = st.flags;
+  LANE_U(ln->path, l) = j;
+  LANE_I(ln->live, l) = -1;
+}
+
+/* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
+ * light sample's contribution where its shadow ray was blocked). */
+inline void lanes_store(const Lanes *ln, uint l, float3 pending, __global PathState *states) {
+  PathState st;
+  st.throughput = (float4)(vec8_get(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
+  st.radiance = (float4)(vec8_get(ln->radiance, l), LANE_F(ln->radiance_w, l));
+  st.vertex_radiance = (float4)(vec8_get(ln->vertex_radiance, l), LANE_F(ln->vertex_radiance_w, l));
+  st.pending = (float4)(pending, 0.0f);
+  st.prev_pos = (float4)(vec8_get(ln->prev, l), LANE_F(ln->path_length, l));
+  st.pixel = LANE_U(ln->pixel, l);
+  st.sample = LANE_U(ln->sample, l);
+  st.depth = LANE_U(ln->depth, l);
+  st.flags = LANE_U(ln->flags, l);
+  states[LANE_U(ln->path, l)] = st;
+}
+
+/* Adds c where `mask`, as shade.cl's add_radiance (seen: add_radiance_seen). */
+inline void lanes_add_radiance(Lanes *ln, Vec8 c, int8 mask, bool seen) {
+  const int8 vertex = (ln->flags & PSF_PATH_VERTEX) != 0u;
+  int8 to_vertex = mask & vertex, to_prefix = mask & ~vertex;
+  int8 raise_w = to_prefix;
+  if (seen) raise_w &= ~(ln->depth == 0u && (ln->flags & (PSF_PATH_VERTEX | PSF_PATH_NULL_CROSSED)) == 0u);
+  ln->vertex_radiance = vec8_select(ln->vertex_radiance, vec8_add(ln->vertex_radiance, c), to_vertex);
+  ln->radiance = vec8_select(ln->radiance, vec8_add(ln->radiance, c), to_prefix);
+  ln->radiance_w = select(ln->radiance_w, (float8)(1.0f), raise_w);
+}
+
+/* One lane's casts (raycast.cl), out of line: the kernel calls each in a loop
+ * over the lanes, and its vectors stay where they are across the call. The
+ * ray and hit go by pointer: by value, the ray's two halves were stored apart
+ * and loaded as one, a stall on every call (PoCL, Mitsuba's cbox: the
+ * call's argument copy was 8 % of the kernel's samples). */
+__attribute__((noinline)) void lane_closest(__global const BvhNode *nodes, __global const BvhTriPack *packs,
+                                            const Ray *r, Hit *h) {
+  *h = intersect_closest_alpha(nodes, packs, *r, 0);
+}
+__attribute__((noinline)) void lane_any(__global const BvhNode *nodes, __global const BvhTriPack *packs, const Ray *r,
+                                        Hit *h) {
+  *h = intersect_any_hit_alpha(nodes, packs, *r, 0);
+}
+__kernel void trace_lanes(FrameParams params, __global const uint *restrict sobol,
+                          __global const float4 *restrict tri_pos, __global const uint *restrict tri_material,
+                          __global const Material *restrict materials, __global const Emitter *restrict emitters,
+                          __global const float *restrict emitter_cdf, __global const float *restrict tri_light_pdf,
+                          __global const BvhNode *restrict nodes, __global const BvhTriPack *restrict packs,
+                          __global const Ray *restrict rays, __global PathState *restrict states,
+                          __global PathVertex *restrict vertices, __global const TriAttrib *restrict tri_attribs,
+                          uint count, uint per_item, __global const uint *restrict queue) {
+  const uint first = get_global_id(0) * per_item;
+  if (first >= count) return;
+  const uint end = min(first + per_item, count);
+  uint next = first;
+  Lanes ln;
+  {
+    const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+    ln.org = ln.dir = ln.beta = ln.radiance = ln.vertex_radiance = ln.prev = zero;
+    ln.tmin = ln.tmax = ln.bsdf_pdf = ln.radiance_w = ln.vertex_radiance_w = ln.path_length = (float8)(0.0f);
+    ln.pixel = ln.sample = ln.depth = ln.flags = ln.path = (uint8)(0u);
+    ln.live = (int8)(0);
+  }
+  for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, queue, rays, states);
+  const uint seed_hash = psf_hash(params.seed);
+  const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
+  const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
+
+  while (any(ln.live)) {
+    /* The closest hits, lane by lane. */
+    float8 t = (float8)(0.0f), bu = (float8)(0.0f), bv = (float8)(0.0f);
+    uint8 prim = (uint8)(PSF_NO_HIT);
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(ln.live, l)) continue;
+      Ray r;
+      r.org = (float4)(vec8_get(ln.org, l), LANE_F(ln.tmin, l));
+      r.dir = (float4)(vec8_get(ln.dir, l), LANE_F(ln.tmax, l));
+      Hit h;
+      lane_closest(nodes, packs, &r, &h);
+      LANE_F(t, l) = h.t;
+      LANE_U(prim, l) = h.prim;
+      LANE_F(bu, l) = h.u;
+      LANE_F(bv, l) = h.v;
+    }
+    ln.flags &= ~PSF_PATH_VERTEX_NEW;
+    const int8 hit = ln.live & (prim != PSF_NO_HIT);
+
+    /* The hit triangles' corners, materials and shading normals, lane by lane.
+     */
+    Vec8 p0, p1, p2, albedo, emission, n0, n1, n2;
+    float8 light_pdf = (float8)(0.0f);
+    int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0);
+    p0 = p1 = p2 = albedo = emission = n0 = n1 = n2 = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(hit, l)) continue;
+      const uint pr = LANE_U(prim, l);
+      vec8_set(&p0, l, tri_pos[3u * pr].xyz);
+      vec8_set(&p1, l, tri_pos[3u * pr + 1u].xyz);
+      vec8_set(&p2, l, tri_pos[3u * pr + 2u].xyz);
+      __global const Material *m = materials + tri_material[pr];
+      vec8_set(&albedo, l, m->albedo.xyz);
+      vec8_set(&emission, l, m->emission.xyz);
+      LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
+      LANE_F(light_pdf, l) = tri_light_pdf[pr];
+      __global const TriAttrib *a = tri_attribs + pr;
+      LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
+      if ((m->flags & PSF_MATFLAG_NORMALS) && (a->flags & PSF_TRI_NORMALS)) {
+        LANE_I(normals, l) = -1;
+        vec8_set(&n0, l, a->n0.xyz);
+        vec8_set(&n1, l, a->n1.xyz);
+        vec8_set(&n2, l, a->n2.xyz);
+      }
+    }
+
+    /* The hit point, its geometric normal and the emission found there. */
+    const float8 ray_len = vec8_length(ln.dir);
+    const float8 dist = t * ray_len;
+    const Vec8 wo = vec8_div(vec8_neg(ln.dir), ray_len);
+    const Vec8 pos = vec8_add(ln.org, vec8_scale(ln.dir, t));
+    Vec8 ng = vec8_cross(vec8_sub(p1, p0), vec8_sub(p2, p0));
+    const float8 area2 = vec8_length(ng);
+    ng = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(1.0f)), vec8_div(ng, area2), area2 > 0.0f);
+    ln.path_length = select(ln.path_length, ln.path_length + dist, hit);
+    const float8 ng_wo = vec8_dot(ng, wo);
+    const int8 front = ng_wo > 0.0f;
+    const int8 emits = hit & (vec8_max3(emission) > 0.0f) & (front | two_sided) & ~(hide_area & (ln.depth == 0u));
+    {
+      const int8 mis = mis_on & (ln.depth > 0u) & ((ln.flags & PSF_PATH_SPECULAR) == 0u);
+      const float8 cos_l = fabs(ng_wo);
+      const float8 pdf_hit = select((float8)(0.0f), light_pdf * dist * dist / cos_l, cos_l > 0.0f);
+      const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
+      lanes_add_radiance(&ln, vec8_scale(vec8_mul(ln.beta, emission), w), emits, true);
+    }
+
+    /* The shading frame: the interpolated normal (else the geometric one),
+     * turned towards wo where the surface is two-sided, as surface.cl's
+     * surface_frame: with a material's vertex normals its s and t are those
+     * of the normal before the turn, else of the turned one. */
+    Vec8 fn = ng, fs, ft;
+    {
+      const Vec8 ni = vec8_add(vec8_add(vec8_scale(n0, 1.0f - bu - bv), vec8_scale(n1, bu)), vec8_scale(n2, bv));
+      const float8 len = vec8_length(ni);
+      const Vec8 ns = vec8_select(ng, vec8_div(ni, len), normals & (len > 0.0f));
+      fn = vec8_select(ns, vec8_neg(ns), two_sided & (vec8_dot(ns, wo) < 0.0f));
+      frame_from_normal8(vec8_select(fn, ns, mat_normals), &fs, &ft);
+    }
+    const float8 fn_wo = vec8_dot(fn, wo);
+    const Vec8 n_camera = vec8_select(vec8_neg(fn), fn, fn_wo >= 0.0f);
+    const uint8 segments = ln.depth + 1u;
+    int8 scatter = hit & (vec8_max3(albedo) > 0.0f);
+    if ((int)params.max_depth >= 0) scatter &= segments + 1u <= params.max_depth;
+
+    /* The filtering vertex: the first diffuse one (every one here is). */
+    const int8 new_vertex = scatter & ((ln.flags & PSF_PATH_VERTEX) == 0u);
+    ln.flags = select(ln.flags, ln.flags | (PSF_PATH_VERTEX | PSF_PATH_VERTEX_NEW), as_uint8(new_vertex));
+    Vec8 beta = vec8_select(ln.beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), new_vertex);
+
+    /* The bounce's samples (shade.cl bounce_samples), lane by lane, transposed.
+     */
+    float8 u_light = (float8)(0.0f), u_la = (float8)(0.0f), u_lb = (float8)(0.0f);
+    float8 u_b1 = (float8)(0.0f), u_b2 = (float8)(0.0f), u_rr = (float8)(0.0f);
+    uint8 light = (uint8)(0u);
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(scatter, l)) continue;
+      const uint key = psf_hash_combine(seed_hash, LANE_U(ln.pixel, l));
+      const float8 u = sample_8d_keyed(sobol, key, LANE_U(ln.sample, l),
+                                       params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * LANE_U(ln.depth, l));
+      LANE_F(u_light, l) = u.s0; /* PSF_DIM_LIGHT_SELECT */
+      LANE_F(u_la, l) = u.s1;    /* PSF_DIM_LIGHT_UV */
+      LANE_F(u_lb, l) = u.s2;
+      LANE_F(u_b1, l) = u.s3; /* PSF_DIM_BSDF_UV */
+      LANE_F(u_b2, l) = u.s4;
+      LANE_F(u_rr, l) = u.s5; /* PSF_DIM_RR */
+      if (params.num_emitters > 0u)
+        LANE_U(light, l) = sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, u.s0);
+    }
+
+    /* Next-event estimation: a point on the chosen triangle (emitter.cl
+     * emitter_sample), its MIS weight against the BSDF's pdf. */
+    Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+    Vec8 shadow_org = pending, shadow_dir = pending;
+    int8 contributes = (int8)(0);
+    if (params.num_emitters > 0u) {
+      Vec8 v0, e1, e2, le;
+      float8 area = (float8)(1.0f), choose = (float8)(0.0f);
+      int8 light_two_sided = (int8)(0);
+      v0 = e1 = e2 = le = pending;
+      for (uint l = 0u; l < PSF_LANES; ++l) {
+        if (!LANE_I(scatter, l)) continue;
+        __global const Emitter *em = emitters + LANE_U(light, l);
+        const float4 a = em->v0;
+        vec8_set(&v0, l, a.xyz);
+        LANE_F(area, l) = a.w;
+        vec8_set(&e1, l, em->e1.xyz);
+        vec8_set(&e2, l, em->e2.xyz);
+        const float4 r = em->radiance;
+        vec8_set(&le, l, r.xyz);
+        LANE_F(choose, l) = r.w;
+        LANE_I(light_two_sided, l) = em->two_sided ? -1 : 0;
+      }
+      const float8 su = sqrt(u_la);
+      const Vec8 lp = vec8_add(v0, vec8_add(vec8_scale(e1, su * (1.0f - u_lb)), vec8_scale(e2, su * u_lb)));
+      const Vec8 lnrm = vec8_normalize(vec8_cross(e1, e2));
+      const Vec8 d = vec8_sub(lp, pos);
+      const float8 d2 = vec8_dot(d, d);
+      const float8 ldist = sqrt(d2);
+      const Vec8 wi = vec8_div(d, ldist);
+      float8 cos_l = -vec8_dot(lnrm, wi);
+      cos_l = select(cos_l, fabs(cos_l), light_two_sided);
+      const int8 sampled = scatter & (d2 > 0.0f) & (cos_l > 0.0f);
+      const float8 lpdf = select((float8)(0.0f), choose / area * d2 / cos_l, sampled);
+      const float8 cos_i = vec8_dot(wi, fn);
+      const int8 f_on = (fn_wo > 0.0f) & (cos_i > 0.0f);
+      const Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
+      const float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
+      const float8 cos_s = fabs(cos_i);
+      contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
+      const float8 w = power_heuristic8(lpdf, bpdf);
+      pending =
+          vec8_select(pending, vec8_scale(vec8_mul(vec8_scale(vec8_mul(beta, f), cos_s), le), w / lpdf), contributes);
+      const Vec8 side = vec8_select(vec8_neg(ng), ng, vec8_dot(wi, ng) >= 0.0f);
+      shadow_org = offset_origin8(pos, side);
+      shadow_dir = vec8_sub(vec8_add(pos, vec8_scale(wi, ldist)), shadow_org);
+    }
+
+    /* The next direction (bsdf.cl bsdf_sample, diffuse), then Russian roulette.
+     */
+    const Vec8 wl = cosine_hemisphere8(u_b1, u_b2);
+    const Vec8 wi =
+        vec8_normalize(vec8_add(vec8_add(vec8_scale(fs, wl.x), vec8_scale(ft, wl.y)), vec8_scale(fn, wl.z)));
+    const float8 pdf = select((float8)(0.0f), wl.z * PSF_INV_PI, fn_wo > 0.0f);
+    const Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
+    beta = vec8_mul(beta, weight);
+    const int8 rr = scatter & (segments >= params.rr_depth);
+    const float8 q = fmin(vec8_max3(beta), 0.95f);
+    scatter &= ~(rr & (u_rr >= q));
+    beta = vec8_select(beta, vec8_div(beta, q), rr);
+    const int8 go = scatter & (vec8_max3(weight) > 0.0f);
+
+    /* The shadow rays, lane by lane (trace_paths' intersect_any_hit_alpha
+     * without alpha), and what they decide (shade.cl shadow_slot). */
+    int8 visible = (int8)(0);
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(contributes, l)) continue;
+      Ray r;
+      r.org = (float4)(vec8_get(shadow_org, l), 0.0f);
+      r.dir = (float4)(vec8_get(shadow_dir, l), 1.0f - PSF_RAY_EPS);
+      Hit h;
+      lane_any(nodes, packs, &r, &h);
+      LANE_I(visible, l) = h.prim != PSF_NO_HIT ? 0 : -1;
+    }
+    lanes_add_radiance(&ln, pending, visible, false);
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(new_vertex, l)) continue;
+      PathVertex v;
+      v.position = (float4)(vec8_get(pos, l), LANE_F(ln.path_length, l));
+      v.normal = (float4)(vec8_get(n_camera, l), LANE_I(visible, l) || !LANE_I(contributes, l) ? 1.0f : 0.0f);
+      v.albedo = (float4)(vec8_get(albedo, l), rsqrt(fmax(fabs(LANE_F(ng_wo, l)), PSF_FOOTPRINT_MIN_COS)));
+      v.alpha = (float4)(vec8_get(ln.beta, l), 0.0f);
+      vertices[LANE_U(ln.path, l)] = v;
+    }
+
+    /* Paths that go on: the next ray from the point, off the surface on the
+     * side wi leaves on; the others end, and their lanes take the next paths.
+     */
+    ln.beta = vec8_select(ln.beta, beta, go);
+    ln.bsdf_pdf = select(ln.bsdf_pdf, pdf, go);
+    ln.prev = vec8_select(ln.prev, pos, go);
+    ln.flags = select(ln.flags, ln.flags & ~(PSF_PATH_SPECULAR | PSF_PATH_NULL_CROSSED), as_uint8(go));
+    ln.org = vec8_select(ln.org, offset_origin8(pos, vec8_select(vec8_neg(ng), ng, vec8_dot(wi, ng) >= 0.0f)), go);
+    ln.dir = vec8_select(ln.dir, wi, go);
+    ln.tmin = select(ln.tmin, (float8)(0.0f), go);
+    ln.tmax = select(ln.tmax, (float8)(INFINITY), go);
+    ln.depth = select(ln.depth, ln.depth + 1u, as_uint8(go));
+    const int8 ends = ln.live & ~go;
+    ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(ends, l)) continue;
+      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states);
+      LANE_I(ln.live, l) = 0;
+      if (next < end) lanes_load(&ln, l, next++, queue, rays, states);
+    }
+  }
+}
