@@ -187,6 +187,52 @@ inline void lanes_add_radiance(Lanes *ln, Vec8 c, int8 mask, bool seen) {
   ln->radiance_w = select(ln->radiance_w, (float8)(1.0f), raise_w);
 }
 
+/* The first six dimensions of each lane's bounce (shade.cl bounce_samples:
+ * light choice, point on the light, BSDF direction, Russian roulette), the
+ * same numbers as sample_8d_keyed's, with the work across the lanes: each
+ * lane's unscrambled point is the xor of the rows of the generator matrices
+ * that its sample index selects (a row holds 8 consecutive dimensions), taken
+ * for the bits of the largest index without a branch on any lane's; then the
+ * points, transposed to a vector per dimension, are scrambled 8 lanes at a
+ * time. Lanes whose dimensions run past the table (depth 36 and more) take
+ * sample_8d_keyed's own path. */
+inline void lanes_samples(__global const uint *sobol, uint seed_hash, uint dim0, const Lanes *ln, int8 active,
+                          float8 *u) {
+  const uint8 key = psf_hash_combine8((uint8)(seed_hash), ln->pixel);
+  const uint8 dim = (uint8)(dim0) + (uint8)(PSF_DIMS_PER_BOUNCE)*ln->depth;
+  const int8 table = dim <= (uint8)(PSF_SOBOL_DIMS - 8u);
+  uint8 rows[PSF_LANES];
+  uint any_bits = 0u;
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    rows[l] = (uint8)(0u);
+    if (LANE_I(active, l) && LANE_I(table, l)) any_bits |= LANE_U(ln->sample, l);
+  }
+  const uint bits = 32u - clz(any_bits);
+  for (uint b = 0u; b < bits; ++b)
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      const uint d = LANE_I(table, l) ? LANE_U(dim, l) : 0u;
+      const uint select_row = 0u - ((LANE_U(ln->sample, l) >> b) & 1u);
+      rows[l] ^= vload8(0, sobol + b * PSF_SOBOL_DIMS + d) & (uint8)(select_row);
+    }
+  __private const uint *r = (__private const uint *)rows;
+  for (uint o = 0u; o < 6u; ++o) {
+    const uint8 x = (uint8)(r[o], r[8 + o], r[16 + o], r[24 + o], r[32 + o], r[40 + o], r[48 + o], r[56 + o]);
+    const uint8 v = nested_uniform_scramble8(x, psf_hash_combine8(key, dim + o));
+    u[o] = convert_float8(v >> 8) * (1.0f / 16777216.0f);
+  }
+  if (all(table | ~active)) return;
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (!LANE_I(active, l) || LANE_I(table, l)) continue;
+    const float8 w = sample_8d_keyed(sobol, LANE_U(key, l), LANE_U(ln->sample, l), LANE_U(dim, l));
+    LANE_F(u[0], l) = w.s0;
+    LANE_F(u[1], l) = w.s1;
+    LANE_F(u[2], l) = w.s2;
+    LANE_F(u[3], l) = w.s3;
+    LANE_F(u[4], l) = w.s4;
+    LANE_F(u[5], l) = w.s5;
+  }
+}
+
 /* One lane's casts (raycast.cl), out of line: the kernel calls each in a loop
  * over the lanes, and its vectors stay where they are across the call. The
  * ray and hit go by pointer: by value, the ray's two halves were stored apart
@@ -316,23 +362,16 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
 
     /* The bounce's samples (shade.cl bounce_samples), lane by lane, transposed.
      */
-    float8 u_light = (float8)(0.0f), u_la = (float8)(0.0f), u_lb = (float8)(0.0f);
-    float8 u_b1 = (float8)(0.0f), u_b2 = (float8)(0.0f), u_rr = (float8)(0.0f);
+    float8 u[6];
+    lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, scatter, u);
+    const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
+    const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
     uint8 light = (uint8)(0u);
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(scatter, l)) continue;
-      const uint key = psf_hash_combine(seed_hash, LANE_U(ln.pixel, l));
-      const float8 u = sample_8d_keyed(sobol, key, LANE_U(ln.sample, l),
-                                       params.dim_bounce0 + PSF_DIMS_PER_BOUNCE * LANE_U(ln.depth, l));
-      LANE_F(u_light, l) = u.s0; /* PSF_DIM_LIGHT_SELECT */
-      LANE_F(u_la, l) = u.s1;    /* PSF_DIM_LIGHT_UV */
-      LANE_F(u_lb, l) = u.s2;
-      LANE_F(u_b1, l) = u.s3; /* PSF_DIM_BSDF_UV */
-      LANE_F(u_b2, l) = u.s4;
-      LANE_F(u_rr, l) = u.s5; /* PSF_DIM_RR */
-      if (params.num_emitters > 0u)
-        LANE_U(light, l) = sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters, u.s0);
-    }
+    if (params.num_emitters > 0u)
+      for (uint l = 0u; l < PSF_LANES; ++l)
+        if (LANE_I(scatter, l))
+          LANE_U(light, l) = sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters,
+                                               LANE_F(u_light, l));
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
      * emitter_sample), its MIS weight against the BSDF's pdf. */

@@ -1615,7 +1615,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // read 1e-9 at 64 spp), the means to 1e-4 (the vertex-normal box: 1.4e-5 from
   // the 15 of 9216 values that differ by more than 0.1 %), filtered (the
   // filtering vertices are the kernel's too) and not. Scenes: our Cornell box (vertex normals
-  // none), with max depth 3 (the depth test), a two-sided box with vertex
+  // none), with max depth 3 (the depth test), with white walls and paths of
+  // any depth (the samples past the Sobol table), a two-sided box with vertex
   // normals and hidden lights, and a scene outside the class
   // (an environment map), which must fall back to trace_paths bit for bit.
   auto& rt = psf::test::runtime();
@@ -1643,6 +1644,14 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     for (auto& m : t.materials) m.two_sided = 1;
     t.hide = PSF_HIDE_AREA;
     cases.push_back({"two-sided, vertex normals, hidden lights", t, true});
+  }
+  {
+    // White walls and no depth limit: paths past depth 35 draw dimensions past
+    // the Sobol table, which trace_lanes takes lane by lane.
+    psf::Scene t = cases.front().scene;
+    for (auto& m : t.materials) m.albedo = {{0.97f, 0.97f, 0.97f, 0.0f}};
+    t.max_depth = -1;
+    cases.push_back({"cornell-box, white walls, unbounded depth", t, true});
   }
   cases.push_back({"envmap floor", envmap_floor(), false});
   for (auto& c : cases) {
