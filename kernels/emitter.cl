@@ -322,7 +322,7 @@ inline float sphere_cone_width(float r, float d2) {
  * Always inlined: as a call, it took its Environment by value and its
  * LightSample back through memory (PoCL, Mitsuba's cbox: 4 % fewer
  * instructions per path inlined). */
-inline __attribute__((always_inline)) LightSample emitter_sample(__global const Emitter* emitters,
+PSF_FORCE_INLINE LightSample emitter_sample(__global const Emitter* emitters,
                                                                  __global const float* cdf, uint count,
                                                                  Environment env, __global const float* env_data,
                                                                  float3 p, float ul, float ua, float ub) {

@@ -125,7 +125,7 @@ inline int filter_record_offset(uint record) {
  * consecutive tuples (in cell order) each work-item averages, 1 (GPUs) or
  * PSF_FILTER_QUERIES (CPUs); consecutive tuples mostly share a row of cells, and a
  * work-item keeps the last one's key parts for the next. */
-inline __attribute__((always_inline)) void filter_queries(FilterParams p, uint stride, uint queries,
+PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
                                                           __global const uint* valid, __global const float* sorted,
                                                           __global const float* values,
                                                           __global const uint* starts, __global float* filtered,

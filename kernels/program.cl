@@ -23,6 +23,17 @@
 #define psf_prefetch_write(p) ((void)0)
 #endif
 
+/* Forced inlining: raycast.cl's traversal (a call would keep the hit record in
+ * memory), shade.cl's bounce, emitter.cl's light sample, filter.cl's queries.
+ * PSF_NO_FORCE_INLINE (scripts/oclgrind) turns it off: inlining emits LLVM
+ * intrinsics Oclgrind 21.10 cannot execute (llvm.experimental.noalias.scope.decl
+ * for the structs passed by value). */
+#ifdef PSF_NO_FORCE_INLINE
+#define PSF_FORCE_INLINE inline
+#else
+#define PSF_FORCE_INLINE inline __attribute__((always_inline))
+#endif
+
 #include "layout.cl"
 #include "sampling.cl"
 #include "texture.cl"

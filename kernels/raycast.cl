@@ -86,14 +86,8 @@ typedef int4 bvh_intw;
 #define PACK_INV_SIZE (9 * PSF_BVH_WIDTH)
 #define PACK_PRIM (10 * PSF_BVH_WIDTH)
 
-/* Forced inlining of the traversal's helpers: a call would keep the hit record
- * in memory instead of registers. PSF_NO_FORCE_INLINE (scripts/oclgrind) turns it
- * off: the inliner emits an intrinsic Oclgrind cannot execute. */
-#ifdef PSF_NO_FORCE_INLINE
-#define BVH_INLINE inline
-#else
-#define BVH_INLINE inline __attribute__((always_inline))
-#endif
+/* Forced inlining of the traversal's helpers (program.cl PSF_FORCE_INLINE). */
+#define BVH_INLINE PSF_FORCE_INLINE
 
 /* Per-component max / min as compare and select (maps to maxps / minps; no NaN
  * can reach them, see slab_ray). */

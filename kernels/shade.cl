@@ -366,7 +366,7 @@ inline float3 offset_origin(float3 p, float3 n) { return p + n * PSF_RAY_EPS * f
  * trace_paths, where the compiler then keeps what the bounce's stages hand each
  * other in registers (PoCL, Mitsuba's cbox: 3 % fewer instructions per path,
  * 5 % less time); called by shade (shade_path), where inlining it cost 4 %. */
-inline __attribute__((always_inline)) bool shade_path_inline(
+PSF_FORCE_INLINE bool shade_path_inline(
     uint k, uint j, FrameParams params, __global const uint* sobol, __global const float4* tri_pos,
     __global const uint* tri_material, __global const Material* materials, __global const Emitter* emitters,
     __global const float* emitter_cdf, __global const float* tri_light_pdf, Environment env,

@@ -1657,11 +1657,11 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   for (auto& c : cases) {
     INFO(c.name);
     psf::Scene& s = c.scene;
-    s.width = std::min(s.width, 64);
-    s.height = std::min(s.height, 48);
+    s.width = std::min(s.width, psf::test::pick(64, 16));
+    s.height = std::min(s.height, psf::test::pick(48, 12));
     psf::Renderer r(rt, s);
     psf::RenderOptions o;
-    o.spp = 16;
+    o.spp = psf::test::pick(16, 4);
     o.max_depth = s.max_depth;
     o.per_path = 1;
     o.lanes = 0;
