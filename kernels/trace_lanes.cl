@@ -1,33 +1,36 @@
-/* trace_lanes.cl: the per-path stage (shade.cl trace_paths) for scenes of plain
- * diffuse surfaces lit by emissive triangles, with eight paths at a time in the
- * lanes of float8 vectors.
+/* trace_lanes.cl: the per-path stage (shade.cl trace_paths) for scenes of
+ * diffuse surfaces, with eight paths at a time in the lanes of float8 vectors.
  *
  * PoCL runs a kernel's work-items one after another and vectorises them only
  * where the kernel has no loops, no vector types and no stores under branches
  * (docs/performance-notes.md), so trace_paths, which loops over bounces and BVH
  * nodes, runs one path at a time in scalar code. Here each work-item holds
  * eight paths in lanes: the shading of a bounce (the hit's triangle and
- * frame, the emission it adds, the light sample and its MIS weight, the
- * cosine-weighted direction, Russian roulette) is written with float8 vectors,
- * so every step is one instruction for the eight; the two casts of a bounce
- * are the BVH8 traversal of raycast.cl, lane by lane, and so are the loads
- * of the hit's triangle, material and light. A lane whose path ends stores the
- * path's state and takes the next path of the work-item's run of
+ * frame, the emission it adds, a light sample on a triangle and its MIS weight,
+ * the cosine-weighted direction, Russian roulette) and the drawing of its
+ * samples are written with float8 vectors, so every step is one instruction for
+ * the eight. Lane by lane: the two casts of a bounce (the BVH8 traversal of
+ * raycast.cl, alpha-tested where the scene has masks), the loads of the hit's
+ * triangle, material and light, and what is rarer or branchier: a colour
+ * texture's albedo and frame (surface.cl surface_frame), the environment an
+ * escaped ray sees, a light sample on the environment or a point, spot or
+ * directional light (emitter.cl emitter_sample). A lane whose path ends stores
+ * the path's state and takes the next path of the work-item's run of
  * `per_item` queue slots, so the lanes stay full until the run's end.
  *
- * The scene class (host/render.cpp lanes_supported): every material diffuse,
- * untextured and isotropic, without media, blends or masks (two-sided and
- * vertex normals allowed); every emitter a triangle; no analytic spheres, no
- * environment. The arithmetic is shade_path_inline's for that class, written
- * the same way, and the samples are drawn by the same functions, so a path's
- * result is the same as trace_paths' up to the rounding of a different
- * instruction order (tests/test_render.cpp compares the two). */
+ * The scene class (host/render.cpp lanes_supported): every material diffuse
+ * (a colour texture, an opacity mask, two sides and vertex normals allowed; no
+ * bump map, blend, medium or vertex colours), no emission texture, no analytic
+ * spheres, no camera medium. The arithmetic is shade_path_inline's for that
+ * class, written the same way, and the samples are drawn by the same
+ * functions, so a path's result is the same as trace_paths' up to the rounding
+ * of a different instruction order (tests/test_emitter.cpp compares the two). */
 
 #define PSF_LANES 8
 /* Lane l of a private vector (a scalar view of its memory). */
-#define LANE_F(v, l) (((float *)&(v))[l])
-#define LANE_U(v, l) (((uint *)&(v))[l])
-#define LANE_I(v, l) (((int *)&(v))[l])
+#define LANE_F(v, l) (((float*)&(v))[l])
+#define LANE_U(v, l) (((uint*)&(v))[l])
+#define LANE_I(v, l) (((int*)&(v))[l])
 
 /* Eight 3-vectors, one per lane. */
 typedef struct {
@@ -58,7 +61,7 @@ inline Vec8 vec8_select(Vec8 b, Vec8 a, int8 c) {
 }
 inline float8 vec8_length(Vec8 a) { return sqrt(vec8_dot(a, a)); }
 inline Vec8 vec8_normalize(Vec8 a) { return vec8_scale(a, rsqrt(vec8_dot(a, a))); }
-inline void vec8_set(Vec8 *v, uint l, float3 a) {
+inline void vec8_set(Vec8* v, uint l, float3 a) {
   LANE_F(v->x, l) = a.x;
   LANE_F(v->y, l) = a.y;
   LANE_F(v->z, l) = a.z;
@@ -71,7 +74,7 @@ inline float8 power_heuristic8(float8 a, float8 b) {
 }
 
 /* psf_sincos (sampling.cl), lane by lane the same operations. */
-inline float8 psf_sincos8(float8 x, float8 *c) {
+inline float8 psf_sincos8(float8 x, float8* c) {
   float8 ax = fabs(x);
   int8 j = convert_int8(ax * 1.27323954473516f);
   j += j & 1;
@@ -103,7 +106,7 @@ inline Vec8 cosine_hemisphere8(float8 u1, float8 u2) {
 }
 
 /* frame_from_normal (bsdf.cl) per lane: s and t around unit n. */
-inline void frame_from_normal8(Vec8 n, Vec8 *s, Vec8 *t) {
+inline void frame_from_normal8(Vec8 n, Vec8* s, Vec8* t) {
   float8 sign = select((float8)(-1.0f), (float8)(1.0f), n.z >= 0.0f);
   float8 a = -1.0f / (sign + n.z);
   float8 c = n.x * n.y * a;
@@ -135,8 +138,8 @@ typedef struct {
 } Lanes;
 
 /* Lane l takes the path in queue slot k: its camera ray and state. */
-inline void lanes_load(Lanes *ln, uint l, uint k, __global const uint *queue, __global const Ray *rays,
-                       __global const PathState *states) {
+inline void lanes_load(Lanes* ln, uint l, uint k, __global const uint* queue, __global const Ray* rays,
+                       __global const PathState* states) {
   const uint j = queue[k];
   const Ray r = rays[k];
   const PathState st = states[j];
@@ -162,7 +165,7 @@ inline void lanes_load(Lanes *ln, uint l, uint k, __global const uint *queue, __
 
 /* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
  * light sample's contribution where its shadow ray was blocked). */
-inline void lanes_store(const Lanes *ln, uint l, float3 pending, __global PathState *states) {
+inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states) {
   PathState st;
   st.throughput = (float4)(vec8_get(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
   st.radiance = (float4)(vec8_get(ln->radiance, l), LANE_F(ln->radiance_w, l));
@@ -177,7 +180,7 @@ inline void lanes_store(const Lanes *ln, uint l, float3 pending, __global PathSt
 }
 
 /* Adds c where `mask`, as shade.cl's add_radiance (seen: add_radiance_seen). */
-inline void lanes_add_radiance(Lanes *ln, Vec8 c, int8 mask, bool seen) {
+inline void lanes_add_radiance(Lanes* ln, Vec8 c, int8 mask, bool seen) {
   const int8 vertex = (ln->flags & PSF_PATH_VERTEX) != 0u;
   int8 to_vertex = mask & vertex, to_prefix = mask & ~vertex;
   int8 raise_w = to_prefix;
@@ -196,8 +199,8 @@ inline void lanes_add_radiance(Lanes *ln, Vec8 c, int8 mask, bool seen) {
  * points, transposed to a vector per dimension, are scrambled 8 lanes at a
  * time. Lanes whose dimensions run past the table (depth 36 and more) take
  * sample_8d_keyed's own path. */
-inline void lanes_samples(__global const uint *sobol, uint seed_hash, uint dim0, const Lanes *ln, int8 active,
-                          float8 *u) {
+inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0, const Lanes* ln, int8 active,
+                          float8* u) {
   const uint8 key = psf_hash_combine8((uint8)(seed_hash), ln->pixel);
   const uint8 dim = (uint8)(dim0) + (uint8)(PSF_DIMS_PER_BOUNCE)*ln->depth;
   const int8 table = dim <= (uint8)(PSF_SOBOL_DIMS - 8u);
@@ -214,7 +217,7 @@ inline void lanes_samples(__global const uint *sobol, uint seed_hash, uint dim0,
       const uint select_row = 0u - ((LANE_U(ln->sample, l) >> b) & 1u);
       rows[l] ^= vload8(0, sobol + b * PSF_SOBOL_DIMS + d) & (uint8)(select_row);
     }
-  __private const uint *r = (__private const uint *)rows;
+  __private const uint* r = (__private const uint*)rows;
   for (uint o = 0u; o < 6u; ++o) {
     const uint8 x = (uint8)(r[o], r[8 + o], r[16 + o], r[24 + o], r[32 + o], r[40 + o], r[48 + o], r[56 + o]);
     const uint8 v = nested_uniform_scramble8(x, psf_hash_combine8(key, dim + o));
@@ -238,22 +241,24 @@ inline void lanes_samples(__global const uint *sobol, uint seed_hash, uint dim0,
  * ray and hit go by pointer: by value, the ray's two halves were stored apart
  * and loaded as one, a stall on every call (PoCL, Mitsuba's cbox: the
  * call's argument copy was 8 % of the kernel's samples). */
-__attribute__((noinline)) void lane_closest(__global const BvhNode *nodes, __global const BvhTriPack *packs,
-                                            const Ray *r, Hit *h) {
-  *h = intersect_closest_alpha(nodes, packs, *r, 0);
+__attribute__((noinline)) void lane_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                            const AlphaScene* alpha, const Ray* r, Hit* h) {
+  *h = intersect_closest_alpha(nodes, packs, *r, alpha);
 }
-__attribute__((noinline)) void lane_any(__global const BvhNode *nodes, __global const BvhTriPack *packs, const Ray *r,
-                                        Hit *h) {
-  *h = intersect_any_hit_alpha(nodes, packs, *r, 0);
+__attribute__((noinline)) void lane_any(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                        const AlphaScene* alpha, const Ray* r, Hit* h) {
+  *h = intersect_any_hit_alpha(nodes, packs, *r, alpha);
 }
-__kernel void trace_lanes(FrameParams params, __global const uint *restrict sobol,
-                          __global const float4 *restrict tri_pos, __global const uint *restrict tri_material,
-                          __global const Material *restrict materials, __global const Emitter *restrict emitters,
-                          __global const float *restrict emitter_cdf, __global const float *restrict tri_light_pdf,
-                          __global const BvhNode *restrict nodes, __global const BvhTriPack *restrict packs,
-                          __global const Ray *restrict rays, __global PathState *restrict states,
-                          __global PathVertex *restrict vertices, __global const TriAttrib *restrict tri_attribs,
-                          uint count, uint per_item, __global const uint *restrict queue) {
+__kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
+                          __global const float4* restrict tri_pos, __global const uint* restrict tri_material,
+                          __global const Material* restrict materials, __global const Emitter* restrict emitters,
+                          __global const float* restrict emitter_cdf, __global const float* restrict tri_light_pdf,
+                          __global const BvhNode* restrict nodes, __global const BvhTriPack* restrict packs,
+                          __global const Ray* restrict rays, __global PathState* restrict states,
+                          __global PathVertex* restrict vertices, __global const TriAttrib* restrict tri_attribs,
+                          __global const TextureInfo* restrict textures, __global const half* restrict texels,
+                          Environment env, __global const float* restrict env_data, uint masked, uint count,
+                          uint per_item, __global const uint* restrict queue) {
   const uint first = get_global_id(0) * per_item;
   if (first >= count) return;
   const uint end = min(first + per_item, count);
@@ -268,6 +273,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
   }
   for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, queue, rays, states);
   const uint seed_hash = psf_hash(params.seed);
+  AlphaScene as = {tri_material, materials, tri_attribs, textures, texels, 0};
+  const AlphaScene* alpha = masked ? &as : 0;
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
   const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
 
@@ -281,7 +288,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
       r.org = (float4)(vec8_get(ln.org, l), LANE_F(ln.tmin, l));
       r.dir = (float4)(vec8_get(ln.dir, l), LANE_F(ln.tmax, l));
       Hit h;
-      lane_closest(nodes, packs, &r, &h);
+      lane_closest(nodes, packs, alpha, &r, &h);
       LANE_F(t, l) = h.t;
       LANE_U(prim, l) = h.prim;
       LANE_F(bu, l) = h.u;
@@ -290,11 +297,31 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
     ln.flags &= ~PSF_PATH_VERTEX_NEW;
     const int8 hit = ln.live & (prim != PSF_NO_HIT);
 
-    /* The hit triangles' corners, materials and shading normals, lane by lane.
-     */
+    /* Escaped rays see the environment, MIS-weighted against its light samples
+     * unless they left the camera (shade.cl), lane by lane. */
+    if (env.present) {
+      const int8 escaped = ln.live & ~hit;
+      Vec8 seen = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+      int8 sees = (int8)(0);
+      for (uint l = 0u; l < PSF_LANES; ++l) {
+        if (!LANE_I(escaped, l)) continue;
+        const uint depth = LANE_U(ln.depth, l);
+        if (depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT)) continue;
+        const float3 d = normalize(vec8_get(ln.dir, l));
+        float w = 1.0f, pdf;
+        const bool mis = depth > 0u && !(LANE_U(ln.flags, l) & PSF_PATH_SPECULAR);
+        const float3 radiance = env_radiance_pdf(env, env_data, d, mis ? &pdf : 0);
+        if (mis) w = power_heuristic(LANE_F(ln.bsdf_pdf, l), env.scale.w * pdf);
+        vec8_set(&seen, l, vec8_get(ln.beta, l) * radiance * w);
+        LANE_I(sees, l) = -1;
+      }
+      lanes_add_radiance(&ln, seen, sees, true);
+    }
+
+    /* The hit triangles' corners, materials and shading normals, lane by lane. */
     Vec8 p0, p1, p2, albedo, emission, n0, n1, n2;
     float8 light_pdf = (float8)(0.0f);
-    int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0);
+    int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0), textured = (int8)(0);
     p0 = p1 = p2 = albedo = emission = n0 = n1 = n2 = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(hit, l)) continue;
@@ -302,12 +329,13 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
       vec8_set(&p0, l, tri_pos[3u * pr].xyz);
       vec8_set(&p1, l, tri_pos[3u * pr + 1u].xyz);
       vec8_set(&p2, l, tri_pos[3u * pr + 2u].xyz);
-      __global const Material *m = materials + tri_material[pr];
+      __global const Material* m = materials + tri_material[pr];
       vec8_set(&albedo, l, m->albedo.xyz);
       vec8_set(&emission, l, m->emission.xyz);
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
+      LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
-      __global const TriAttrib *a = tri_attribs + pr;
+      __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
       if ((m->flags & PSF_MATFLAG_NORMALS) && (a->flags & PSF_TRI_NORMALS)) {
         LANE_I(normals, l) = -1;
@@ -349,6 +377,20 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
       fn = vec8_select(ns, vec8_neg(ns), two_sided & (vec8_dot(ns, wo) < 0.0f));
       frame_from_normal8(vec8_select(fn, ns, mat_normals), &fs, &ft);
     }
+    /* A colour texture: the albedo, and a frame along dp/du, from surface.cl's
+     * own surface_frame, lane by lane. */
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(textured, l)) continue;
+      Material m = materials[tri_material[LANE_U(prim, l)]];
+      float3 unperturbed;
+      const Frame f = surface_frame(&m, tri_attribs + LANE_U(prim, l), LANE_F(bu, l), LANE_F(bv, l), vec8_get(p0, l),
+                                    vec8_get(p1, l), vec8_get(p2, l), vec8_get(ng, l), vec8_get(wo, l), textures,
+                                    texels, &unperturbed);
+      vec8_set(&fs, l, f.s);
+      vec8_set(&ft, l, f.t);
+      vec8_set(&fn, l, f.n);
+      vec8_set(&albedo, l, m.albedo.xyz);
+    }
     const float8 fn_wo = vec8_dot(fn, wo);
     const Vec8 n_camera = vec8_select(vec8_neg(fn), fn, fn_wo >= 0.0f);
     const uint8 segments = ln.depth + 1u;
@@ -360,8 +402,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
     ln.flags = select(ln.flags, ln.flags | (PSF_PATH_VERTEX | PSF_PATH_VERTEX_NEW), as_uint8(new_vertex));
     Vec8 beta = vec8_select(ln.beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), new_vertex);
 
-    /* The bounce's samples (shade.cl bounce_samples), lane by lane, transposed.
-     */
+    /* The bounce's samples (shade.cl bounce_samples), across the lanes. */
     float8 u[6];
     lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, scatter, u);
     const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
@@ -374,18 +415,25 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
                                                LANE_F(u_light, l));
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
-     * emitter_sample), its MIS weight against the BSDF's pdf. */
+     * emitter_sample) in vectors, any other light (the environment, point,
+     * spot and directional lights) by emitter_sample itself, lane by lane; the
+     * sample's MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     Vec8 shadow_org = pending, shadow_dir = pending;
+    float8 shadow_tmax = (float8)(1.0f - PSF_RAY_EPS);
     int8 contributes = (int8)(0);
     if (params.num_emitters > 0u) {
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
-      int8 light_two_sided = (int8)(0);
+      int8 light_two_sided = (int8)(0), general = (int8)(0);
       v0 = e1 = e2 = le = pending;
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(scatter, l)) continue;
-        __global const Emitter *em = emitters + LANE_U(light, l);
+        __global const Emitter* em = emitters + LANE_U(light, l);
+        if (em->type != PSF_EMITTER_TRIANGLE) {
+          LANE_I(general, l) = -1;
+          continue;
+        }
         const float4 a = em->v0;
         vec8_set(&v0, l, a.xyz);
         LANE_F(area, l) = a.w;
@@ -401,28 +449,40 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
       const Vec8 lnrm = vec8_normalize(vec8_cross(e1, e2));
       const Vec8 d = vec8_sub(lp, pos);
       const float8 d2 = vec8_dot(d, d);
-      const float8 ldist = sqrt(d2);
-      const Vec8 wi = vec8_div(d, ldist);
+      float8 ldist = sqrt(d2);
+      Vec8 wi = vec8_div(d, ldist);
       float8 cos_l = -vec8_dot(lnrm, wi);
       cos_l = select(cos_l, fabs(cos_l), light_two_sided);
       const int8 sampled = scatter & (d2 > 0.0f) & (cos_l > 0.0f);
-      const float8 lpdf = select((float8)(0.0f), choose / area * d2 / cos_l, sampled);
+      float8 lpdf = select((float8)(0.0f), choose / area * d2 / cos_l, sampled);
+      int8 delta = (int8)(0);
+      for (uint l = 0u; l < PSF_LANES; ++l) {
+        if (!LANE_I(general, l)) continue;
+        const LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data,
+                                              vec8_get(pos, l), LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
+        vec8_set(&wi, l, ls.wi);
+        LANE_F(ldist, l) = ls.dist;
+        LANE_F(lpdf, l) = ls.pdf;
+        vec8_set(&le, l, ls.radiance);
+        LANE_I(delta, l) = ls.delta ? -1 : 0;
+      }
       const float8 cos_i = vec8_dot(wi, fn);
       const int8 f_on = (fn_wo > 0.0f) & (cos_i > 0.0f);
       const Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       const float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const float8 cos_s = fabs(cos_i);
       contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
-      const float8 w = power_heuristic8(lpdf, bpdf);
+      const float8 w = select(power_heuristic8(lpdf, bpdf), (float8)(1.0f), delta);
       pending =
           vec8_select(pending, vec8_scale(vec8_mul(vec8_scale(vec8_mul(beta, f), cos_s), le), w / lpdf), contributes);
       const Vec8 side = vec8_select(vec8_neg(ng), ng, vec8_dot(wi, ng) >= 0.0f);
       shadow_org = offset_origin8(pos, side);
-      shadow_dir = vec8_sub(vec8_add(pos, vec8_scale(wi, ldist)), shadow_org);
+      const int8 infinite = isinf(ldist);
+      shadow_dir = vec8_select(vec8_sub(vec8_add(pos, vec8_scale(wi, ldist)), shadow_org), wi, infinite);
+      shadow_tmax = select(shadow_tmax, (float8)(INFINITY), infinite);
     }
 
-    /* The next direction (bsdf.cl bsdf_sample, diffuse), then Russian roulette.
-     */
+    /* The next direction (bsdf.cl bsdf_sample, diffuse), then Russian roulette. */
     const Vec8 wl = cosine_hemisphere8(u_b1, u_b2);
     const Vec8 wi =
         vec8_normalize(vec8_add(vec8_add(vec8_scale(fs, wl.x), vec8_scale(ft, wl.y)), vec8_scale(fn, wl.z)));
@@ -442,9 +502,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
       if (!LANE_I(contributes, l)) continue;
       Ray r;
       r.org = (float4)(vec8_get(shadow_org, l), 0.0f);
-      r.dir = (float4)(vec8_get(shadow_dir, l), 1.0f - PSF_RAY_EPS);
+      r.dir = (float4)(vec8_get(shadow_dir, l), LANE_F(shadow_tmax, l));
       Hit h;
-      lane_any(nodes, packs, &r, &h);
+      lane_any(nodes, packs, alpha, &r, &h);
       LANE_I(visible, l) = h.prim != PSF_NO_HIT ? 0 : -1;
     }
     lanes_add_radiance(&ln, pending, visible, false);
@@ -459,8 +519,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint *restrict sobo
     }
 
     /* Paths that go on: the next ray from the point, off the surface on the
-     * side wi leaves on; the others end, and their lanes take the next paths.
-     */
+     * side wi leaves on; the others end, and their lanes take the next paths. */
     ln.beta = vec8_select(ln.beta, beta, go);
     ln.bsdf_pdf = select(ln.bsdf_pdf, pdf, go);
     ln.prev = vec8_select(ln.prev, pos, go);

@@ -1617,8 +1617,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // filtering vertices are the kernel's too) and not. Scenes: our Cornell box (vertex normals
   // none), with max depth 3 (the depth test), with white walls and paths of
   // any depth (the samples past the Sobol table), a two-sided box with vertex
-  // normals and hidden lights, and a scene outside the class
-  // (an environment map), which must fall back to trace_paths bit for bit.
+  // normals and hidden lights, an environment map, a textured floor with an
+  // alpha-masked leaf and a point light; and a scene outside the class (media),
+  // which must fall back to trace_paths bit for bit.
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
@@ -1653,7 +1654,37 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     t.max_depth = -1;
     cases.push_back({"cornell-box, white walls, unbounded depth", t, true});
   }
-  cases.push_back({"envmap floor", envmap_floor(), false});
+  cases.push_back({"envmap floor", envmap_floor(), true});
+  {
+    // A textured floor under an area light and a point light, with a leaf
+    // between them whose opacity texture cuts out half of it (alpha-tested casts).
+    Material light{};
+    light.type = PSF_MATERIAL_DIFFUSE;
+    light.emission = {{2.0f, 2.0f, 2.0f, 0}};
+    psf::Scene t = lit_floor(light);
+    psf::detail::TextureStore store(t);
+    std::vector<float> texels;
+    for (int i = 0; i < 16; ++i) texels.insert(texels.end(), {0.1f + 0.05f * i, 0.8f - 0.04f * i, 0.5f, 1.0f});
+    t.materials[0].tex_color = store.pixels(psf::detail::TextureDesc{}, 4, 4, texels);
+    psf::detail::TextureDesc nearest;
+    nearest.bilinear = false;
+    Material leaf{};
+    leaf.type = PSF_MATERIAL_DIFFUSE;
+    leaf.albedo = {{0.3f, 0.7f, 0.2f, 0}};
+    leaf.opacity = 1.0f;
+    leaf.tex_opacity = store.pixels(nearest, 2, 2, {1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1});
+    leaf.flags = PSF_MATFLAG_MASKED;
+    t.materials.push_back(leaf);
+    t.material_names.push_back("leaf");
+    add_quad(t, {-0.7f, -0.7f, 0.4f}, {1.4f, 0, 0}, {0, 1.4f, 0}, uint32_t(t.materials.size() - 1));
+    psf::LightDesc point;
+    point.type = psf::LightType::Point;
+    point.position = {0.6f, -0.3f, 0.7f};
+    point.color = {0.3f, 0.2f, 0.1f};
+    t.lights = {point};
+    cases.push_back({"textured floor, masked leaf, area and point lights", t, true});
+  }
+  cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   for (auto& c : cases) {
     INFO(c.name);
     psf::Scene& s = c.scene;
