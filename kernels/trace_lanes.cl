@@ -242,13 +242,24 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
  * and loaded as one, a stall on every call (PoCL, Mitsuba's cbox: the
  * call's argument copy was 8 % of the kernel's samples). */
 __attribute__((noinline)) void lane_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                            const AlphaScene* alpha, const Ray* r, Hit* h) {
+                                            const Ray* r, Hit* h) {
+  *h = intersect_closest_alpha(nodes, packs, *r, 0);
+}
+__attribute__((noinline)) void lane_any(__global const BvhNode* nodes, __global const BvhTriPack* packs, const Ray* r,
+                                        Hit* h) {
+  *h = intersect_any_hit_alpha(nodes, packs, *r, 0);
+}
+/* The same, alpha-tested (a scene with opacity masks); apart, so that the
+ * casts of a scene without masks compile without the tests. */
+__attribute__((noinline)) void lane_closest_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                                   const AlphaScene* alpha, const Ray* r, Hit* h) {
   *h = intersect_closest_alpha(nodes, packs, *r, alpha);
 }
-__attribute__((noinline)) void lane_any(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                        const AlphaScene* alpha, const Ray* r, Hit* h) {
+__attribute__((noinline)) void lane_any_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
+                                               const AlphaScene* alpha, const Ray* r, Hit* h) {
   *h = intersect_any_hit_alpha(nodes, packs, *r, alpha);
 }
+
 __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
                           __global const float4* restrict tri_pos, __global const uint* restrict tri_material,
                           __global const Material* restrict materials, __global const Emitter* restrict emitters,
@@ -273,8 +284,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
   }
   for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, queue, rays, states);
   const uint seed_hash = psf_hash(params.seed);
-  AlphaScene as = {tri_material, materials, tri_attribs, textures, texels, 0};
-  const AlphaScene* alpha = masked ? &as : 0;
+  const AlphaScene alpha = {tri_material, materials, tri_attribs, textures, texels, 0};
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
   const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
 
@@ -288,7 +298,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       r.org = (float4)(vec8_get(ln.org, l), LANE_F(ln.tmin, l));
       r.dir = (float4)(vec8_get(ln.dir, l), LANE_F(ln.tmax, l));
       Hit h;
-      lane_closest(nodes, packs, alpha, &r, &h);
+      if (masked)
+        lane_closest_masked(nodes, packs, &alpha, &r, &h);
+      else
+        lane_closest(nodes, packs, &r, &h);
       LANE_F(t, l) = h.t;
       LANE_U(prim, l) = h.prim;
       LANE_F(bu, l) = h.u;
@@ -504,7 +517,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       r.org = (float4)(vec8_get(shadow_org, l), 0.0f);
       r.dir = (float4)(vec8_get(shadow_dir, l), LANE_F(shadow_tmax, l));
       Hit h;
-      lane_any(nodes, packs, alpha, &r, &h);
+      if (masked)
+        lane_any_masked(nodes, packs, &alpha, &r, &h);
+      else
+        lane_any(nodes, packs, &r, &h);
       LANE_I(visible, l) = h.prim != PSF_NO_HIT ? 0 : -1;
     }
     lanes_add_radiance(&ln, pending, visible, false);
