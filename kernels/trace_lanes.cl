@@ -197,7 +197,7 @@ inline void lanes_add_radiance(Lanes* ln, Vec8 c, int8 mask, bool seen) {
  * that its sample index selects (a row holds 8 consecutive dimensions), taken
  * for the bits of the largest index without a branch on any lane's; then the
  * points, transposed to a vector per dimension, are scrambled 8 lanes at a
- * time. Lanes whose dimensions run past the table (depth 36 and more) take
+ * time. Lanes whose dimensions run past the table (from depth 36 on, 35 with a lens) take
  * sample_8d_keyed's own path. */
 inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0, const Lanes* ln, int8 active,
                           float8* u) {

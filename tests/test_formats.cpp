@@ -1268,6 +1268,47 @@ TEST_CASE("OBJ: an MTL value that is not a finite float is an error at its line"
   CHECK_THROWS_WITH(psf::load_scene(obj), Catch::Contains("m.mtl:2") && Catch::Contains("d: 'x' is not a finite number"));
 }
 
+TEST_CASE("OBJ: map_Kd's alpha channel cuts the surface out where the material has no map_d", "[formats]") {
+  // McGuire's archive draws foliage so (the pine of ../shared: RGBA leaves, no
+  // map_d). An RGB image, an RGBA image whose every texel is opaque, and a
+  // material with its own map_d keep the behaviour they had.
+  TempDir dir;
+  const unsigned char leaf[] = {40, 160, 40, 255, 40, 160, 40, 0, 40, 160, 40, 128, 40, 160, 40, 255};
+  const unsigned char opaque[] = {40, 160, 40, 255, 40, 160, 40, 255, 40, 160, 40, 255, 40, 160, 40, 255};
+  const unsigned char rgb[] = {40, 160, 40, 0, 0, 0, 90, 90, 90, 255, 255, 255};
+  const unsigned char mask[] = {255, 0, 0, 255};
+  dir.write("leaf.png", png_bytes(2, 2, 4, leaf));
+  dir.write("opaque.png", png_bytes(2, 2, 4, opaque));
+  dir.write("rgb.png", png_bytes(2, 2, 3, rgb));
+  dir.write("mask.png", png_bytes(2, 2, 1, mask));
+  dir.write("m.mtl",
+            "newmtl leaf\nmap_Kd leaf.png\nnewmtl opaque\nmap_Kd opaque.png\nnewmtl rgb\nmap_Kd rgb.png\n"
+            "newmtl own\nmap_Kd leaf.png\nmap_d mask.png\n");
+  std::string obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n";
+  for (const char* m : {"leaf", "opaque", "rgb", "own"}) obj += std::string("usemtl ") + m + "\nf 1/1 2/2 3/3\n";
+  psf::Scene s = psf::load_scene(dir.write("m.obj", obj));
+  CHECK(s.warnings.empty());
+  REQUIRE(s.tri_material.size() == 4);
+  auto material = [&](size_t k) -> const Material& { return s.materials.at(s.tri_material[k]); };
+  const Material& cut = material(0);
+  CHECK((cut.flags & PSF_MATFLAG_MASKED) != 0);
+  REQUIRE(cut.tex_opacity != PSF_NO_TEXTURE);
+  CHECK(cut.opacity == 1.0f);
+  CHECK(texel_x(s, cut.tex_opacity, 0) == 1.0f);
+  CHECK(texel_x(s, cut.tex_opacity, 1) == 0.0f);
+  CHECK(texel_x(s, cut.tex_opacity, 2) == Approx(128 / 255.0).epsilon(2e-3));
+  for (size_t k : {size_t(1), size_t(2)}) {
+    INFO("material " << k);
+    CHECK((material(k).flags & PSF_MATFLAG_MASKED) == 0);
+    CHECK(material(k).tex_opacity == PSF_NO_TEXTURE);
+  }
+  const Material& own = material(3);  // map_d decides: its luminance, not leaf.png's alpha
+  REQUIRE(own.tex_opacity != PSF_NO_TEXTURE);
+  CHECK(texel_x(s, own.tex_opacity, 0) == 1.0f);
+  CHECK(texel_x(s, own.tex_opacity, 1) == 0.0f);
+  CHECK(texel_x(s, own.tex_opacity, 2) == 0.0f);
+}
+
 TEST_CASE("Mitsuba mask: a bitmap's opacity is its luminance (Mitsuba 3) or its alpha (0.5 files)", "[formats]") {
   // Mitsuba 3 reads a bitmap's RGB only; Bitterli's 0.5 files cut their leaves
   // out by the images' alpha, as Tungsten renders them.

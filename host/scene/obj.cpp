@@ -489,12 +489,22 @@ float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 // - otherwise diffuse Kd.
 // map_Kd replaces Kd (Kd stays the colour if the file is missing); d < 1 or
 // map_d make a mask of opacity d times map_d (its alpha channel, else
-// luminance); map_bump / bump a bump map (heights: luminance). Ke is emission,
+// luminance), and without map_d so does map_Kd's alpha channel where it has
+// texels that are not opaque; map_bump / bump a bump map (heights: luminance). Ke is emission,
 // from the front side only (the side the face's counter-clockwise winding faces),
 // as Mitsuba's and pbrt's area lights emit: a light panel just below a ceiling
 // (McGuire's Cornell boxes) would otherwise light the ceiling through the gap.
 // All other surfaces but dielectrics scatter on both sides (OBJ has no one-sided
 // surfaces); an emitter, like a Mitsuba area emitter's surface, on its front only.
+// Whether some texel of texture `index` (RGBA halfs) has an alpha below 1.
+bool texture_has_transparency(const Scene& scene, uint32_t index) {
+  const TextureInfo& t = scene.textures.at(index);
+  const size_t first = size_t(t.offset) * 4, end = first + size_t(t.width) * t.height * 4;
+  for (size_t i = first + 3; i < end && i < scene.texels.size(); i += 4)
+    if (scene.texels[i] < 0x3C00u) return true;  // below 1.0 as a half (alpha is never negative)
+  return false;
+}
+
 Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) {
   Material m{};
   m.emission = {{om.ke.x, om.ke.y, om.ke.z, 0}};
@@ -583,6 +593,14 @@ Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) 
     if (!om.map_d.file.empty())
       m.tex_opacity = obj_texture(om, om.map_d, TextureUse::Opacity, "map_d", "using d alone", store, scene);
     if (m.opacity < 1.0f || m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
+  }
+  // Without map_d, map_Kd's own alpha channel, where some texel of it is not
+  // opaque, cuts the surface out: archives draw foliage so (McGuire's, whose
+  // pine was made for alpha-testing research), and G3D and Falcor read it so.
+  if (om.map_d.file.empty() && kd_tex != PSF_NO_TEXTURE && texture_has_transparency(scene, kd_tex)) {
+    m.opacity = std::clamp(om.d, 0.0f, 1.0f);
+    m.tex_opacity = obj_texture(om, om.map_kd, TextureUse::Opacity, "map_Kd", "opaque", store, scene);
+    if (m.tex_opacity != PSF_NO_TEXTURE) m.flags |= PSF_MATFLAG_MASKED;
   }
   if (!om.map_bump.file.empty()) {
     m.tex_bump = obj_texture(om, om.map_bump, TextureUse::Height, "map_bump", "no bump mapping", store, scene);
