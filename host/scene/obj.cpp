@@ -471,6 +471,15 @@ uint32_t obj_texture(const ObjMaterial& om, const ObjTexture& t, TextureUse use,
 
 float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
+// Whether some texel of texture `index` (RGBA halfs) has an alpha below 1.
+bool texture_has_transparency(const Scene& scene, uint32_t index) {
+  const TextureInfo& t = scene.textures.at(index);
+  const size_t first = size_t(t.offset) * 4, end = first + size_t(t.width) * t.height * 4;
+  for (size_t i = first + 3; i < end && i < scene.texels.size(); i += 4)
+    if (scene.texels[i] < 0x3C00u) return true;  // below 1.0 as a half (alpha is never negative)
+  return false;
+}
+
 // An MTL material as one of the renderer's BSDFs. There is no standard for
 // this; the usual reading of the illumination models:
 // - illum 4, 6, 7 or 9 (the refraction models): dielectric with IOR Ni (1.5 if
@@ -496,15 +505,6 @@ float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 // (McGuire's Cornell boxes) would otherwise light the ceiling through the gap.
 // All other surfaces but dielectrics scatter on both sides (OBJ has no one-sided
 // surfaces); an emitter, like a Mitsuba area emitter's surface, on its front only.
-// Whether some texel of texture `index` (RGBA halfs) has an alpha below 1.
-bool texture_has_transparency(const Scene& scene, uint32_t index) {
-  const TextureInfo& t = scene.textures.at(index);
-  const size_t first = size_t(t.offset) * 4, end = first + size_t(t.width) * t.height * 4;
-  for (size_t i = first + 3; i < end && i < scene.texels.size(); i += 4)
-    if (scene.texels[i] < 0x3C00u) return true;  // below 1.0 as a half (alpha is never negative)
-  return false;
-}
-
 Material obj_material(const ObjMaterial& om, TextureStore& store, Scene& scene) {
   Material m{};
   m.emission = {{om.ke.x, om.ke.y, om.ke.z, 0}};
