@@ -257,10 +257,9 @@ int run_render(const RenderArgs& a) {
   opt.spp = a.spp > 0 ? a.spp : (scene.default_spp > 0 ? scene.default_spp : 16);
   opt.seed = a.seed;
   opt.emission_rays = a.emission_rays;
-  opt.per_path = a.path_kernels == "per-path" || a.path_kernels == "lanes" ? 1
-                 : a.path_kernels == "wavefront"                         ? 0
-                                                                         : -1;
-  opt.lanes = a.path_kernels == "lanes" ? 1 : a.path_kernels == "auto" ? -1 : 0;
+  const std::string& kernels = a.path_kernels;  // auto, wavefront, per-path or lanes
+  opt.per_path = kernels == "auto" ? -1 : kernels == "wavefront" ? 0 : 1;
+  opt.lanes = kernels == "auto" ? -1 : kernels == "lanes" ? 1 : 0;
   opt.max_depth = a.max_depth >= -1 ? a.max_depth : scene.max_depth;
   opt.rr_depth = scene.rr_depth;
   opt.filter = a.fopt;

@@ -35,15 +35,19 @@ void in_parallel(uint64_t count, uint64_t threads, F&& f) {
   for (auto& t : pool) t.join();
 }
 
-// Whether trace_lanes (kernels/trace_lanes.cl) renders the scene: every
-// material diffuse (a colour texture, an opacity mask, two sides and vertex
-// normals allowed; no bump map, blend, medium, vertex colours, null boundary or
-// anisotropic roughness, which changes the frame), no emission texture, no
-// analytic spheres and no camera medium. Any light but a sphere.
-bool lanes_supported(const Scene& scene, const std::vector<Material>& materials, const std::vector<Emitter>& emitters) {
+// Whether trace_lanes (kernels/trace_lanes.cl) can render the scene, in two
+// parts: its geometry and lights (no analytic spheres, no camera medium, any
+// light but a sphere, no emission texture), and its device materials (every one
+// diffuse: a colour texture, an opacity mask, two sides and vertex normals
+// allowed; no bump map, blend, medium, vertex colours, null boundary or
+// anisotropic roughness, which changes the frame).
+bool lanes_lights_supported(const Scene& scene, const std::vector<Emitter>& emitters) {
   if (!scene.spheres.empty() || scene.camera_medium != 0) return false;
   for (const Emitter& e : emitters)
     if (e.type == PSF_EMITTER_SPHERE || e.tex_emission != PSF_NO_TEXTURE) return false;
+  return true;
+}
+bool lanes_materials_supported(const std::vector<Material>& materials) {
   for (const Material& m : materials)
     if (m.type != PSF_MATERIAL_DIFFUSE || (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 ||
         m.tex_bump != PSF_NO_TEXTURE || m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE ||
@@ -62,8 +66,7 @@ struct Renderer::Impl {
   std::unique_ptr<RayCaster> caster;
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
-  std::vector<Emitter> emitter_table;  // as uploaded (lanes_supported)
-  bool lanes = false;                  // lanes_supported
+  bool lanes = false;  // lanes_lights_supported and lanes_materials_supported
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -96,7 +99,7 @@ struct Renderer::Impl {
     tri_attribs = rt.upload(attributes);
     const std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
     materials = rt.upload(device);
-    lanes = lanes_supported(scene, device, emitter_table);
+    lanes = lanes && lanes_materials_supported(device);  // upload_geometry checked the lights
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);
@@ -140,7 +143,7 @@ struct Renderer::Impl {
       if (lo.x <= hi.x) auto_visibility_ray = 0.01f * glm::length(hi - lo);
     }
     emitters = rt.upload(lights.emitters);
-    emitter_table = lights.emitters;
+    lanes = lanes_lights_supported(scene, lights.emitters);
     emitter_cdf = rt.upload(lights.cdf);
     tri_light_pdf = rt.upload(lights.tri_light_pdf);
     env = lights.env;
@@ -505,7 +508,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   // per path cannot (PoCL, living room: 35 % slower per path; Cornell boxes:
   // 8-13 % faster).
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
-  // Scenes of the diffuse class (lanes_supported) on CPUs, with or without an
+  // Scenes of the diffuse class (lanes_*_supported) on CPUs, with or without an
   // environment map: eight paths per work-item in the lanes of vectors
   // (kernels/trace_lanes.cl), each work-item over a run of kLanesRun paths
   // (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for the wavefront

@@ -18,7 +18,7 @@
  * the path's state and takes the next path of the work-item's run of
  * `per_item` queue slots, so the lanes stay full until the run's end.
  *
- * The scene class (host/render.cpp lanes_supported): every material diffuse
+ * The scene class (host/render.cpp lanes_*_supported): every material diffuse
  * (a colour texture, an opacity mask, two sides and vertex normals allowed; no
  * bump map, blend, medium or vertex colours), no emission texture, no analytic
  * spheres, no camera medium. The arithmetic is shade_path_inline's for that
