@@ -37,10 +37,8 @@ void in_parallel(uint64_t count, uint64_t threads, F&& f) {
 
 // Whether trace_lanes (kernels/trace_lanes.cl) can render the scene, in two
 // parts: its geometry and lights (no analytic spheres, no camera medium, any
-// light but a sphere, no emission texture), and its device materials (every one
-// diffuse: a colour texture, an opacity mask, two sides and vertex normals
-// allowed; no bump map, blend, medium, vertex colours, null boundary or
-// anisotropic roughness, which changes the frame).
+// light but a sphere, no emission texture), and its device materials (any BSDF,
+// texture, bump map or blend; no medium, null boundary or emission texture).
 bool lanes_lights_supported(const Scene& scene, const std::vector<Emitter>& emitters) {
   if (!scene.spheres.empty() || scene.camera_medium != 0) return false;
   for (const Emitter& e : emitters)
@@ -49,10 +47,8 @@ bool lanes_lights_supported(const Scene& scene, const std::vector<Emitter>& emit
 }
 bool lanes_materials_supported(const std::vector<Material>& materials) {
   for (const Material& m : materials)
-    if (m.type != PSF_MATERIAL_DIFFUSE || (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 ||
-        m.tex_bump != PSF_NO_TEXTURE || m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE ||
-        m.tex_emission != PSF_NO_TEXTURE || m.blend != 0 || m.interior.s[3] > 0.0f || m.exterior != 0 ||
-        m.alpha_u != m.alpha_v)
+    if ((m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0 || m.tex_emission != PSF_NO_TEXTURE || m.interior.s[3] > 0.0f ||
+        m.exterior != 0)
       return false;
   return true;
 }
@@ -508,11 +504,14 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   // per path cannot (PoCL, living room: 35 % slower per path; Cornell boxes:
   // 8-13 % faster).
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
-  // Scenes of the diffuse class (lanes_*_supported) on CPUs, with or without an
+  // Scenes of the lanes' class (lanes_*_supported) on CPUs, with or without an
   // environment map: eight paths per work-item in the lanes of vectors
   // (kernels/trace_lanes.cl), each work-item over a run of kLanesRun paths
   // (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for the wavefront
-  // and 849-951 per path; the pine under the default sky 110-124 against 150-186).
+  // and 849-951 per path; the pine under the default sky 110-124 against 150-186;
+  // medians of alternating renders in one process, lanes / per path / wavefront:
+  // Sponza 214 / 273 / 246 ms, living room 1400 / 1738 / 1408, staircase
+  // 1622 / 1572 / 1572).
   const bool lanes = s.lanes && o.per_path != 0 && (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU"));
   if (lanes) {
     constexpr uint32_t kLanesRun = 32;

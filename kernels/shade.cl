@@ -177,17 +177,7 @@ inline void prefetch_hit_ahead(FrameParams params, __global const float4* tri_po
     const Hit h = hits[k + PSF_PREFETCH_AHEAD / 2u];
     if (h.prim >= params.first_sphere) return; /* a sphere, or PSF_NO_HIT (above every prim) */
     const uint tex = materials[tri_material[h.prim]].tex_color;
-    if (tex == PSF_NO_TEXTURE) return;
-    const TextureInfo t = textures[tex];
-    const float2 st = texture_uv(t, surface_uv(tri_attribs + h.prim, h.u, h.v));
-    const int x = (int)floor(st.x * (float)t.width - 0.5f), y = (int)floor(st.y * (float)t.height - 0.5f);
-    /* 8 bytes a texel: texels x and x + 1 cross a line one time in eight. */
-    __global const half* row0 = texels + 4u * texture_texel_index(t, x, y);
-    __global const half* row1 = texels + 4u * texture_texel_index(t, x, y + 1);
-    psf_prefetch(row0);
-    psf_prefetch(row0 + 7u);
-    psf_prefetch(row1);
-    psf_prefetch(row1 + 7u);
+    if (tex != PSF_NO_TEXTURE) texture_prefetch(textures, texels, tex, surface_uv(tri_attribs + h.prim, h.u, h.v));
   }
 }
 

@@ -40,6 +40,21 @@ inline float2 texture_uv(TextureInfo t, float2 uv) {
   return (float2)(t.uv_u.x * uv.x + t.uv_u.y * uv.y + t.uv_u.z, t.uv_v.x * uv.x + t.uv_v.y * uv.y + t.uv_v.z);
 }
 
+/* A prefetch of the texels texture_eval reads at uv (psf_prefetch): x and x + 1
+ * of both rows, 8 bytes a texel, so that the pair crosses a cache line one
+ * time in eight. */
+inline void texture_prefetch(__global const TextureInfo* textures, __global const half* texels, uint index, float2 uv) {
+  const TextureInfo t = textures[index];
+  const float2 st = texture_uv(t, uv);
+  const int x = (int)floor(st.x * (float)t.width - 0.5f), y = (int)floor(st.y * (float)t.height - 0.5f);
+  __global const half* row0 = texels + 4u * texture_texel_index(t, x, y);
+  __global const half* row1 = texels + 4u * texture_texel_index(t, x, y + 1);
+  psf_prefetch(row0);
+  psf_prefetch(row0 + 7u);
+  psf_prefetch(row1);
+  psf_prefetch(row1 + 7u);
+}
+
 inline float4 texture_eval(__global const TextureInfo* textures, __global const half* texels, uint index, float2 uv) {
   TextureInfo t = textures[index];
   float2 st = texture_uv(t, uv);

@@ -1,30 +1,33 @@
-/* trace_lanes.cl: the per-path stage (shade.cl trace_paths) for scenes of
- * diffuse surfaces, with eight paths at a time in the lanes of float8 vectors.
+/* trace_lanes.cl: the per-path stage (shade.cl trace_paths) with eight paths at
+ * a time in the lanes of float8 vectors.
  *
  * PoCL runs a kernel's work-items one after another and vectorises them only
  * where the kernel has no loops, no vector types and no stores under branches
  * (docs/performance-notes.md), so trace_paths, which loops over bounces and BVH
  * nodes, runs one path at a time in scalar code. Here each work-item holds
- * eight paths in lanes: the shading of a bounce (the hit's triangle and
- * frame, the emission it adds, a light sample on a triangle and its MIS weight,
- * the cosine-weighted direction, Russian roulette) and the drawing of its
- * samples are written with float8 vectors, so every step is one instruction for
- * the eight. Lane by lane: the two casts of a bounce (the BVH8 traversal of
- * raycast.cl, alpha-tested where the scene has masks), the loads of the hit's
- * triangle, material and light, and what is rarer or branchier: a colour
- * texture's albedo and frame (surface.cl surface_frame), the environment an
- * escaped ray sees, a light sample on the environment or a point, spot or
- * directional light (emitter.cl emitter_sample). A lane whose path ends stores
- * the path's state and takes the next path of the work-item's run of
- * `per_item` queue slots, so the lanes stay full until the run's end.
+ * eight paths in lanes: the shading of a bounce on a diffuse surface (the hit's
+ * triangle and frame, the emission it adds, a light sample on a triangle and
+ * its MIS weight, the cosine-weighted direction, Russian roulette) and the
+ * drawing of its samples are written with float8 vectors, so every step is one
+ * instruction for the eight. Lane by lane: the two casts of a bounce (the BVH8
+ * traversal of raycast.cl, alpha-tested where the scene has masks), the loads
+ * of the hit's triangle, material and light, and what is rarer or branchier: a
+ * colour texture's albedo and frame, any other material (a blend's choice, its
+ * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
+ * bsdf.cl's own functions), the environment an escaped ray sees, a light sample
+ * on a point, spot or directional light (emitter.cl emitter_sample). A light
+ * sample on an environment map takes its steps over all lanes before the next
+ * (lanes_env_sample), so that the lanes' cache misses overlap. A lane whose
+ * path ends stores the path's state and takes the next path of the
+ * work-item's run of `per_item` queue slots, so the lanes stay full until the
+ * run's end.
  *
- * The scene class (host/render.cpp lanes_*_supported): every material diffuse
- * (a colour texture, an opacity mask, two sides and vertex normals allowed; no
- * bump map, blend, medium or vertex colours), no emission texture, no analytic
- * spheres, no camera medium. The arithmetic is shade_path_inline's for that
- * class, written the same way, and the samples are drawn by the same
- * functions, so a path's result is the same as trace_paths' up to the rounding
- * of a different instruction order (tests/test_emitter.cpp compares the two). */
+ * The scene class (host/render.cpp lanes_*_supported): no medium, null
+ * boundary, emission texture, analytic sphere or camera medium. The arithmetic
+ * is shade_path_inline's for that class, written the same way, and the samples
+ * are drawn by the same functions, so a path's result is the same as
+ * trace_paths' up to the rounding of a different instruction order
+ * (tests/test_emitter.cpp compares the two). */
 
 #define PSF_LANES 8
 /* Lane l of a private vector (a scalar view of its memory). */
@@ -67,6 +70,14 @@ inline void vec8_set(Vec8* v, uint l, float3 a) {
   LANE_F(v->z, l) = a.z;
 }
 inline float3 vec8_get(Vec8 v, uint l) { return (float3)(LANE_F(v.x, l), LANE_F(v.y, l), LANE_F(v.z, l)); }
+/* Lane l's frame (bsdf.cl Frame) of tangents s, t and normal n. */
+inline Frame vec8_frame(Vec8 s, Vec8 t, Vec8 n, uint l) {
+  Frame f;
+  f.s = vec8_get(s, l);
+  f.t = vec8_get(t, l);
+  f.n = vec8_get(n, l);
+  return f;
+}
 
 inline float8 power_heuristic8(float8 a, float8 b) {
   float8 a2 = a * a, b2 = b * b;
@@ -190,8 +201,8 @@ inline void lanes_add_radiance(Lanes* ln, Vec8 c, int8 mask, bool seen) {
   ln->radiance_w = select(ln->radiance_w, (float8)(1.0f), raise_w);
 }
 
-/* The first six dimensions of each lane's bounce (shade.cl bounce_samples:
- * light choice, point on the light, BSDF direction, Russian roulette), the
+/* The dimensions of each lane's bounce (shade.cl bounce_samples: light
+ * choice, point on the light, BSDF direction, Russian roulette, lobe), the
  * same numbers as sample_8d_keyed's, with the work across the lanes: each
  * lane's unscrambled point is the xor of the rows of the generator matrices
  * that its sample index selects (a row holds 8 consecutive dimensions), taken
@@ -218,7 +229,7 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
       rows[l] ^= vload8(0, sobol + b * PSF_SOBOL_DIMS + d) & (uint8)(select_row);
     }
   __private const uint* r = (__private const uint*)rows;
-  for (uint o = 0u; o < 6u; ++o) {
+  for (uint o = 0u; o < PSF_DIMS_PER_BOUNCE; ++o) {
     const uint8 x = (uint8)(r[o], r[8 + o], r[16 + o], r[24 + o], r[32 + o], r[40 + o], r[48 + o], r[56 + o]);
     const uint8 v = nested_uniform_scramble8(x, psf_hash_combine8(key, dim + o));
     u[o] = convert_float8(v >> 8) * (1.0f / 16777216.0f);
@@ -233,7 +244,73 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
     LANE_F(u[3], l) = w.s3;
     LANE_F(u[4], l) = w.s4;
     LANE_F(u[5], l) = w.s5;
+    LANE_F(u[6], l) = w.s6;
   }
+}
+
+/* The texels env_lookup reads at uv: a prefetch of the two of each row (12
+ * bytes each, so each pair's end too). */
+inline void env_prefetch_texels(Environment env, __global const float* data, float2 uv) {
+  float2 t;
+  const uint4 c = env_bilinear(env, uv, &t);
+  __global const float* row0 = data + 3u * ((size_t)c.z * env.width + c.x);
+  __global const float* row1 = data + 3u * ((size_t)c.w * env.width + c.x);
+  psf_prefetch(row0);
+  psf_prefetch(row0 + 5);
+  psf_prefetch(row1);
+  psf_prefetch(row1 + 5);
+}
+
+/* What env_radiance_pdf reads for direction d (unit) from a map: a prefetch
+ * of its texels and of the cdf entries of its pdf (env_map_pdf). */
+inline void env_prefetch_lookup(Environment env, __global const float* data, float3 d) {
+  const float2 uv = env_uv(env_to_map(env, d));
+  const uint2 t = env_cell_of_uv(env, uv);
+  psf_prefetch(data + env_marginal_offset(env) + t.y);
+  psf_prefetch(data + env_block_cdf_offset(env, t.y) + t.x / PSF_ENV_BLOCK);
+  psf_prefetch(data + env_texel_cdf_offset(env, t.y, t.x / PSF_ENV_BLOCK));
+  env_prefetch_texels(env, data, uv);
+}
+
+/* Light samples on an environment map (env.width > 0) for the lanes of `mask`,
+ * as emitter_sample draws them (emitter.cl env_sample: the row, the block, the
+ * texel and its direction, then the radiance), each step over the lanes before
+ * the next, with a prefetch of what the next step reads: the lanes' cache
+ * misses then overlap, where one lane's chain of them waits on each in turn
+ * (shade.cl's wavefront does the same with a kernel per step). The sample's
+ * direction, pdf (times the environment's selection probability `choose`) and
+ * radiance go into the lanes of wi, pdf and radiance; a lane whose texel has no
+ * probability gets pdf 0, as emitter_sample. */
+inline void lanes_env_sample(Environment env, __global const float* data, int8 mask, float8 u1, float8 u2,
+                             float8 choose, Vec8* wi, float8* pdf, Vec8* radiance) {
+  float4 r[PSF_LANES];
+  uint y[PSF_LANES], b[PSF_LANES];
+  float2 uv[PSF_LANES];
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (!LANE_I(mask, l)) continue;
+    r[l] = env_sample_row(env, data, LANE_F(u1, l), LANE_F(u2, l), &y[l]);
+    psf_prefetch(data + env_block_guide_at(env, y[l], r[l].x));
+  }
+  for (uint l = 0u; l < PSF_LANES; ++l)
+    if (LANE_I(mask, l))
+      psf_prefetch(data + env_block_cdf_at(env, y[l]) + as_uint(data[env_block_guide_at(env, y[l], r[l].x)]));
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (!LANE_I(mask, l)) continue;
+    r[l] = env_sample_block(env, data, r[l], y[l], &b[l]);
+    psf_prefetch(data + env_texel_cdf_offset(env, y[l], b[l]));
+  }
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (!LANE_I(mask, l)) continue;
+    float p;
+    const float3 w = env_sample_cell(env, data, r[l], (uint2)(y[l], b[l]), &p, &uv[l]);
+    vec8_set(wi, l, p > 0.0f ? w : (float3)(0.0f, 0.0f, 1.0f));
+    LANE_F(*pdf, l) = p > 0.0f ? LANE_F(choose, l) * p : 0.0f;
+    if (p > 0.0f) env_prefetch_texels(env, data, uv[l]);
+  }
+  for (uint l = 0u; l < PSF_LANES; ++l)
+    vec8_set(radiance, l,
+             LANE_I(mask, l) && LANE_F(*pdf, l) > 0.0f ? env_lookup(env, data, uv[l]) * env.scale.xyz
+                                                       : vec8_get(*radiance, l));
 }
 
 /* One lane's casts (raycast.cl), out of line: the kernel calls each in a loop
@@ -258,6 +335,43 @@ __attribute__((noinline)) void lane_closest_masked(__global const BvhNode* nodes
 __attribute__((noinline)) void lane_any_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
                                                const AlphaScene* alpha, const Ray* r, Hit* h) {
   *h = intersect_any_hit_alpha(nodes, packs, *r, alpha);
+}
+
+/* Whether the lanes shade material m in vectors: diffuse, with nothing that
+ * changes its frame or its reflectance but a colour texture (read lane by lane)
+ * or an opacity mask. Any other material is shaded lane by lane by bsdf.cl's
+ * and surface.cl's own functions. */
+inline bool lanes_vector_material(__global const Material* m) {
+  return m->type == PSF_MATERIAL_DIFFUSE && m->blend == 0u &&
+         (m->flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) == 0u && m->tex_bump == PSF_NO_TEXTURE &&
+         m->tex_alpha == PSF_NO_TEXTURE && m->tex_table == PSF_NO_TEXTURE && m->alpha_u == m->alpha_v;
+}
+
+/* One lane's surface where the vectors do not shade it (a colour texture or a
+ * material of another kind), as shade_path_inline: a blend's choice by the
+ * hash of the path and bounce, the frame and the textures. */
+__attribute__((noinline)) void lane_surface(Material* m, __global const Material* materials,
+                                            __global const TriAttrib* a, float b1, float b2, float3 p0, float3 p1,
+                                            float3 p2, float3 ng, float3 wo, __global const TextureInfo* textures,
+                                            __global const half* texels, float u_blend, Frame* f, float3* unperturbed) {
+  if (m->blend != 0u) *m = surface_blend(*m, materials, a, b1, b2, textures, texels, u_blend, dot(ng, wo) > 0.0f);
+  *f = surface_frame(m, a, b1, b2, p0, p1, p2, ng, wo, textures, texels, unperturbed);
+}
+
+/* One lane's BSDF value and pdf for a light sample (zero where a bump map's
+ * sides disagree), and its sampled direction, as shade_path_inline. */
+__attribute__((noinline)) float3 lane_bsdf_eval(const Material* m, __global const TextureInfo* textures,
+                                                __global const half* texels, const Frame* f, const float3* unperturbed,
+                                                float3 wo, float3 wi, float* pdf) {
+  *pdf = 0.0f;
+  if (!surface_side_agrees(m, *f, *unperturbed, wi)) return (float3)(0.0f);
+  return bsdf_eval(*m, surface_table(*m, textures, texels), *f, wo, wi, pdf);
+}
+__attribute__((noinline)) void lane_bsdf_sample(const Material* m, __global const TextureInfo* textures,
+                                                __global const half* texels, const Frame* f, const float3* unperturbed,
+                                                float3 wo, float u1, float u2, float uc, BsdfSample* bs) {
+  *bs = bsdf_sample(*m, surface_table(*m, textures, texels), *f, wo, u1, u2, bsdf_chooses_lobe(*m) ? uc : 0.5f);
+  if (!surface_side_agrees(m, *f, *unperturbed, bs->wi)) bs->weight = (float3)(0.0f);
 }
 
 __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
@@ -302,6 +416,12 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         lane_closest_masked(nodes, packs, &alpha, &r, &h);
       else
         lane_closest(nodes, packs, &r, &h);
+      if (PSF_PREFETCH && h.prim != PSF_NO_HIT) { /* what shading reads of the hit, while the other lanes cast */
+        psf_prefetch(tri_pos + 3u * h.prim);
+        psf_prefetch(tri_pos + 3u * h.prim + 2u);
+        psf_prefetch(tri_material + h.prim);
+        psf_prefetch(tri_attribs + h.prim);
+      }
       LANE_F(t, l) = h.t;
       LANE_U(prim, l) = h.prim;
       LANE_F(bu, l) = h.u;
@@ -316,6 +436,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const int8 escaped = ln.live & ~hit;
       Vec8 seen = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
       int8 sees = (int8)(0);
+      if (PSF_PREFETCH && env.width > 0u) /* first what the lanes' lookups read, so that their misses overlap */
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(escaped, l)) env_prefetch_lookup(env, env_data, normalize(vec8_get(ln.dir, l)));
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(escaped, l)) continue;
         const uint depth = LANE_U(ln.depth, l);
@@ -335,6 +458,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 p0, p1, p2, albedo, emission, n0, n1, n2;
     float8 light_pdf = (float8)(0.0f);
     int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0), textured = (int8)(0);
+    int8 general = (int8)(0); /* a material the vectors do not shade (lanes_vector_material) */
     p0 = p1 = p2 = albedo = emission = n0 = n1 = n2 = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(hit, l)) continue;
@@ -347,6 +471,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       vec8_set(&emission, l, m->emission.xyz);
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
+      LANE_I(general, l) = lanes_vector_material(m) ? 0 : -1;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
       __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
@@ -390,36 +515,59 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       fn = vec8_select(ns, vec8_neg(ns), two_sided & (vec8_dot(ns, wo) < 0.0f));
       frame_from_normal8(vec8_select(fn, ns, mat_normals), &fs, &ft);
     }
-    /* A colour texture: the albedo, and a frame along dp/du, from surface.cl's
-     * own surface_frame, lane by lane. */
+    /* A colour texture (its albedo, and a frame along dp/du) or a material the
+     * vectors do not shade (a blend's choice, its frame and textures, what
+     * scatters, whether it is diffuse enough for the filtering vertex): from
+     * surface.cl's and bsdf.cl's own functions, lane by lane. */
+    Material mats[PSF_LANES];      /* the material that scatters, where `general` */
+    float3 unperturbed[PSF_LANES]; /* surface_frame's normal before a bump map */
+    int8 scatters = (int8)(0), diffuse = (int8)(0);
+    const int8 own_frame = hit & (textured | general);
+    const int8 texels_read = hit & textured;
+    if (PSF_PREFETCH) /* first the lanes' colour texels, so that their misses overlap */
+      for (uint l = 0u; l < PSF_LANES; ++l)
+        if (LANE_I(texels_read, l)) {
+          const uint pr = LANE_U(prim, l);
+          texture_prefetch(textures, texels, materials[tri_material[pr]].tex_color,
+                           surface_uv(tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l)));
+        }
     for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(textured, l)) continue;
-      Material m = materials[tri_material[LANE_U(prim, l)]];
-      float3 unperturbed;
-      const Frame f = surface_frame(&m, tri_attribs + LANE_U(prim, l), LANE_F(bu, l), LANE_F(bv, l), vec8_get(p0, l),
-                                    vec8_get(p1, l), vec8_get(p2, l), vec8_get(ng, l), vec8_get(wo, l), textures,
-                                    texels, &unperturbed);
+      if (!LANE_I(own_frame, l)) continue;
+      const uint pr = LANE_U(prim, l);
+      Material m = materials[tri_material[pr]];
+      const float u_blend =
+          m.blend != 0u ? bits_to_float(psf_hash_combine(
+                              psf_hash_combine(psf_hash_combine(seed_hash, LANE_U(ln.pixel, l)), LANE_U(ln.sample, l)),
+                              LANE_U(ln.depth, l)))
+                        : 0.0f;
+      Frame f;
+      lane_surface(&m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), vec8_get(p0, l), vec8_get(p1, l),
+                   vec8_get(p2, l), vec8_get(ng, l), vec8_get(wo, l), textures, texels, u_blend, &f, &unperturbed[l]);
       vec8_set(&fs, l, f.s);
       vec8_set(&ft, l, f.t);
       vec8_set(&fn, l, f.n);
-      vec8_set(&albedo, l, m.albedo.xyz);
+      vec8_set(&albedo, l, bsdf_albedo(m));
+      LANE_I(scatters, l) = bsdf_scatters(m) ? -1 : 0;
+      LANE_I(diffuse, l) = bsdf_is_diffuse(m) ? -1 : 0;
+      mats[l] = m;
     }
     const float8 fn_wo = vec8_dot(fn, wo);
     const Vec8 n_camera = vec8_select(vec8_neg(fn), fn, fn_wo >= 0.0f);
     const uint8 segments = ln.depth + 1u;
-    int8 scatter = hit & (vec8_max3(albedo) > 0.0f);
+    int8 scatter = hit & select(vec8_max3(albedo) > 0.0f, scatters, general);
     if ((int)params.max_depth >= 0) scatter &= segments + 1u <= params.max_depth;
 
-    /* The filtering vertex: the first diffuse one (every one here is). */
-    const int8 new_vertex = scatter & ((ln.flags & PSF_PATH_VERTEX) == 0u);
+    /* The filtering vertex: the first diffuse one. */
+    const int8 new_vertex = scatter & ((ln.flags & PSF_PATH_VERTEX) == 0u) & (~general | diffuse);
     ln.flags = select(ln.flags, ln.flags | (PSF_PATH_VERTEX | PSF_PATH_VERTEX_NEW), as_uint8(new_vertex));
     Vec8 beta = vec8_select(ln.beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), new_vertex);
 
     /* The bounce's samples (shade.cl bounce_samples), across the lanes. */
-    float8 u[6];
+    float8 u[PSF_DIMS_PER_BOUNCE];
     lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, scatter, u);
     const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
     const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
+    const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
     uint8 light = (uint8)(0u);
     if (params.num_emitters > 0u)
       for (uint l = 0u; l < PSF_LANES; ++l)
@@ -429,7 +577,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
      * emitter_sample) in vectors, any other light (the environment, point,
-     * spot and directional lights) by emitter_sample itself, lane by lane; the
+     * spot and directional lights) by emitter_sample itself, lane by lane, but
+     * for an environment map's steps (lanes_env_sample); the
      * sample's MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     Vec8 shadow_org = pending, shadow_dir = pending;
@@ -438,13 +587,18 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     if (params.num_emitters > 0u) {
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
-      int8 light_two_sided = (int8)(0), general = (int8)(0);
+      int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0);
       v0 = e1 = e2 = le = pending;
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(scatter, l)) continue;
         __global const Emitter* em = emitters + LANE_U(light, l);
+        if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
+          LANE_I(env_light, l) = -1;
+          LANE_F(choose, l) = em->radiance.w;
+          continue;
+        }
         if (em->type != PSF_EMITTER_TRIANGLE) {
-          LANE_I(general, l) = -1;
+          LANE_I(other_light, l) = -1;
           continue;
         }
         const float4 a = em->v0;
@@ -470,7 +624,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       float8 lpdf = select((float8)(0.0f), choose / area * d2 / cos_l, sampled);
       int8 delta = (int8)(0);
       for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(general, l)) continue;
+        if (!LANE_I(other_light, l)) continue;
         const LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data,
                                               vec8_get(pos, l), LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
         vec8_set(&wi, l, ls.wi);
@@ -479,10 +633,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         vec8_set(&le, l, ls.radiance);
         LANE_I(delta, l) = ls.delta ? -1 : 0;
       }
+      if (any(env_light)) {
+        lanes_env_sample(env, env_data, env_light, u_la, u_lb, choose, &wi, &lpdf, &le);
+        ldist = select(ldist, (float8)(INFINITY), env_light);
+      }
       const float8 cos_i = vec8_dot(wi, fn);
       const int8 f_on = (fn_wo > 0.0f) & (cos_i > 0.0f);
-      const Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
-      const float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
+      Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
+      float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
+      const int8 evaluate = general & scatter & (lpdf > 0.0f);
+      for (uint l = 0u; l < PSF_LANES; ++l) {
+        if (!LANE_I(evaluate, l)) continue;
+        const Frame fr = vec8_frame(fs, ft, fn, l);
+        float pdf_l;
+        vec8_set(
+            &f, l,
+            lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), vec8_get(wi, l), &pdf_l));
+        LANE_F(bpdf, l) = pdf_l;
+      }
       const float8 cos_s = fabs(cos_i);
       contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
       const float8 w = select(power_heuristic8(lpdf, bpdf), (float8)(1.0f), delta);
@@ -495,12 +663,25 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       shadow_tmax = select(shadow_tmax, (float8)(INFINITY), infinite);
     }
 
-    /* The next direction (bsdf.cl bsdf_sample, diffuse), then Russian roulette. */
+    /* The next direction (bsdf.cl bsdf_sample: diffuse in vectors, any other
+     * material lane by lane), then Russian roulette. */
     const Vec8 wl = cosine_hemisphere8(u_b1, u_b2);
-    const Vec8 wi =
-        vec8_normalize(vec8_add(vec8_add(vec8_scale(fs, wl.x), vec8_scale(ft, wl.y)), vec8_scale(fn, wl.z)));
-    const float8 pdf = select((float8)(0.0f), wl.z * PSF_INV_PI, fn_wo > 0.0f);
-    const Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
+    Vec8 wi = vec8_normalize(vec8_add(vec8_add(vec8_scale(fs, wl.x), vec8_scale(ft, wl.y)), vec8_scale(fn, wl.z)));
+    float8 pdf = select((float8)(0.0f), wl.z * PSF_INV_PI, fn_wo > 0.0f);
+    Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
+    int8 delta_lobe = (int8)(0);
+    const int8 sample_own = general & scatter;
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(sample_own, l)) continue;
+      const Frame fr = vec8_frame(fs, ft, fn, l);
+      BsdfSample bs;
+      lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), LANE_F(u_b1, l),
+                       LANE_F(u_b2, l), LANE_F(u_lobe, l), &bs);
+      vec8_set(&wi, l, bs.wi);
+      LANE_F(pdf, l) = bs.pdf;
+      vec8_set(&weight, l, bs.weight);
+      LANE_I(delta_lobe, l) = (bs.flags & BSDF_DELTA) ? -1 : 0;
+    }
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);
     const float8 q = fmin(vec8_max3(beta), 0.95f);
@@ -540,6 +721,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.bsdf_pdf = select(ln.bsdf_pdf, pdf, go);
     ln.prev = vec8_select(ln.prev, pos, go);
     ln.flags = select(ln.flags, ln.flags & ~(PSF_PATH_SPECULAR | PSF_PATH_NULL_CROSSED), as_uint8(go));
+    ln.flags = select(ln.flags, ln.flags | PSF_PATH_SPECULAR, as_uint8(go & delta_lobe));
     ln.org = vec8_select(ln.org, offset_origin8(pos, vec8_select(vec8_neg(ng), ng, vec8_dot(wi, ng) >= 0.0f)), go);
     ln.dir = vec8_select(ln.dir, wi, go);
     ln.tmin = select(ln.tmin, (float8)(0.0f), go);

@@ -1684,6 +1684,48 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     t.lights = {point};
     cases.push_back({"textured floor, masked leaf, area and point lights", t, true});
   }
+  {
+    // Our Cornell box with a BSDF of every other kind, which the lanes shade
+    // lane by lane with bsdf.cl's functions: a textured roughplastic floor, a
+    // bump-mapped ceiling, a smooth plastic back wall, a gold mirror and a rough
+    // Beckmann conductor for the side walls, a glass box, and a blend of diffuse
+    // and rough GGX conductor for the tall box.
+    std::ifstream in(psf::test::source_path("scenes/cornell-box.xml"));
+    std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (const char* id : {"floor", "ceiling", "back", "short", "tall"}) {
+      const size_t at = xml.find("<ref id=\"white\"/>");
+      REQUIRE(at != std::string::npos);
+      xml.replace(at, 17, std::string("<ref id=\"") + id + "\"/>");
+    }
+    const std::string checker =
+        R"(<texture type="checkerboard"><rgb name="color0" value="0.8, 0.7, 0.3"/>)"
+        R"(<rgb name="color1" value="0.2, 0.3, 0.6"/><transform name="to_uv"><scale x="4" y="4"/></transform></texture>)";
+    const std::string bsdfs =
+        R"(<bsdf type="roughplastic" id="floor"><float name="alpha" value="0.2"/>)"
+        R"(<texture name="diffuse_reflectance" type="checkerboard"><rgb name="color0" value="0.8, 0.7, 0.3"/>)"
+        R"(<rgb name="color1" value="0.2, 0.3, 0.6"/><transform name="to_uv"><scale x="4" y="4"/></transform></texture>)"
+        R"(</bsdf>)"
+        R"(<bsdf type="bumpmap" id="ceiling"><float name="scale" value="0.5"/>)" +
+        checker +
+        R"(<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></bsdf>)"
+        R"(<bsdf type="plastic" id="back"><rgb name="diffuse_reflectance" value="0.4, 0.5, 0.6"/></bsdf>)"
+        R"(<bsdf type="roughconductor" id="green"><string name="distribution" value="beckmann"/>)"
+        R"(<float name="alpha" value="0.15"/><string name="material" value="Cu"/></bsdf>)"
+        R"(<bsdf type="dielectric" id="short"/>)"
+        R"(<bsdf type="blendbsdf" id="tall"><float name="weight" value="0.4"/>)"
+        R"(<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf>)"
+        R"(<bsdf type="roughconductor"><float name="alpha" value="0.3"/></bsdf></bsdf>)"
+        R"(<bsdf type="conductor" id="red"><string name="material" value="Au"/></bsdf>)";
+    for (const char* id : {"red", "green"}) {
+      const size_t from = xml.find(std::string("<bsdf type=\"diffuse\" id=\"") + id + "\">");
+      REQUIRE(from != std::string::npos);
+      xml.erase(from, xml.find("</bsdf>", from) + 7 - from);
+    }
+    xml.insert(xml.find("<bsdf type=\"diffuse\" id=\"light\">"), bsdfs);
+    const std::string path = psf::test::temp_dir("lanes-materials") + "/box.xml";
+    std::ofstream(path) << xml;
+    cases.push_back({"cornell-box, every other BSDF", psf::load_scene(path), true});
+  }
   cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   for (auto& c : cases) {
     INFO(c.name);
