@@ -1618,8 +1618,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // none), with max depth 3 (the depth test), with white walls and paths of
   // any depth (the samples past the Sobol table), a two-sided box with vertex
   // normals and hidden lights, an environment map, a textured floor with an
-  // alpha-masked leaf and a point light; and a scene outside the class (media),
-  // which must fall back to trace_paths bit for bit.
+  // alpha-masked leaf and a point light, the Cornell box with a BSDF of every
+  // other kind; and a scene outside the class (media), which must fall back to
+  // trace_paths bit for bit.
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
@@ -1697,16 +1698,18 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
       REQUIRE(at != std::string::npos);
       xml.replace(at, 17, std::string("<ref id=\"") + id + "\"/>");
     }
-    const std::string checker =
-        R"(<texture type="checkerboard"><rgb name="color0" value="0.8, 0.7, 0.3"/>)"
-        R"(<rgb name="color1" value="0.2, 0.3, 0.6"/><transform name="to_uv"><scale x="4" y="4"/></transform></texture>)";
+    const auto checker = [](const std::string& name) {
+      return "<texture " + name +
+             R"( type="checkerboard"><rgb name="color0" value="0.8, 0.7, 0.3"/>)"
+             R"(<rgb name="color1" value="0.2, 0.3, 0.6"/><transform name="to_uv"><scale x="4" y="4"/></transform>)"
+             R"(</texture>)";
+    };
     const std::string bsdfs =
-        R"(<bsdf type="roughplastic" id="floor"><float name="alpha" value="0.2"/>)"
-        R"(<texture name="diffuse_reflectance" type="checkerboard"><rgb name="color0" value="0.8, 0.7, 0.3"/>)"
-        R"(<rgb name="color1" value="0.2, 0.3, 0.6"/><transform name="to_uv"><scale x="4" y="4"/></transform></texture>)"
+        R"(<bsdf type="roughplastic" id="floor"><float name="alpha" value="0.2"/>)" +
+        checker(R"(name="diffuse_reflectance")") +
         R"(</bsdf>)"
         R"(<bsdf type="bumpmap" id="ceiling"><float name="scale" value="0.5"/>)" +
-        checker +
+        checker("") +
         R"(<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></bsdf>)"
         R"(<bsdf type="plastic" id="back"><rgb name="diffuse_reflectance" value="0.4, 0.5, 0.6"/></bsdf>)"
         R"(<bsdf type="roughconductor" id="green"><string name="distribution" value="beckmann"/>)"
