@@ -36,19 +36,31 @@ void in_parallel(uint64_t count, uint64_t threads, F&& f) {
 }
 
 // Whether trace_lanes (kernels/trace_lanes.cl) can render the scene, in two
-// parts: its geometry and lights (no analytic spheres, no camera medium, any
-// light but a sphere, no emission texture), and its device materials (any BSDF,
-// texture, bump map or blend; no medium, null boundary or emission texture).
+// parts: its geometry and lights (no camera medium, no emission texture), and
+// its device materials (any BSDF, texture, bump map or blend; no medium, null
+// boundary or emission texture).
 bool lanes_lights_supported(const Scene& scene, const std::vector<Emitter>& emitters) {
-  if (!scene.spheres.empty() || scene.camera_medium != 0) return false;
+  if (scene.camera_medium != 0) return false;
   for (const Emitter& e : emitters)
-    if (e.type == PSF_EMITTER_SPHERE || e.tex_emission != PSF_NO_TEXTURE) return false;
+    if (e.tex_emission != PSF_NO_TEXTURE) return false;
   return true;
 }
 bool lanes_materials_supported(const std::vector<Material>& materials) {
   for (const Material& m : materials)
     if ((m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0 || m.tex_emission != PSF_NO_TEXTURE || m.interior.s[3] > 0.0f ||
         m.exterior != 0)
+      return false;
+  return true;
+}
+// Whether the lanes shade every material of the scene in vectors (as
+// trace_lanes.cl's lanes_vector_material decides: diffuse, with a colour
+// texture, an opacity mask, two sides and vertex normals allowed, nothing else
+// that changes the frame or the BSDF).
+bool lanes_vector_materials(const std::vector<Material>& materials) {
+  for (const Material& m : materials)
+    if (m.type != PSF_MATERIAL_DIFFUSE || m.blend != 0 || (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 ||
+        m.tex_bump != PSF_NO_TEXTURE || m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE ||
+        m.alpha_u != m.alpha_v)
       return false;
   return true;
 }
@@ -63,6 +75,7 @@ struct Renderer::Impl {
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
   bool lanes = false;  // lanes_lights_supported and lanes_materials_supported
+  bool lanes_vector = false;  // and lanes_vector_materials, without analytic spheres
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -96,6 +109,7 @@ struct Renderer::Impl {
     const std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
     materials = rt.upload(device);
     lanes = lanes && lanes_materials_supported(device);  // upload_geometry checked the lights
+    lanes_vector = lanes && scene.spheres.empty() && lanes_vector_materials(device);
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);
@@ -504,15 +518,21 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   // per path cannot (PoCL, living room: 35 % slower per path; Cornell boxes:
   // 8-13 % faster).
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
-  // Scenes of the lanes' class (lanes_*_supported) on CPUs, with or without an
-  // environment map: eight paths per work-item in the lanes of vectors
-  // (kernels/trace_lanes.cl), each work-item over a run of kLanesRun paths
-  // (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for the wavefront
-  // and 849-951 per path; the pine under the default sky 110-124 against 150-186;
-  // medians of alternating renders in one process, lanes / per path / wavefront:
-  // Sponza 214 / 273 / 246 ms, living room 1400 / 1738 / 1408, staircase
-  // 1622 / 1572 / 1572).
-  const bool lanes = s.lanes && o.per_path != 0 && (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU"));
+  // Eight paths per work-item in the lanes of vectors (kernels/trace_lanes.cl),
+  // each work-item over a run of kLanesRun paths, for scenes of the lanes' class
+  // (lanes_*_supported). By default on CPUs where the lanes shade every material
+  // in vectors (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for
+  // the wavefront and 849-951 per path; the pine under the default sky 110-124
+  // against 150-186), and where an environment map lights the scene, whose light
+  // samples the lanes draw with their cache misses overlapped as the wavefront
+  // does. Scenes of other materials without a map stay per path, where the
+  // lanes shade lane by lane with the scalar code and gain nothing. Medians of
+  // alternating renders in one process, lanes / per path / wavefront: Sponza
+  // (default sky) 214 / 273 / 246 ms, living room (map) 1400 / 1738 / 1408,
+  // staircase 1622 / 1572 / 1572, principled spheres 123 / 101 / 115, glass
+  // sphere on a ground 43 / 40 / 38.
+  const bool lanes = s.lanes && o.per_path != 0 &&
+                     (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU" && (s.lanes_vector || env_presampled)));
   if (lanes) {
     constexpr uint32_t kLanesRun = 32;
     rt.launch("trace_lanes", (p.batch_size + kLanesRun - 1) / kLanesRun, 8, p, s.sobol, s.tri_pos, s.tri_material,

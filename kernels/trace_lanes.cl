@@ -15,15 +15,16 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions), the environment an escaped ray sees, a light sample
- * on a point, spot or directional light (emitter.cl emitter_sample). A light
- * sample on an environment map takes its steps over all lanes before the next
- * (lanes_env_sample), so that the lanes' cache misses overlap. A lane whose
- * path ends stores the path's state and takes the next path of the
- * work-item's run of `per_item` queue slots, so the lanes stay full until the
- * run's end.
+ * on a point, spot, directional or sphere light (emitter.cl emitter_sample),
+ * a hit on an analytic sphere. A light sample on an environment map takes its
+ * steps over all lanes before the next (lanes_env_sample), so that the lanes'
+ * cache misses overlap. A lane whose path ends stores the path's state and
+ * takes the next path of the work-item's run of `per_item` queue slots, so the
+ * lanes stay full until the run's end.
  *
  * The scene class (host/render.cpp lanes_*_supported): no medium, null
- * boundary, emission texture, analytic sphere or camera medium. The arithmetic
+ * boundary, emission texture or camera medium (an analytic sphere's lanes take
+ * its point's frame from surface.cl surface_sphere). The arithmetic
  * is shade_path_inline's for that class, written the same way, and the samples
  * are drawn by the same functions, so a path's result is the same as
  * trace_paths' up to the rounding of a different instruction order
@@ -471,7 +472,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       vec8_set(&emission, l, m->emission.xyz);
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
-      LANE_I(general, l) = lanes_vector_material(m) ? 0 : -1;
+      LANE_I(general, l) = lanes_vector_material(m) && pr < params.first_sphere ? 0 : -1;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
       __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
@@ -491,6 +492,20 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 ng = vec8_cross(vec8_sub(p1, p0), vec8_sub(p2, p0));
     const float8 area2 = vec8_length(ng);
     ng = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(1.0f)), vec8_div(ng, area2), area2 > 0.0f);
+    /* An analytic sphere (its lanes shade with their own frame): its normal, uv
+     * and dp/du, dp/dv as three points (surface.cl surface_sphere), lane by lane. */
+    const int8 sphere = hit & (prim >= (uint8)(params.first_sphere));
+    if (any(sphere))
+      for (uint l = 0u; l < PSF_LANES; ++l) {
+        if (!LANE_I(sphere, l)) continue;
+        float3 n, a, b, c;
+        surface_sphere(tri_pos + 3u * LANE_U(prim, l), vec8_get(pos, l), &n, &LANE_F(bu, l), &LANE_F(bv, l), &a, &b,
+                       &c);
+        vec8_set(&ng, l, n);
+        vec8_set(&p0, l, a);
+        vec8_set(&p1, l, b);
+        vec8_set(&p2, l, c);
+      }
     ln.path_length = select(ln.path_length, ln.path_length + dist, hit);
     const float8 ng_wo = vec8_dot(ng, wo);
     const int8 front = ng_wo > 0.0f;
@@ -498,7 +513,14 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     {
       const int8 mis = mis_on & (ln.depth > 0u) & ((ln.flags & PSF_PATH_SPECULAR) == 0u);
       const float8 cos_l = fabs(ng_wo);
-      const float8 pdf_hit = select((float8)(0.0f), light_pdf * dist * dist / cos_l, cos_l > 0.0f);
+      float8 pdf_hit = select((float8)(0.0f), light_pdf * dist * dist / cos_l, cos_l > 0.0f);
+      const int8 sphere_light = emits & mis & sphere;
+      if (any(sphere_light))
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(sphere_light, l))
+            LANE_F(pdf_hit, l) = emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
+                                                    LANE_I(two_sided, l) ? 1u : 0u, vec8_get(ln.prev, l),
+                                                    LANE_F(dist, l), LANE_F(cos_l, l));
       const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
       lanes_add_radiance(&ln, vec8_scale(vec8_mul(ln.beta, emission), w), emits, true);
     }

@@ -1619,8 +1619,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // any depth (the samples past the Sobol table), a two-sided box with vertex
   // normals and hidden lights, an environment map, a textured floor with an
   // alpha-masked leaf and a point light, the Cornell box with a BSDF of every
-  // other kind; and a scene outside the class (media), which must fall back to
-  // trace_paths bit for bit.
+  // other kind, three scenes of analytic spheres (one a sphere light); and a
+  // scene outside the class (media), which must fall back to trace_paths bit
+  // for bit.
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
@@ -1729,6 +1730,10 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     std::ofstream(path) << xml;
     cases.push_back({"cornell-box, every other BSDF", psf::load_scene(path), true});
   }
+  // Analytic spheres: a sphere light over a rough conductor sphere, a glass
+  // sphere on a sphere ground under a constant sky, principled spheres.
+  for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres"})
+    cases.push_back({name, psf::load_scene(psf::test::source_path(std::string("scenes/") + name + ".xml")), true});
   cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   for (auto& c : cases) {
     INFO(c.name);
@@ -1766,6 +1771,44 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
       CHECK(se <= 1e-6 * ref2);
       CHECK(sa == Approx(sb).epsilon(1e-4));
     }
+  }
+}
+
+TEST_CASE("Render: on CPUs the lanes are the default for diffuse scenes and scenes lit by a map", "[emitter]") {
+  // host/render.cpp: with RenderOptions' defaults a CPU device renders with
+  // trace_lanes where every material is diffuse or an environment map lights
+  // the scene, and per path (trace_paths) where neither holds.
+  auto& rt = psf::test::runtime();
+  REQUIRE(rt.device().type == "CPU");
+  psf::Scene glossy_under_map = envmap_floor();
+  glossy_under_map.materials[0].type = PSF_MATERIAL_ROUGH_CONDUCTOR;
+  glossy_under_map.materials[0].specular = {{0.9f, 0.8f, 0.7f, 0.0f}};
+  glossy_under_map.materials[0].alpha_u = glossy_under_map.materials[0].alpha_v = 0.3f;
+  struct Case {
+    const char* name;
+    psf::Scene scene;
+    const char* kernel;
+  } cases[] = {
+      {"diffuse, area light", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")), "trace_lanes"},
+      {"diffuse, map", envmap_floor(), "trace_lanes"},
+      {"rough conductor, map", glossy_under_map, "trace_lanes"},
+      {"spheres, rough conductor, area light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")),
+       "trace_paths"},
+  };
+  for (auto& c : cases) {
+    INFO(c.name);
+    c.scene.width = c.scene.height = 16;
+    psf::Renderer r(rt, c.scene);
+    psf::RenderOptions o;
+    o.spp = 1;
+    o.filter.enabled = false;
+    rt.finish();
+    rt.reset_stats();
+    r.render(o);
+    rt.finish();
+    const auto stats = rt.stats();
+    CHECK(stats.count(c.kernel) == 1);
+    CHECK(stats.count("trace_lanes") + stats.count("trace_paths") == 1);
   }
 }
 
