@@ -482,8 +482,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(6, 26));
   render->add_option("--path-kernels", ra.path_kernels,
                      "wavefront: a kernel per stage over the live paths; per-path: each path in one work-item; "
-                     "lanes: eight paths per work-item in vector lanes, for scenes without media or emission "
-                     "textures (others: per-path); auto: on CPU devices lanes where the scene allows and its "
+                     "lanes: eight paths per work-item in vector lanes, for scenes without media (others: "
+                     "per-path); auto: on CPU devices lanes where the scene allows and its "
                      "materials are all diffuse or an environment map lights it, else per-path for scenes without "
                      "an environment map, else wavefront (lanes: the same image up to float rounding)")
       ->check(CLI::IsMember({"auto", "wavefront", "per-path", "lanes"}));

@@ -35,21 +35,12 @@ void in_parallel(uint64_t count, uint64_t threads, F&& f) {
   for (auto& t : pool) t.join();
 }
 
-// Whether trace_lanes (kernels/trace_lanes.cl) can render the scene, in two
-// parts: its geometry and lights (no camera medium, no emission texture), and
-// its device materials (any BSDF, texture, bump map or blend; no medium, null
-// boundary or emission texture).
-bool lanes_lights_supported(const Scene& scene, const std::vector<Emitter>& emitters) {
-  if (scene.camera_medium != 0) return false;
-  for (const Emitter& e : emitters)
-    if (e.tex_emission != PSF_NO_TEXTURE) return false;
-  return true;
-}
+// Whether trace_lanes (kernels/trace_lanes.cl) can render the scene: its device
+// materials may have any BSDF, texture, bump map, blend or emission texture,
+// but no medium or null boundary, and its camera sits in no medium.
 bool lanes_materials_supported(const std::vector<Material>& materials) {
   for (const Material& m : materials)
-    if ((m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0 || m.tex_emission != PSF_NO_TEXTURE || m.interior.s[3] > 0.0f ||
-        m.exterior != 0)
-      return false;
+    if ((m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0 || m.interior.s[3] > 0.0f || m.exterior != 0) return false;
   return true;
 }
 // Whether the lanes shade every material of the scene in vectors (as
@@ -74,7 +65,7 @@ struct Renderer::Impl {
   std::unique_ptr<RayCaster> caster;
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
-  bool lanes = false;  // lanes_lights_supported and lanes_materials_supported
+  bool lanes = false;  // no camera medium, and lanes_materials_supported
   bool lanes_vector = false;  // and lanes_vector_materials, without analytic spheres
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
@@ -108,7 +99,7 @@ struct Renderer::Impl {
     tri_attribs = rt.upload(attributes);
     const std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
     materials = rt.upload(device);
-    lanes = lanes && lanes_materials_supported(device);  // upload_geometry checked the lights
+    lanes = scene.camera_medium == 0 && lanes_materials_supported(device);
     lanes_vector = lanes && scene.spheres.empty() && lanes_vector_materials(device);
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
@@ -153,7 +144,6 @@ struct Renderer::Impl {
       if (lo.x <= hi.x) auto_visibility_ray = 0.01f * glm::length(hi - lo);
     }
     emitters = rt.upload(lights.emitters);
-    lanes = lanes_lights_supported(scene, lights.emitters);
     emitter_cdf = rt.upload(lights.cdf);
     tri_light_pdf = rt.upload(lights.tri_light_pdf);
     env = lights.env;
@@ -520,9 +510,9 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
   // Eight paths per work-item in the lanes of vectors (kernels/trace_lanes.cl),
   // each work-item over a run of kLanesRun paths, for scenes of the lanes' class
-  // (lanes_*_supported). By default on CPUs where the lanes shade every material
-  // in vectors (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for
-  // the wavefront and 849-951 per path; the pine under the default sky 110-124
+  // (Impl::lanes). By default on CPUs where the lanes shade every material in
+  // vectors (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for the
+  // wavefront and 849-951 per path; the pine under the default sky 110-124
   // against 150-186), and where an environment map lights the scene, whose light
   // samples the lanes draw with their cache misses overlapped as the wavefront
   // does. Scenes of other materials without a map stay per path, where the

@@ -22,9 +22,10 @@
  * takes the next path of the work-item's run of `per_item` queue slots, so the
  * lanes stay full until the run's end.
  *
- * The scene class (host/render.cpp lanes_*_supported): no medium, null
- * boundary, emission texture or camera medium (an analytic sphere's lanes take
- * its point's frame from surface.cl surface_sphere). The arithmetic
+ * The scene class (host/render.cpp lanes_materials_supported): no medium, null
+ * boundary or camera medium (an analytic sphere's lanes take their frame from
+ * surface.cl surface_sphere, an emission texture multiplies the emission where
+ * it is hit or sampled lane by lane). The arithmetic
  * is shade_path_inline's for that class, written the same way, and the samples
  * are drawn by the same functions, so a path's result is the same as
  * trace_paths' up to the rounding of a different instruction order
@@ -457,6 +458,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
 
     /* The hit triangles' corners, materials and shading normals, lane by lane. */
     Vec8 p0, p1, p2, albedo, emission, n0, n1, n2;
+    uint8 emission_tex = (uint8)(PSF_NO_TEXTURE);
     float8 light_pdf = (float8)(0.0f);
     int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0), textured = (int8)(0);
     int8 general = (int8)(0); /* a material the vectors do not shade (lanes_vector_material) */
@@ -470,6 +472,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       __global const Material* m = materials + tri_material[pr];
       vec8_set(&albedo, l, m->albedo.xyz);
       vec8_set(&emission, l, m->emission.xyz);
+      LANE_U(emission_tex, l) = m->tex_emission;
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
       LANE_I(general, l) = lanes_vector_material(m) && pr < params.first_sphere ? 0 : -1;
@@ -522,6 +525,16 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                                                     LANE_I(two_sided, l) ? 1u : 0u, vec8_get(ln.prev, l),
                                                     LANE_F(dist, l), LANE_F(cos_l, l));
       const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
+      /* An emission texture multiplies the emission there (surface.cl surface_emission). */
+      const int8 emits_textured = emits & (emission_tex != (uint8)(PSF_NO_TEXTURE));
+      if (any(emits_textured))
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(emits_textured, l))
+            vec8_set(&emission, l,
+                     vec8_get(emission, l) *
+                         texture_eval(textures, texels, LANE_U(emission_tex, l),
+                                      surface_uv(tri_attribs + LANE_U(prim, l), LANE_F(bu, l), LANE_F(bv, l)))
+                             .xyz);
       lanes_add_radiance(&ln, vec8_scale(vec8_mul(ln.beta, emission), w), emits, true);
     }
 
@@ -610,6 +623,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0);
+      uint8 light_tex = (uint8)(PSF_NO_TEXTURE), light_prim = (uint8)(0u);
       v0 = e1 = e2 = le = pending;
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(scatter, l)) continue;
@@ -632,6 +646,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         vec8_set(&le, l, r.xyz);
         LANE_F(choose, l) = r.w;
         LANE_I(light_two_sided, l) = em->two_sided ? -1 : 0;
+        LANE_U(light_tex, l) = em->tex_emission;
+        LANE_U(light_prim, l) = em->prim;
       }
       const float8 su = sqrt(u_la);
       const Vec8 lp = vec8_add(v0, vec8_add(vec8_scale(e1, su * (1.0f - u_lb)), vec8_scale(e2, su * u_lb)));
@@ -644,11 +660,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       cos_l = select(cos_l, fabs(cos_l), light_two_sided);
       const int8 sampled = scatter & (d2 > 0.0f) & (cos_l > 0.0f);
       float8 lpdf = select((float8)(0.0f), choose / area * d2 / cos_l, sampled);
+      /* An emission texture at the sampled point (shade.cl next_event_sample). */
+      const int8 light_textured = sampled & (lpdf > 0.0f) & (light_tex != (uint8)(PSF_NO_TEXTURE));
+      if (any(light_textured))
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(light_textured, l))
+            vec8_set(&le, l,
+                     vec8_get(le, l) * texture_eval(textures, texels, LANE_U(light_tex, l),
+                                                    surface_uv(tri_attribs + LANE_U(light_prim, l),
+                                                               LANE_F(su, l) * (1.0f - LANE_F(u_lb, l)),
+                                                               LANE_F(su, l) * LANE_F(u_lb, l)))
+                                           .xyz);
       int8 delta = (int8)(0);
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(other_light, l)) continue;
-        const LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data,
-                                              vec8_get(pos, l), LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
+        LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, vec8_get(pos, l),
+                                        LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
+        if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f)
+          ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
         vec8_set(&wi, l, ls.wi);
         LANE_F(ldist, l) = ls.dist;
         LANE_F(lpdf, l) = ls.pdf;
