@@ -49,9 +49,9 @@ bool lanes_materials_supported(const std::vector<Material>& materials) {
 // that changes the frame or the BSDF).
 bool lanes_vector_materials(const std::vector<Material>& materials) {
   for (const Material& m : materials)
-    if (m.type != PSF_MATERIAL_DIFFUSE || m.blend != 0 || (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 ||
-        m.tex_bump != PSF_NO_TEXTURE || m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE ||
-        m.alpha_u != m.alpha_v)
+    if (m.type != PSF_MATERIAL_DIFFUSE || m.blend != 0 ||
+        (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 || m.tex_bump != PSF_NO_TEXTURE ||
+        m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE || m.alpha_u != m.alpha_v)
       return false;
   return true;
 }

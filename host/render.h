@@ -22,7 +22,7 @@ struct RenderOptions {
   int per_path = -1;         // 1: each path in one work-item (trace_paths); 0: the wavefront; -1: per path
                              // on CPU devices for scenes without an environment map, else the wavefront.
                              // The image is the same either way.
-  int lanes = -1;            // scenes of the lanes' class (render.cpp: lanes_materials_supported), unless per_path is 0: 1
+  int lanes = -1;            // scenes of the lanes' class (render.cpp lanes_materials_supported), unless per_path 0: 1
                              // eight paths per work-item in vector lanes (kernels/trace_lanes.cl), 0 none (per_path
                              // decides), -1 lanes on CPU devices for scenes of diffuse materials or lit by an
                              // environment map. The image is the same up to float rounding.
