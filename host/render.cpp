@@ -43,17 +43,13 @@ bool lanes_materials_supported(const std::vector<Material>& materials) {
     if ((m.flags & PSF_MATFLAG_NULL_BOUNDARY) != 0 || m.interior.s[3] > 0.0f || m.exterior != 0) return false;
   return true;
 }
-// Whether the lanes shade every material of the scene in vectors (as
-// trace_lanes.cl's lanes_vector_material decides: diffuse, with a colour
-// texture, an opacity mask, two sides and vertex normals allowed, nothing else
-// that changes the frame or the BSDF).
-bool lanes_vector_materials(const std::vector<Material>& materials) {
-  for (const Material& m : materials)
-    if (m.type != PSF_MATERIAL_DIFFUSE || m.blend != 0 ||
-        (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) != 0 || m.tex_bump != PSF_NO_TEXTURE ||
-        m.tex_alpha != PSF_NO_TEXTURE || m.tex_table != PSF_NO_TEXTURE || m.alpha_u != m.alpha_v)
-      return false;
-  return true;
+// Whether the lanes shade device material m in vectors (PSF_MATFLAG_LANES_VECTOR):
+// diffuse, with a colour texture, an opacity mask, two sides and vertex normals
+// allowed, nothing else that changes the frame or the BSDF.
+bool lanes_vector_material(const Material& m) {
+  return m.type == PSF_MATERIAL_DIFFUSE && m.blend == 0 &&
+         (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) == 0 && m.tex_bump == PSF_NO_TEXTURE &&
+         m.tex_alpha == PSF_NO_TEXTURE && m.tex_table == PSF_NO_TEXTURE && m.alpha_u == m.alpha_v;
 }
 
 }  // namespace
@@ -66,7 +62,7 @@ struct Renderer::Impl {
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
   bool lanes = false;  // no camera medium, and lanes_materials_supported
-  bool lanes_vector = false;  // and lanes_vector_materials, without analytic spheres
+  bool lanes_vector = false;  // and every material PSF_MATFLAG_LANES_VECTOR, without analytic spheres
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -97,10 +93,15 @@ struct Renderer::Impl {
                                   " are supported");
     std::vector<TriAttrib> attributes = triangle_attributes(scene);
     tri_attribs = rt.upload(attributes);
-    const std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
+    std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
+    bool all_vector = true;
+    for (Material& m : device) {
+      if (lanes_vector_material(m)) m.flags |= PSF_MATFLAG_LANES_VECTOR;
+      else all_vector = false;
+    }
     materials = rt.upload(device);
     lanes = scene.camera_medium == 0 && lanes_materials_supported(device);
-    lanes_vector = lanes && scene.spheres.empty() && lanes_vector_materials(device);
+    lanes_vector = lanes && scene.spheres.empty() && all_vector;
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);

@@ -231,6 +231,10 @@ typedef struct {
  * relative index 1 (nothing reflected, nothing bent) whose crossing, as a null
  * interaction in Mitsuba, counts neither towards the depth nor for Russian roulette. */
 #define PSF_MATFLAG_NULL_BOUNDARY 2048u
+/* Set by host/render.cpp on device materials that trace_lanes shades in
+ * vectors: diffuse, with nothing but a colour texture, an opacity mask, two
+ * sides and vertex normals to change its frame or reflectance. */
+#define PSF_MATFLAG_LANES_VECTOR 4096u
 /* Largest normal-incidence reflectance conductor_from_reflectance keeps finite. */
 #define PSF_MAX_REFLECTANCE 0.9999f
 

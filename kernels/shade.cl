@@ -321,6 +321,14 @@ inline float medium_sample(__global const Material* materials, uint medium, floa
   return dist;
 }
 
+/* A light sample's radiance times its emitter's emission texture at the
+ * sampled point, where it has one. */
+inline void light_sample_textured(LightSample* ls, __global const TriAttrib* tri_attribs,
+                                  __global const TextureInfo* textures, __global const half* texels) {
+  if (ls->tex != PSF_NO_TEXTURE && ls->pdf > 0.0f)
+    ls->radiance *= texture_eval(textures, texels, ls->tex, surface_uv(tri_attribs + ls->prim, ls->b1, ls->b2)).xyz;
+}
+
 /* The light sample of slot k's bounce from `pos`: one point on one emitter,
  * chosen by power, with the bounce's light dimensions; the environment's drawn
  * ahead by shade_env_samples with the same numbers where it was presampled. */
@@ -343,8 +351,7 @@ inline LightSample next_event_sample(uint k, FrameParams params, __global const 
   ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, pos,
                       bounce_sample(samples, PSF_DIM_LIGHT_SELECT), bounce_sample(samples, PSF_DIM_LIGHT_UV),
                       bounce_sample(samples, PSF_DIM_LIGHT_UV + 1u));
-  if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f) /* an emission texture at the sampled point */
-    ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
+  light_sample_textured(&ls, tri_attribs, textures, texels);
   return ls;
 }
 
@@ -485,7 +492,7 @@ PSF_FORCE_INLINE bool shade_path_inline(
    * two-sided) and the material's textures. */
   if (m.blend != 0u)
     m = surface_blend(m, materials, tri_attribs + hit.prim, hit.u, hit.v, textures, texels,
-                      bits_to_float(psf_hash_combine(psf_hash_combine(key, st.sample), st.depth)), front);
+                      surface_blend_u(key, st.sample, st.depth), front);
   float3 n_unperturbed;
   Frame frame =
       surface_frame(&m, tri_attribs + hit.prim, hit.u, hit.v, p0, p1, p2, ng, wo, textures, texels, &n_unperturbed);

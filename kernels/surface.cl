@@ -85,6 +85,12 @@ inline float2 surface_uv(__global const TriAttrib* a, float b1, float b2) {
  * in turn (up to PSF_BLEND_CHAIN materials in all): u, rescaled to [0, 1) by
  * each choice taken, decides the next. */
 #define PSF_BLEND_CHAIN 3
+/* The number in [0, 1) that decides a blend at bounce `depth` of sample
+ * `sample` of the pixel whose pixel_seed is `key`: a hash, not a Sobol
+ * dimension, so that the other dimensions keep their place. */
+inline float surface_blend_u(uint key, uint sample, uint depth) {
+  return bits_to_float(psf_hash_combine(psf_hash_combine(key, sample), depth));
+}
 inline Material surface_blend(Material m, __global const Material* materials, __global const TriAttrib* a, float b1,
                               float b2, __global const TextureInfo* textures, __global const half* texels, float u,
                               bool front) {

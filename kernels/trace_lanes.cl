@@ -25,11 +25,10 @@
  * The scene class (host/render.cpp lanes_materials_supported): no medium, null
  * boundary or camera medium (an analytic sphere's lanes take their frame from
  * surface.cl surface_sphere, an emission texture multiplies the emission where
- * it is hit or sampled lane by lane). The arithmetic
- * is shade_path_inline's for that class, written the same way, and the samples
- * are drawn by the same functions, so a path's result is the same as
- * trace_paths' up to the rounding of a different instruction order
- * (tests/test_emitter.cpp compares the two). */
+ * it is hit or sampled lane by lane). The arithmetic is shade_path_inline's for
+ * that class, written the same way, and the samples are drawn by the same
+ * functions, so a path's result is the same as trace_paths' up to the rounding
+ * of a different instruction order (tests/test_emitter.cpp compares the two). */
 
 #define PSF_LANES 8
 /* Lane l of a private vector (a scalar view of its memory). */
@@ -339,16 +338,6 @@ __attribute__((noinline)) void lane_any_masked(__global const BvhNode* nodes, __
   *h = intersect_any_hit_alpha(nodes, packs, *r, alpha);
 }
 
-/* Whether the lanes shade material m in vectors: diffuse, with nothing that
- * changes its frame or its reflectance but a colour texture (read lane by lane)
- * or an opacity mask. Any other material is shaded lane by lane by bsdf.cl's
- * and surface.cl's own functions. */
-inline bool lanes_vector_material(__global const Material* m) {
-  return m->type == PSF_MATERIAL_DIFFUSE && m->blend == 0u &&
-         (m->flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) == 0u && m->tex_bump == PSF_NO_TEXTURE &&
-         m->tex_alpha == PSF_NO_TEXTURE && m->tex_table == PSF_NO_TEXTURE && m->alpha_u == m->alpha_v;
-}
-
 /* One lane's surface where the vectors do not shade it (a colour texture or a
  * material of another kind), as shade_path_inline: a blend's choice by the
  * hash of the path and bounce, the frame and the textures. */
@@ -461,7 +450,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     uint8 emission_tex = (uint8)(PSF_NO_TEXTURE);
     float8 light_pdf = (float8)(0.0f);
     int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0), textured = (int8)(0);
-    int8 general = (int8)(0); /* a material the vectors do not shade (lanes_vector_material) */
+    int8 general = (int8)(0); /* a sphere, or a material the vectors do not shade (PSF_MATFLAG_LANES_VECTOR) */
     p0 = p1 = p2 = albedo = emission = n0 = n1 = n2 = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(hit, l)) continue;
@@ -475,7 +464,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_U(emission_tex, l) = m->tex_emission;
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
-      LANE_I(general, l) = lanes_vector_material(m) && pr < params.first_sphere ? 0 : -1;
+      LANE_I(general, l) = (m->flags & PSF_MATFLAG_LANES_VECTOR) && pr < params.first_sphere ? 0 : -1;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
       __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
@@ -570,11 +559,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       if (!LANE_I(own_frame, l)) continue;
       const uint pr = LANE_U(prim, l);
       Material m = materials[tri_material[pr]];
-      const float u_blend =
-          m.blend != 0u ? bits_to_float(psf_hash_combine(
-                              psf_hash_combine(psf_hash_combine(seed_hash, LANE_U(ln.pixel, l)), LANE_U(ln.sample, l)),
-                              LANE_U(ln.depth, l)))
-                        : 0.0f;
+      const float u_blend = m.blend != 0u ? surface_blend_u(psf_hash_combine(seed_hash, LANE_U(ln.pixel, l)),
+                                                            LANE_U(ln.sample, l), LANE_U(ln.depth, l))
+                                          : 0.0f;
       Frame f;
       lane_surface(&m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), vec8_get(p0, l), vec8_get(p1, l),
                    vec8_get(p2, l), vec8_get(ng, l), vec8_get(wo, l), textures, texels, u_blend, &f, &unperturbed[l]);
@@ -611,10 +598,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                                                LANE_F(u_light, l));
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
-     * emitter_sample) in vectors, any other light (the environment, point,
-     * spot and directional lights) by emitter_sample itself, lane by lane, but
-     * for an environment map's steps (lanes_env_sample); the
-     * sample's MIS weight against the BSDF's pdf (none for a delta light). */
+     * emitter_sample) in vectors, any other light (a constant environment,
+     * point, spot, directional and sphere lights) by emitter_sample itself,
+     * lane by lane, and an environment map's by lanes_env_sample; the sample's
+     * MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     Vec8 shadow_org = pending, shadow_dir = pending;
     float8 shadow_tmax = (float8)(1.0f - PSF_RAY_EPS);
@@ -676,8 +663,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         if (!LANE_I(other_light, l)) continue;
         LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, vec8_get(pos, l),
                                         LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
-        if (ls.tex != PSF_NO_TEXTURE && ls.pdf > 0.0f)
-          ls.radiance *= texture_eval(textures, texels, ls.tex, surface_uv(tri_attribs + ls.prim, ls.b1, ls.b2)).xyz;
+        light_sample_textured(&ls, tri_attribs, textures, texels);
         vec8_set(&wi, l, ls.wi);
         LANE_F(ldist, l) = ls.dist;
         LANE_F(lpdf, l) = ls.pdf;
