@@ -91,8 +91,9 @@ inline double kernel_ms(const std::map<std::string, psf::KernelTime>& stats, con
 
 // The path tracing stages of a batch (host/render.cpp) and the filter stages (host/filter.cpp).
 inline const std::vector<std::string>& pathtrace_kernels() {
-  static const std::vector<std::string> k = {"camera_rays", "raycast_",     "shade",
-                                             "trace_paths", "store_tuples", "accumulate", "cast_shadows_media"};
+  static const std::vector<std::string> k = {"camera_rays",  "raycast_",   "shade",
+                                             "trace_paths",  "trace_lanes", "store_tuples",
+                                             "accumulate",   "cast_shadows_media"};
   return k;
 }
 // Where the only light is an environment: each filtering vertex's hemisphere ray

@@ -12,34 +12,35 @@
 inline ulong frame_first_path(FrameParams p) { return ((ulong)p.first_path_hi << 32) | (ulong)p.first_path_lo; }
 
 /* The inverse error function in single precision (Giles, "Approximating the
- * erfinv function", GPU Computing Gems, 2011), for |x| < 1. */
-inline float psf_erfinv(float x) {
-  float w = -log((1.0f - x) * (1.0f + x)), p;
-  if (w < 5.0f) {
-    w -= 2.5f;
-    p = 2.81022636e-08f;
-    p = 3.43273939e-07f + p * w;
-    p = -3.5233877e-06f + p * w;
-    p = -4.39150654e-06f + p * w;
-    p = 0.00021858087f + p * w;
-    p = -0.00125372503f + p * w;
-    p = -0.00417768164f + p * w;
-    p = 0.246640727f + p * w;
-    p = 1.50140941f + p * w;
-  } else {
-    w = sqrt(w) - 3.0f;
-    p = -0.000200214257f;
-    p = 0.000100950558f + p * w;
-    p = 0.00134934322f + p * w;
-    p = -0.00367342844f + p * w;
-    p = 0.00573950773f + p * w;
-    p = -0.0076224613f + p * w;
-    p = 0.00943887047f + p * w;
-    p = 1.00167406f + p * w;
-    p = 2.83297682f + p * w;
+ * erfinv function", GPU Computing Gems, 2011), for |x| < 1: both of its
+ * polynomials, then the select, so that one body serves a float and a float8
+ * (trace_lanes.cl's camera rays). */
+#define PSF_DEFINE_ERFINV(T, SUFFIX)                  \
+  inline T psf_erfinv##SUFFIX(T x) {                  \
+    const T w0 = -log((1.0f - x) * (1.0f + x));       \
+    T w = w0 - 2.5f, p = (T)(2.81022636e-08f);        \
+    p = 3.43273939e-07f + p * w;                      \
+    p = -3.5233877e-06f + p * w;                      \
+    p = -4.39150654e-06f + p * w;                     \
+    p = 0.00021858087f + p * w;                       \
+    p = -0.00125372503f + p * w;                      \
+    p = -0.00417768164f + p * w;                      \
+    p = 0.246640727f + p * w;                         \
+    p = 1.50140941f + p * w;                          \
+    T v = sqrt(w0) - 3.0f, q = (T)(-0.000200214257f); \
+    q = 0.000100950558f + q * v;                      \
+    q = 0.00134934322f + q * v;                       \
+    q = -0.00367342844f + q * v;                      \
+    q = 0.00573950773f + q * v;                       \
+    q = -0.0076224613f + q * v;                       \
+    q = 0.00943887047f + q * v;                       \
+    q = 1.00167406f + q * v;                          \
+    q = 2.83297682f + q * v;                          \
+    return select(q, p, w0 < 5.0f) * x;               \
   }
-  return p * x;
-}
+
+PSF_DEFINE_ERFINV(float, )
+PSF_DEFINE_ERFINV(float8, 8)
 
 /* A sample's offset from its pixel's centre along one axis, in pixels, from
  * the uniform number u by inverting the pixel filter's cdf: every sample then
@@ -103,9 +104,8 @@ inline Ray camera_ray(Camera camera, uint fx, uint fy, float8 u8) {
   return r;
 }
 
-__kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol,
-                          __global PathState* states, __global PathVertex* vertices, __global Ray* rays,
-                          __global uint* queue) {
+__kernel void camera_rays(FrameParams params, Camera camera, __global const uint* sobol, __global PathState* states,
+                          __global PathVertex* vertices, __global Ray* rays, __global uint* queue) {
   uint j = get_global_id(0);
   if (j >= params.batch_size) return;
   uint sample, fx, fy;

@@ -19,8 +19,10 @@
  * a hit on an analytic sphere. A light sample on an environment map takes its
  * steps over all lanes before the next (lanes_env_sample), so that the lanes'
  * cache misses overlap. A lane whose path ends stores the path's state and
- * takes the next path of the work-item's run of `per_item` queue slots, so the
- * lanes stay full until the run's end.
+ * takes the next path of the work-item's run of `per_item` paths, so the
+ * lanes stay full until the run's end. The kernel draws its camera rays itself
+ * (camera_rays8: camera.cl's rays from the same samples, eight paths in
+ * vectors), so that no camera_rays pass writes rays and states for it to read.
  *
  * The scene class (host/render.cpp lanes_materials_supported): no medium, null
  * boundary or camera medium (an analytic sphere's lanes take their frame from
@@ -149,35 +151,140 @@ typedef struct {
   int8 live; /* all ones: the lane holds a path */
 } Lanes;
 
-/* Lane l takes the path in queue slot k: its camera ray and state. */
-inline void lanes_load(Lanes* ln, uint l, uint k, __global const uint* queue, __global const Ray* rays,
-                       __global const PathState* states) {
-  const uint j = queue[k];
-  const Ray r = rays[k];
-  const PathState st = states[j];
-  vec8_set(&ln->org, l, r.org.xyz);
-  vec8_set(&ln->dir, l, r.dir.xyz);
-  LANE_F(ln->tmin, l) = r.org.w;
-  LANE_F(ln->tmax, l) = r.dir.w;
-  vec8_set(&ln->beta, l, st.throughput.xyz);
-  LANE_F(ln->bsdf_pdf, l) = st.throughput.w;
-  vec8_set(&ln->radiance, l, st.radiance.xyz);
-  LANE_F(ln->radiance_w, l) = st.radiance.w;
-  vec8_set(&ln->vertex_radiance, l, st.vertex_radiance.xyz);
-  LANE_F(ln->vertex_radiance_w, l) = st.vertex_radiance.w;
-  vec8_set(&ln->prev, l, st.prev_pos.xyz);
-  LANE_F(ln->path_length, l) = st.prev_pos.w;
-  LANE_U(ln->pixel, l) = st.pixel;
-  LANE_U(ln->sample, l) = st.sample;
-  LANE_U(ln->depth, l) = st.depth;
-  LANE_U(ln->flags, l) = st.flags;
+/* pixel_filter_offset (camera.cl) per lane. */
+inline float8 pixel_filter_offset8(const Camera* c, float8 u) {
+  if (c->filter == PSF_PIXEL_FILTER_TENT)
+    return select(c->filter_a * (1.0f - sqrt(2.0f - 2.0f * u)), c->filter_a * (sqrt(2.0f * u) - 1.0f), u < 0.5f);
+  if (c->filter == PSF_PIXEL_FILTER_GAUSSIAN) return c->filter_a * psf_erfinv8((2.0f * u - 1.0f) * c->filter_b);
+  return (2.0f * u - 1.0f) * (c->filter_a > 0.0f ? c->filter_a : 0.5f);
+}
+
+/* The camera rays of eight consecutive paths, drawn a vector at a time for
+ * lanes to take one by one (lanes_load). */
+typedef struct {
+  Vec8 org, dir;
+  float8 tmin, tmax;
+  uint8 pixel, sample; /* film pixel and sample number */
+  uint first;          /* the batch's paths first..first + 7 */
+} CameraRays8;
+
+/* Path j's camera ray (camera.cl camera_ray from the samples camera_rays
+ * draws), its film pixel and its sample number, as lane l of `c`. */
+inline void lane_camera_ray(const FrameParams* params, const Camera* camera, __global const uint* sobol, uint j, uint l,
+                            CameraRays8* c) {
+  uint fx, fy, sample;
+  const uint pixel = camera_film_pixel(*params, *camera, j, &sample, &fx, &fy);
+  const Ray r =
+      camera_ray(*camera, fx, fy, sample_8d_keyed(sobol, pixel_seed(params->seed, pixel), sample, PSF_DIM_PIXEL));
+  vec8_set(&c->org, l, r.org.xyz);
+  vec8_set(&c->dir, l, r.dir.xyz);
+  LANE_F(c->tmin, l) = r.org.w;
+  LANE_F(c->tmax, l) = r.dir.w;
+  LANE_U(c->pixel, l) = pixel;
+  LANE_U(c->sample, l) = sample;
+}
+
+/* The camera rays of paths j..j + 7 into `c`: camera_film_pixel, the samples
+ * (sample_8d_keyed's numbers: consecutive paths are consecutive pixels of one
+ * sample number, or of two where they pass the image's end, so the unscrambled
+ * Sobol points are those of two indices) and camera_ray, in vectors. An image
+ * narrower than the lanes takes them lane by lane. Out of line, as the casts. */
+__attribute__((noinline)) void camera_rays8(const FrameParams* params, const Camera* camera, __global const uint* sobol,
+                                            uint j, CameraRays8* c) {
+  c->first = j;
+  const uint width = params->width;
+  if (width < PSF_LANES) {
+    for (uint l = 0u; l < PSF_LANES; ++l) lane_camera_ray(params, camera, sobol, j + l, l, c);
+    return;
+  }
+  const ulong pixels = (ulong)width * (ulong)params->height;
+  const ulong g = frame_first_path(*params) + (ulong)j;
+  const uint pixel0 = (uint)(g % pixels), sample0 = (uint)(g / pixels);
+  const uint8 k = (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
+  /* At most one row end and one image end among eight pixels of a row of at least eight. */
+  const int8 next_image = convert_int8((ulong8)(pixel0) + convert_ulong8(k) >= (ulong8)(pixels));
+  uint8 x = (uint8)(pixel0 % width) + k;
+  const int8 next_row = x >= (uint8)(width);
+  x = select(x, x - width, next_row);
+  uint8 y = (uint8)(pixel0 / width) + select((uint8)(0u), (uint8)(1u), next_row);
+  y = select(y, y - params->height, next_image);
+  const uint8 sample = select((uint8)(sample0), (uint8)(sample0 + 1u), next_image);
+  const uint8 fx = x + (uint)camera->right.w, fy = y + (uint)camera->down.w;
+  const uint8 pixel = fy * camera->width + fx;
+  const uint8 key = psf_hash_combine8((uint8)(psf_hash(params->seed)), pixel);
+  /* Dimensions PSF_DIM_PIXEL.. (two, four with a lens). */
+  float8 u[4];
+  const uint dims = camera->aperture > 0.0f ? 4u : 2u;
+  for (uint d = 0u; d < dims; ++d) {
+    const uint dim = PSF_DIM_PIXEL + d;
+    const uint8 bits = select((uint8)(sobol_unscrambled(sobol, sample0, dim)),
+                              (uint8)(sobol_unscrambled(sobol, sample0 + 1u, dim)), next_image);
+    u[d] = convert_float8(nested_uniform_scramble8(bits, psf_hash_combine8(key, (uint8)(dim))) >> 8) *
+           (1.0f / 16777216.0f);
+  }
+  const float8 s =
+      (convert_float8(fx) + 0.5f + pixel_filter_offset8(camera, u[0])) / (float)camera->width + camera->shift_s;
+  const float8 t =
+      (convert_float8(fy) + 0.5f + pixel_filter_offset8(camera, u[1])) / (float)camera->height + camera->shift_t;
+  const float3 fw = camera->forward.xyz, rt = camera->right.xyz, dn = camera->down.xyz, o = camera->origin.xyz;
+  const float8 a = 2.0f * s - 1.0f, b = 2.0f * t - 1.0f;
+  Vec8 dir = vec8(fw.x + a * rt.x + b * dn.x, fw.y + a * rt.y + b * dn.y, fw.z + a * rt.z + b * dn.z);
+  Vec8 org = vec8((float8)(o.x), (float8)(o.y), (float8)(o.z));
+  if (camera->orthographic) {
+    org = vec8(org.x + dir.x - fw.x, org.y + dir.y - fw.y, org.z + dir.z - fw.z);
+    dir = vec8((float8)(fw.x), (float8)(fw.y), (float8)(fw.z));
+  } else if (camera->aperture > 0.0f) {
+    const float8 r = camera->aperture * sqrt(u[2]);
+    float8 cs;
+    const float8 sn = psf_sincos8(2.0f * 3.14159265358979f * u[3], &cs);
+    const float3 er = normalize(rt), ed = normalize(dn);
+    const Vec8 lens = vec8(r * (cs * er.x + sn * ed.x), r * (cs * er.y + sn * ed.y), r * (cs * er.z + sn * ed.z));
+    dir = vec8_sub(vec8_scale(dir, (float8)(camera->focus)), lens);
+    org = vec8_add(org, lens);
+  }
+  const Vec8 d = vec8_normalize(dir);
+  const float8 inv_cos = 1.0f / (d.x * fw.x + d.y * fw.y + d.z * fw.z);
+  c->org = org;
+  c->dir = d;
+  c->tmin = camera->origin.w * inv_cos;
+  c->tmax = camera->forward.w * inv_cos;
+  c->pixel = pixel;
+  c->sample = sample;
+}
+
+/* Lane l takes path j of the batch: its camera ray (from `c`, drawn anew when
+ * it does not hold j) and the state camera_rays gives a path (the lanes' class
+ * has no camera medium). */
+inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, const Camera* camera,
+                       __global const uint* sobol, CameraRays8* c) {
+  if (j - c->first >= (uint)PSF_LANES) camera_rays8(params, camera, sobol, j, c);
+  const uint k = j - c->first;
+  const float3 org = vec8_get(c->org, k);
+  vec8_set(&ln->org, l, org);
+  vec8_set(&ln->dir, l, vec8_get(c->dir, k));
+  LANE_F(ln->tmin, l) = LANE_F(c->tmin, k);
+  LANE_F(ln->tmax, l) = LANE_F(c->tmax, k);
+  vec8_set(&ln->beta, l, (float3)(1.0f));
+  LANE_F(ln->bsdf_pdf, l) = 0.0f;
+  vec8_set(&ln->radiance, l, (float3)(0.0f));
+  LANE_F(ln->radiance_w, l) = 0.0f;
+  vec8_set(&ln->vertex_radiance, l, (float3)(0.0f));
+  LANE_F(ln->vertex_radiance_w, l) = 0.0f;
+  vec8_set(&ln->prev, l, org);
+  LANE_F(ln->path_length, l) = 0.0f;
+  LANE_U(ln->pixel, l) = LANE_U(c->pixel, k);
+  LANE_U(ln->sample, l) = LANE_U(c->sample, k);
+  LANE_U(ln->depth, l) = 0u;
+  LANE_U(ln->flags, l) = PSF_PATH_ALIVE;
   LANE_U(ln->path, l) = j;
   LANE_I(ln->live, l) = -1;
 }
 
 /* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
- * light sample's contribution where its shadow ray was blocked). */
-inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states) {
+ * light sample's contribution where its shadow ray was blocked), and the
+ * empty filtering vertex of a path that met none (camera_rays' default). */
+inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states,
+                        __global PathVertex* vertices) {
   PathState st;
   st.throughput = (float4)(vec8_get(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
   st.radiance = (float4)(vec8_get(ln->radiance, l), LANE_F(ln->radiance_w, l));
@@ -189,6 +296,11 @@ inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathSt
   st.depth = LANE_U(ln->depth, l);
   st.flags = LANE_U(ln->flags, l);
   states[LANE_U(ln->path, l)] = st;
+  if (!(st.flags & PSF_PATH_VERTEX)) {
+    PathVertex none;
+    none.position = none.normal = none.albedo = none.alpha = (float4)(0.0f);
+    vertices[LANE_U(ln->path, l)] = none;
+  }
 }
 
 /* Adds c where `mask`, as shade.cl's add_radiance (seen: add_radiance_seen). */
@@ -370,11 +482,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                           __global const Material* restrict materials, __global const Emitter* restrict emitters,
                           __global const float* restrict emitter_cdf, __global const float* restrict tri_light_pdf,
                           __global const BvhNode* restrict nodes, __global const BvhTriPack* restrict packs,
-                          __global const Ray* restrict rays, __global PathState* restrict states,
-                          __global PathVertex* restrict vertices, __global const TriAttrib* restrict tri_attribs,
-                          __global const TextureInfo* restrict textures, __global const half* restrict texels,
-                          Environment env, __global const float* restrict env_data, uint masked, uint count,
-                          uint per_item, __global const uint* restrict queue) {
+                          Camera camera, __global PathState* restrict states, __global PathVertex* restrict vertices,
+                          __global const TriAttrib* restrict tri_attribs, __global const TextureInfo* restrict textures,
+                          __global const half* restrict texels, Environment env,
+                          __global const float* restrict env_data, uint masked, uint count, uint per_item) {
   const uint first = get_global_id(0) * per_item;
   if (first >= count) return;
   const uint end = min(first + per_item, count);
@@ -387,7 +498,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.pixel = ln.sample = ln.depth = ln.flags = ln.path = (uint8)(0u);
     ln.live = (int8)(0);
   }
-  for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, queue, rays, states);
+  CameraRays8 cam;
+  cam.first = next + PSF_LANES; /* empty */
+  for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
   const uint seed_hash = psf_hash(params.seed);
   const AlphaScene alpha = {tri_material, materials, tri_attribs, textures, texels, 0};
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
@@ -768,9 +881,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(ends, l)) continue;
-      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states);
+      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states, vertices);
       LANE_I(ln.live, l) = 0;
-      if (next < end) lanes_load(&ln, l, next++, queue, rays, states);
+      if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
     }
   }
 }

@@ -1620,8 +1620,10 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map, a textured floor with an
   // alpha-masked leaf and a point light, the Cornell box with a BSDF of every
   // other kind, three scenes of analytic spheres (one a sphere light), an
-  // emission texture; and a scene outside the class (media), which must fall
-  // back to trace_paths bit for bit.
+  // emission texture, three cameras (thin lens and Gaussian filter, tent filter
+  // and crop window, orthographic), whose rays the lanes draw themselves; and a
+  // scene outside the class (media), which must fall back to trace_paths bit
+  // for bit.
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
@@ -1745,6 +1747,33 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     t.materials[1].tex_emission = store.pixels(psf::detail::TextureDesc{}, 2, 2, {1, 0.5f, 0.25f, 1, 0.5f, 1, 0.5f, 1,
                                                                                   0.25f, 0.5f, 1, 1, 1, 1, 1, 1});
     cases.push_back({"emission texture", t, true});
+  }
+  {
+    // The cameras: trace_lanes draws the camera rays of eight paths in vectors
+    // (camera_rays8), lane by lane for an image narrower than the lanes.
+    const psf::Scene box = cases.front().scene;
+    psf::Scene t = box;  // a thin lens focused on the box's back wall, a Gaussian filter, and an image of
+    t.width = 13;        // 143 pixels, so that groups of eight paths pass the image's end (two sample numbers)
+    t.height = 11;
+    t.camera.aperture_radius = 20.0f;
+    t.camera.focus_distance = 1350.0f;
+    t.camera.pixel_filter = "gaussian";
+    cases.push_back({"thin lens, Gaussian filter, 13x11", t, true});
+    t = box;  // a tent filter and a crop window
+    t.camera.pixel_filter = "tent";
+    t.camera.film_width = 64;
+    t.camera.film_height = 48;
+    t.camera.crop_x = 21;
+    t.camera.crop_y = 9;
+    t.width = 27;
+    t.height = 19;
+    cases.push_back({"tent filter, crop window", t, true});
+    t = box;  // an orthographic camera, an image narrower than the lanes
+    t.camera.orthographic = true;
+    t.camera.ortho_scale = {300.0f, 300.0f};
+    t.width = 5;
+    t.height = 9;
+    cases.push_back({"orthographic, 5x9", t, true});
   }
   for (auto& c : cases) {
     INFO(c.name);
