@@ -14,7 +14,9 @@
  * of the hit's triangle, material and light, and what is rarer or branchier: a
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
- * bsdf.cl's own functions), the environment an escaped ray sees, a light sample
+ * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
+ * and no bump map, whose BSDF the vectors evaluate and sample, Plastic8), the
+ * environment an escaped ray sees, a light sample
  * on a point, spot, directional or sphere light (emitter.cl emitter_sample),
  * a hit on an analytic sphere. A light sample on an environment map takes its
  * steps over all lanes before the next (lanes_env_sample), so that the lanes'
@@ -477,6 +479,91 @@ __attribute__((noinline)) void lane_bsdf_sample(const Material* m, __global cons
   if (!surface_side_agrees(m, *f, *unperturbed, bs->wi)) bs->weight = (float3)(0.0f);
 }
 
+/* --- rough plastic in vectors ------------------------------------------------
+ * bsdf.cl's roughplastic (bsdf_eval_local, bsdf_sample_general) for the lanes
+ * whose material is one with an isotropic GGX coat and no bump or normal map
+ * (the floors and walls of Bitterli's scenes), written with the same
+ * operations in float8 arithmetic; its transmittance table read lane by lane. */
+
+/* Whether the lanes shade material m as a Plastic8. */
+inline bool lanes_plastic(const Material* m) {
+  return m->type == PSF_MATERIAL_ROUGH_PLASTIC && !(m->flags & PSF_MATFLAG_BECKMANN) && m->alpha_u == m->alpha_v &&
+         m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' rough plastics: their parameters (Material's, as bsdf.cl reads
+ * them) and the coat's transmittance towards wo. */
+typedef struct {
+  float8 alpha, eta, scale, weight, t_o; /* alpha_u, eta.x, eta.y, albedo.w, T(cos_o) */
+  Vec8 spec, base;                       /* specular, plastic_base */
+} Plastic8;
+
+/* fresnel_dielectric for 0 <= cos_i (a microfacet's cosine towards o). */
+inline float8 fresnel_dielectric8(float8 ci, float8 n) {
+  const float8 ct2 = 1.0f - (1.0f - ci * ci) / (n * n);
+  const float8 ct = sqrt(fmax(ct2, 0.0f));
+  const float8 rs = (ci - n * ct) / (ci + n * ct);
+  const float8 rp = (n * ci - ct) / (n * ci + ct);
+  return select(0.5f * (rs * rs + rp * rp), (float8)(1.0f), ct2 <= 0.0f);
+}
+
+/* mf_D, mf_G1 and mf_pdf for isotropic GGX. */
+inline float8 ggx_D8(Vec8 m, float8 a) {
+  const float8 ct = m.z, x = m.x / a, y = m.y / a, ct2 = ct * ct;
+  const float8 d = x * x + y * y + ct2;
+  const float8 r = 1.0f / (PSF_PI * a * a * d * d);
+  return select((float8)(0.0f), r, (ct > 0.0f) & (r * ct > 1e-20f));
+}
+inline float8 ggx_G1_8(Vec8 v, Vec8 m, float8 a) {
+  const float8 xy = a * a * v.x * v.x + a * a * v.y * v.y;
+  const float8 t2 = xy / (v.z * v.z);
+  const float8 g = select(2.0f / (1.0f + sqrt(1.0f + t2)), (float8)(1.0f), xy == 0.0f);
+  return select(g, (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
+}
+
+/* mf_sample for isotropic GGX: a visible normal for v (v.z > 0). */
+inline Vec8 ggx_sample8(Vec8 v, float8 a, float8 u1, float8 u2) {
+  const Vec8 vh = vec8_normalize(vec8(a * v.x, a * v.y, v.z));
+  const float8 lensq = vh.x * vh.x + vh.y * vh.y;
+  const float8 inv = rsqrt(lensq);
+  const int8 tilted = lensq > 0.0f;
+  const Vec8 t1 =
+      vec8(select((float8)(1.0f), -vh.y * inv, tilted), select((float8)(0.0f), vh.x * inv, tilted), (float8)(0.0f));
+  const Vec8 t2 = vec8_cross(vh, t1);
+  const float8 r = sqrt(u1), phi = 2.0f * PSF_PI * u2;
+  float8 cos_phi;
+  const float8 sin_phi = psf_sincos8(phi, &cos_phi);
+  const float8 p1 = r * cos_phi, s = 0.5f * (1.0f + vh.z);
+  const float8 p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * (r * sin_phi);
+  const float8 pz = sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2));
+  const Vec8 nh = vec8_add(vec8_add(vec8_scale(t1, p1), vec8_scale(t2, p2)), vec8_scale(vh, pz));
+  return vec8_normalize(vec8(a * nh.x, a * nh.y, fmax(1e-6f, nh.z)));
+}
+
+/* plastic_prob_specular for the coat's reflectance 1 - T(cos_o). */
+inline float8 plastic8_prob_specular(const Plastic8* p) {
+  const float8 r = 1.0f - p->t_o;
+  const float8 ps = r * p->weight, pd = (1.0f - r) * (1.0f - p->weight);
+  return select((float8)(0.0f), ps / (ps + pd), ps + pd > 0.0f);
+}
+
+/* bsdf_eval_local's roughplastic: f and *pdf for local o and i, t_i the coat's
+ * transmittance towards i. */
+inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8* pdf) {
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  const float8 ps = plastic8_prob_specular(p);
+  const Vec8 h = vec8_normalize(vec8_add(o, i));
+  const float8 oh = vec8_dot(o, h);
+  const float8 fr = fresnel_dielectric8(oh, p->eta);
+  const float8 d = ggx_D8(h, p->alpha), g_o = ggx_G1_8(o, h, p->alpha);
+  const float8 g = g_o * ggx_G1_8(i, h, p->alpha);
+  const float8 pm = d * g_o * fabs(oh) / o.z;
+  *pdf = select((float8)(0.0f), ps * pm / (4.0f * oh) + (1.0f - ps) * i.z * PSF_INV_PI, on);
+  const Vec8 f = vec8_add(vec8_scale(p->spec, fr * d * g / (4.0f * o.z * i.z)),
+                          vec8_scale(p->base, p->scale * p->t_o * t_i * PSF_INV_PI));
+  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
+}
+
 __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
                           __global const float4* restrict tri_pos, __global const uint* restrict tri_material,
                           __global const Material* restrict materials, __global const Emitter* restrict emitters,
@@ -687,6 +774,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       mats[l] = m;
     }
     const float8 fn_wo = vec8_dot(fn, wo);
+    /* The rough plastics that scatter in vectors (Plastic8): their parameters
+     * and the coat's transmittance towards wo, its table read lane by lane. */
+    int8 plastic = (int8)(0);
+    Plastic8 pl;
+    __global const half* plastic_table[PSF_LANES];
+    for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (!LANE_I(own_frame, l) || !LANE_I(general, l) || !lanes_plastic(&mats[l])) continue;
+      const Material* m = &mats[l];
+      LANE_I(plastic, l) = -1;
+      plastic_table[l] = surface_table(*m, textures, texels);
+      LANE_F(pl.alpha, l) = m->alpha_u;
+      LANE_F(pl.eta, l) = m->eta.x;
+      LANE_F(pl.scale, l) = m->eta.y;
+      LANE_F(pl.weight, l) = m->albedo.w;
+      LANE_F(pl.t_o, l) = rough_transmittance(*m, plastic_table[l], LANE_F(fn_wo, l));
+      vec8_set(&pl.spec, l, m->specular.xyz);
+      vec8_set(&pl.base, l, plastic_base(*m));
+    }
     const Vec8 n_camera = vec8_select(vec8_neg(fn), fn, fn_wo >= 0.0f);
     const uint8 segments = ln.depth + 1u;
     int8 scatter = hit & select(vec8_max3(albedo) > 0.0f, scatters, general);
@@ -793,13 +898,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
       for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(evaluate, l)) continue;
+        if (!LANE_I(evaluate, l) || LANE_I(plastic, l)) continue;
         const Frame fr = vec8_frame(fs, ft, fn, l);
         float pdf_l;
         vec8_set(
             &f, l,
             lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), vec8_get(wi, l), &pdf_l));
         LANE_F(bpdf, l) = pdf_l;
+      }
+      const int8 evaluate_plastic = evaluate & plastic;
+      if (any(evaluate_plastic)) {
+        const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+        const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
+        float8 t_i = (float8)(0.0f), pdf_p;
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(evaluate_plastic, l))
+            LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
+        f = vec8_select(f, plastic8_eval(&pl, o, i, t_i, &pdf_p), evaluate_plastic);
+        bpdf = select(bpdf, pdf_p, evaluate_plastic);
       }
       const float8 cos_s = fabs(cos_i);
       contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
@@ -822,7 +938,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
     for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(sample_own, l)) continue;
+      if (!LANE_I(sample_own, l) || LANE_I(plastic, l)) continue;
       const Frame fr = vec8_frame(fs, ft, fn, l);
       BsdfSample bs;
       lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), LANE_F(u_b1, l),
@@ -831,6 +947,29 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_F(pdf, l) = bs.pdf;
       vec8_set(&weight, l, bs.weight);
       LANE_I(delta_lobe, l) = (bs.flags & BSDF_DELTA) ? -1 : 0;
+    }
+    /* A rough plastic's sample (bsdf_sample_general): the coat's visible
+     * normal with its probability, else the cosine-weighted direction (wl),
+     * then bsdf_finish's value and pdf. */
+    const int8 sample_plastic = sample_own & plastic;
+    if (any(sample_plastic)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      const int8 coat = u_lobe < plastic8_prob_specular(&pl);
+      const Vec8 h = ggx_sample8(o, pl.alpha, u_b1, u_b2);
+      const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
+      const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
+      float8 t_i = (float8)(0.0f), pdf_p;
+      for (uint l = 0u; l < PSF_LANES; ++l)
+        if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
+      const Vec8 f = plastic8_eval(&pl, o, i, t_i, &pdf_p);
+      const int8 ok = sample_plastic & ~fails & (pdf_p > 0.0f);
+      const Vec8 world = vec8_add(vec8_add(vec8_scale(fs, i.x), vec8_scale(ft, i.y)), vec8_scale(fn, i.z));
+      wi = vec8_select(wi, vec8_select(wo, world, ~fails), sample_plastic);
+      pdf = select(pdf, select((float8)(0.0f), pdf_p, ok), sample_plastic);
+      weight = vec8_select(
+          weight,
+          vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), vec8_scale(f, fabs(i.z) / pdf_p), ok),
+          sample_plastic);
     }
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);

@@ -1690,7 +1690,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   }
   {
     // Our Cornell box with a BSDF of every other kind, which the lanes shade
-    // lane by lane with bsdf.cl's functions: a textured roughplastic floor, a
+    // lane by lane with bsdf.cl's functions, but for the textured roughplastic
+    // floor (GGX, nonlinear), which they shade in vectors (Plastic8): a
     // bump-mapped ceiling, a smooth plastic back wall, a gold mirror and a rough
     // Beckmann conductor for the side walls, a glass box, and a blend of diffuse
     // and rough GGX conductor for the tall box.
@@ -1708,7 +1709,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
              R"(</texture>)";
     };
     const std::string bsdfs =
-        R"(<bsdf type="roughplastic" id="floor"><float name="alpha" value="0.2"/>)" +
+        R"(<bsdf type="roughplastic" id="floor"><float name="alpha" value="0.2"/>)"
+        R"(<string name="distribution" value="ggx"/><boolean name="nonlinear" value="true"/>)" +
         checker(R"(name="diffuse_reflectance")") +
         R"(</bsdf>)"
         R"(<bsdf type="bumpmap" id="ceiling"><float name="scale" value="0.5"/>)" +
