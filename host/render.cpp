@@ -51,6 +51,15 @@ bool lanes_vector_material(const Material& m) {
          (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) == 0 && m.tex_bump == PSF_NO_TEXTURE &&
          m.tex_alpha == PSF_NO_TEXTURE && m.tex_table == PSF_NO_TEXTURE && m.alpha_u == m.alpha_v;
 }
+// Whether the lanes render a scene with device material m slower than the
+// other path kernels: the principled BSDFs and pplastic, large scalar
+// functions that the lanes call out of line for one lane at a time (PoCL,
+// medians of alternating renders, lanes / per path: principled spheres 502 /
+// 438 ms, pplastic spheres 454 / 405, thin principled sheets 531 / 390).
+bool lanes_slow_material(const Material& m) {
+  return m.type == PSF_MATERIAL_PRINCIPLED || m.type == PSF_MATERIAL_PRINCIPLED_THIN ||
+         m.type == PSF_MATERIAL_PPLASTIC;
+}
 
 }  // namespace
 
@@ -62,7 +71,7 @@ struct Renderer::Impl {
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
   bool lanes = false;  // no camera medium, and lanes_materials_supported
-  bool lanes_vector = false;  // and every material PSF_MATFLAG_LANES_VECTOR, without analytic spheres
+  bool lanes_default = false;  // and no material lanes_slow_material: the lanes by default on CPUs
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -94,14 +103,14 @@ struct Renderer::Impl {
     std::vector<TriAttrib> attributes = triangle_attributes(scene);
     tri_attribs = rt.upload(attributes);
     std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
-    bool all_vector = true;
+    bool slow = false;
     for (Material& m : device) {
       if (lanes_vector_material(m)) m.flags |= PSF_MATFLAG_LANES_VECTOR;
-      else all_vector = false;
+      slow = slow || lanes_slow_material(m);
     }
     materials = rt.upload(device);
     lanes = scene.camera_medium == 0 && lanes_materials_supported(device);
-    lanes_vector = lanes && scene.spheres.empty() && all_vector;
+    lanes_default = lanes && !slow;
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);
@@ -510,20 +519,17 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
   // Eight paths per work-item in the lanes of vectors (kernels/trace_lanes.cl),
   // each work-item over a run of kLanesRun paths, for scenes of the lanes' class
-  // (Impl::lanes). By default on CPUs where the lanes shade every material in
-  // vectors (PoCL: the bunny under a 1k map 634-666 ms against 656-743 for the
-  // wavefront and 849-951 per path; the pine under the default sky 110-124
-  // against 150-186), and where an environment map lights the scene, whose light
-  // samples the lanes draw with their cache misses overlapped as the wavefront
-  // does. Scenes of other materials without a map stay per path, where the
-  // lanes shade lane by lane with the scalar code and gain nothing. Medians of
-  // alternating renders in one process, lanes / per path / wavefront: Sponza
-  // (default sky) 214 / 273 / 246 ms, living room (map) 1400 / 1738 / 1408,
-  // staircase 1622 / 1572 / 1572, principled spheres 123 / 101 / 115, glass
-  // sphere on a ground 43 / 40 / 38, glTF material spheres (default sky, no
-  // diffuse material) 1600 / 1598 / 1505.
+  // (Impl::lanes); by default on CPUs unless a material is one the lanes shade
+  // slower than the other kernels (lanes_slow_material). Medians of alternating
+  // renders in one process (PoCL, 2 cores), lanes / per path: staircase 1988 /
+  // 2104 ms and 2011 / 2232 (1 spp), sphere light 222 / 234, glass sphere on a
+  // ground 163 / 160, McGuire's glossy Cornell box 778 / 895, water 775 / 772
+  // (256x256, 16 spp); with an environment map the lanes draw its light samples
+  // with their cache misses overlapped as the wavefront does (living room 1400
+  // against 1408 ms for the wavefront, Sponza 214 against 246, before the lanes
+  // shaded rough plastics in vectors).
   const bool lanes = s.lanes && o.per_path != 0 &&
-                     (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU" && (s.lanes_vector || env_presampled)));
+                     (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU" && s.lanes_default));
   // The lanes draw their camera rays themselves (camera_rays' rays, from the
   // same samples): a camera_rays pass wrote 196 bytes per path that the lanes
   // read back, 7 % of the device time of the Cornell boxes.

@@ -24,8 +24,8 @@ struct RenderOptions {
                              // The image is the same either way.
   int lanes = -1;            // scenes of the lanes' class (render.cpp lanes_materials_supported), unless per_path 0: 1
                              // eight paths per work-item in vector lanes (kernels/trace_lanes.cl), 0 none (per_path
-                             // decides), -1 lanes on CPU devices for scenes of diffuse materials or lit by an
-                             // environment map. The image is the same up to float rounding.
+                             // decides), -1 lanes on CPU devices for scenes without principled or pplastic
+                             // materials. The image is the same up to float rounding.
   int64_t tail_paths = -1;   // the wavefront hands its live paths to one trace_paths launch once at most this
                              // many are left (0: never; -1: by device kind, 1/16 of the batch on GPUs, never
                              // on CPUs). The image is the same either way.

@@ -1816,16 +1816,21 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   }
 }
 
-TEST_CASE("Render: on CPUs the lanes are the default for diffuse scenes and scenes lit by a map", "[emitter]") {
-  // host/render.cpp: with RenderOptions' defaults a CPU device renders with
-  // trace_lanes where every material is diffuse or an environment map lights
-  // the scene, and per path (trace_paths) where neither holds.
+TEST_CASE("Render: on CPUs the lanes are the default but for principled and pplastic materials", "[emitter]") {
+  // host/render.cpp: with RenderOptions' defaults a CPU device renders the
+  // lanes' class with trace_lanes unless a material is principled, thin
+  // principled or pplastic (lanes_slow_material); those scenes go per path
+  // (trace_paths) without an environment map and to the wavefront (shade)
+  // with one.
   auto& rt = psf::test::runtime();
   REQUIRE(rt.device().type == "CPU");
   psf::Scene glossy_under_map = envmap_floor();
   glossy_under_map.materials[0].type = PSF_MATERIAL_ROUGH_CONDUCTOR;
   glossy_under_map.materials[0].specular = {{0.9f, 0.8f, 0.7f, 0.0f}};
   glossy_under_map.materials[0].alpha_u = glossy_under_map.materials[0].alpha_v = 0.3f;
+  psf::Scene principled_under_map = envmap_floor();
+  principled_under_map.materials[0].type = PSF_MATERIAL_PRINCIPLED;
+  principled_under_map.materials[0].alpha_u = principled_under_map.materials[0].alpha_v = 0.3f;
   struct Case {
     const char* name;
     psf::Scene scene;
@@ -1835,7 +1840,11 @@ TEST_CASE("Render: on CPUs the lanes are the default for diffuse scenes and scen
       {"diffuse, map", envmap_floor(), "trace_lanes"},
       {"rough conductor, map", glossy_under_map, "trace_lanes"},
       {"spheres, rough conductor, area light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")),
-       "trace_paths"},
+       "trace_lanes"},
+      {"principled spheres, area light and constant sky",
+       psf::load_scene(psf::test::source_path("scenes/principled-spheres.xml")), "trace_paths"},
+      {"pplastic spheres", psf::load_scene(psf::test::source_path("scenes/pplastic-spheres.xml")), "trace_paths"},
+      {"principled, map", principled_under_map, "shade"},
   };
   for (auto& c : cases) {
     INFO(c.name);
@@ -1850,7 +1859,7 @@ TEST_CASE("Render: on CPUs the lanes are the default for diffuse scenes and scen
     rt.finish();
     const auto stats = rt.stats();
     CHECK(stats.count(c.kernel) == 1);
-    CHECK(stats.count("trace_lanes") + stats.count("trace_paths") == 1);
+    CHECK(stats.count("trace_lanes") + stats.count("trace_paths") + stats.count("shade") == 1);
   }
 }
 
