@@ -1617,8 +1617,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // filtering vertices are the kernel's too) and not. Scenes: our Cornell box (vertex normals
   // none), with max depth 3 (the depth test), with white walls and paths of
   // any depth (the samples past the Sobol table), a two-sided box with vertex
-  // normals and hidden lights, an environment map, a textured floor with an
-  // alpha-masked leaf and a point light, the Cornell box with a BSDF of every
+  // normals and hidden lights, an environment map (a floor, then with an
+  // occluder), a textured floor with an alpha-masked leaf and a point light,
+  // the Cornell box with a BSDF of every
   // other kind, three scenes of analytic spheres (one a sphere light), an
   // emission texture, three cameras (thin lens and Gaussian filter, tent filter
   // and crop window, orthographic), whose rays the lanes draw themselves; and a
@@ -1659,6 +1660,12 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     cases.push_back({"cornell-box, white walls, unbounded depth", t, true});
   }
   cases.push_back({"envmap floor", envmap_floor(), true});
+  {
+    // The map's light samples decide shadows: a quad over a quarter of the floor.
+    psf::Scene t = envmap_floor();
+    add_quad(t, {-1, 0.5f, -1}, {0, 0, 1}, {1, 0, 0}, t.tri_material[0]);
+    cases.push_back({"envmap floor, occluder", t, true});
+  }
   {
     // A textured floor under an area light and a point light, with a leaf
     // between them whose opacity texture cuts out half of it (alpha-tested casts).
