@@ -808,12 +808,23 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
     const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
     const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
+    /* The light, by sample_cdf_guided for all lanes at once: each lane's guide
+     * entry, then the forward steps of the lanes together, so that no lane's
+     * number of steps is a branch to mispredict. */
     uint8 light = (uint8)(0u);
-    if (params.num_emitters > 0u)
+    if (params.num_emitters > 0u) {
+      const uint n = params.num_emitters;
       for (uint l = 0u; l < PSF_LANES; ++l)
         if (LANE_I(scatter, l))
-          LANE_U(light, l) = sample_cdf_guided(emitter_cdf, params.num_emitters, emitter_cdf + params.num_emitters,
-                                               LANE_F(u_light, l));
+          LANE_U(light, l) = as_uint(emitter_cdf[n + min((uint)(LANE_F(u_light, l) * (float)n), n - 1u)]);
+      for (;;) {
+        float8 c;
+        for (uint l = 0u; l < PSF_LANES; ++l) LANE_F(c, l) = emitter_cdf[LANE_U(light, l)];
+        const int8 step = scatter & (light < (uint8)(n - 1u)) & (c <= u_light);
+        if (!any(step)) break;
+        light = select(light, light + 1u, as_uint8(step));
+      }
+    }
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
      * emitter_sample) in vectors, any other light (a constant environment,
