@@ -542,9 +542,16 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     // medians 523 ms against 542 with runs of 32, 528 with 512; living room
     // 2085 against 2124 ms).
     constexpr uint32_t kLanesRun = 128;
-    rt.launch("trace_lanes", (p.batch_size + kLanesRun - 1) / kLanesRun, 8, p, s.sobol, s.tri_pos, s.tri_material,
-              s.materials, s.emitters, s.emitter_cdf, s.tri_light_pdf, s.caster->nodes(), s.caster->packs(),
-              s.camera, states, vertices, s.tri_attribs, s.textures, s.texels, s.env, s.env_data,
+    // Work-groups of one work-item on CPUs: PoCL runs a work-group's items as a
+    // loop whose frame holds each item's private arrays (the lanes' materials
+    // among them): 77 KiB of stack for eight, 12 KiB for one. Medians of
+    // alternating renders, groups of 1 against 8: our Cornell box 490 against
+    // 515 ms, living room 1670 and 1720 against 1733 and 1761, Mitsuba's cbox
+    // 403 and 408 against 436 and 409.
+    const size_t lanes_local = rt.device().type == "CPU" ? 1 : 8;
+    rt.launch("trace_lanes", (p.batch_size + kLanesRun - 1) / kLanesRun, lanes_local, p, s.sobol, s.tri_pos,
+              s.tri_material, s.materials, s.emitters, s.emitter_cdf, s.tri_light_pdf, s.caster->nodes(),
+              s.caster->packs(), s.camera, states, vertices, s.tri_attribs, s.textures, s.texels, s.env, s.env_data,
               cl_uint(s.caster->masked() ? 1 : 0), p.batch_size, kLanesRun);
   } else if (per_path) {
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
