@@ -544,7 +544,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     constexpr uint32_t kLanesRun = 128;
     // Work-groups of one work-item on CPUs: PoCL runs a work-group's items as a
     // loop whose frame holds each item's private arrays (the lanes' materials
-    // among them): 77 KiB of stack for eight, 12 KiB for one. Medians of
+    // among them): 82 KiB of stack for eight, 12 KiB for one. Medians of
     // alternating renders, groups of 1 against 8: our Cornell box 490 against
     // 515 ms, living room 1670 and 1720 against 1733 and 1761, Mitsuba's cbox
     // 403 and 408 against 436 and 409.
