@@ -162,7 +162,12 @@ uint32_t PathSpaceFilter::run(const FilterParams& params, int iterations, const 
   rt_.launch("cell_keys", lane_items, kLocal, p, gather_lanes_, vertices, keys_, indices_);
   radix_sort(rt_, keys_, indices_, tmp_keys_, tmp_indices_, n, p.key_bits + 1, 0, 0, RadixKernels::automatic,
              &sort_scratch_);
-  rt_.launch("cell_ranges", n + 1, kLocal, n, p.key_bits, keys_, starts_, valid_);
+  // Each cell's start: on GPUs one work-item per entry (a binary search), on CPUs
+  // one per tuple writing the entries up to its key (kernels/cell_ranges.cl).
+  if (rt_.device().type == "GPU")
+    rt_.launch("cell_ranges_search", (size_t(1) << p.key_bits) + 1, kLocal, n, p.key_bits, keys_, starts_, valid_);
+  else
+    rt_.launch("cell_ranges", n + 1, kLocal, n, p.key_bits, keys_, starts_, valid_);
   rt_.launch("gather_tuples", lane_items, kLocal, p, stride_, gather_lanes_, indices_, vertices, values, valid_,
              sorted_, values_a_);
 

@@ -465,7 +465,7 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
   result.filter_off_after = filter_off_after;
   for (auto& rt : runtimes)
     for (const auto& [name, t] : rt->stats()) {
-      bool filter_stage = name == "cell_keys" || name.rfind("radix_", 0) == 0 || name == "cell_ranges" ||
+      bool filter_stage = name == "cell_keys" || name.rfind("radix_", 0) == 0 || name.rfind("cell_ranges", 0) == 0 ||
                           name == "gather_tuples" || name.rfind("filter", 0) == 0 || name == "scatter_values";
       (filter_stage ? result.filter_ms : result.trace_ms) += t.ms;
     }

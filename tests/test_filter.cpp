@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <numeric>
@@ -309,6 +310,60 @@ TEST_CASE("Cell ranges: start and end of every key in sorted order", "[filter]")
   size_t expect_invalid = std::count_if(v.begin(), v.end(), [](auto& t) { return t.albedo.s[3] == 0.0f; });
   CHECK(invalid == expect_invalid);
   CHECK(rt.download<uint32_t>(filter.valid_count(), 1)[0] == n - invalid);
+}
+
+TEST_CASE("Cell ranges: both kernels give each entry the number of keys below it (std::lower_bound)", "[filter]") {
+  // cell_ranges (a work-item per tuple, CPUs) and cell_ranges_search (a work-item
+  // per entry, GPUs) on sorted keys the filter can produce: dense runs in a few
+  // blocks far apart (block-hashed cells), a first key far from 0, duplicates,
+  // paths without a vertex (the key 2^key_bits) behind them, or only those.
+  auto& rt = psf::test::runtime();
+  std::mt19937 rng(61);
+  const uint32_t n_big = psf::test::pick(100000u, 5000u);
+  struct Case {
+    const char* name;
+    std::vector<uint32_t> keys;
+  };
+  std::vector<Case> cases;
+  const uint32_t big_cells = 1u << psf::filter_key_bits(n_big);
+  {
+    std::vector<uint32_t> k;  // three blocks of 4096 entries, a tenth of the paths without a vertex
+    for (uint32_t i = 0; i < n_big; ++i) {
+      const uint32_t block = std::array<uint32_t, 3>{big_cells / 7, big_cells / 2, big_cells - 4096}[rng() % 3];
+      k.push_back(rng() % 10 == 0 ? big_cells : block + rng() % 4096);
+    }
+    cases.push_back({"three blocks, paths without a vertex", k});
+  }
+  {
+    std::vector<uint32_t> k;  // uniform, many duplicates, every path with a vertex
+    for (uint32_t i = 0; i < n_big; ++i) k.push_back(rng() % (n_big / 8));
+    cases.push_back({"uniform, duplicates", k});
+  }
+  cases.push_back({"one key", {12345u % (1u << psf::filter_key_bits(1))}});
+  cases.push_back({"one path without a vertex", {1u << psf::filter_key_bits(1)}});
+  cases.push_back({"only paths without a vertex", std::vector<uint32_t>(777, 1u << psf::filter_key_bits(777))});
+  for (auto& c : cases) {
+    INFO(c.name);
+    std::sort(c.keys.begin(), c.keys.end());
+    const uint32_t n = uint32_t(c.keys.size()), bits = psf::filter_key_bits(n), cells = 1u << bits;
+    REQUIRE(c.keys.back() <= cells);
+    std::vector<uint32_t> ref(cells + 1);
+    for (uint32_t e = 0; e <= cells; ++e)
+      ref[e] = uint32_t(std::lower_bound(c.keys.begin(), c.keys.end(), e) - c.keys.begin());
+    cl::Buffer keys = rt.upload(c.keys);
+    for (const char* kernel : {"cell_ranges", "cell_ranges_search"}) {
+      INFO(kernel);
+      cl::Buffer starts = rt.upload(std::vector<uint32_t>(cells + 1, 0xDEADBEEFu), CL_MEM_READ_WRITE);
+      cl::Buffer valid = rt.upload(std::vector<uint32_t>(1, 0xDEADBEEFu), CL_MEM_READ_WRITE);
+      const size_t items = std::string(kernel) == "cell_ranges" ? size_t(n) + 1 : size_t(cells) + 1;
+      rt.launch(kernel, items, 64, n, bits, keys, starts, valid);
+      const auto got = rt.download<uint32_t>(starts, cells + 1);
+      size_t wrong = 0;
+      for (uint32_t e = 0; e <= cells; ++e) wrong += got[e] != ref[e];
+      CHECK(wrong == 0);
+      CHECK(rt.download<uint32_t>(valid, 1)[0] == ref[cells]);
+    }
+  }
 }
 
 TEST_CASE("Filter: neighbour counts and averages equal the brute-force equation", "[filter]") {
