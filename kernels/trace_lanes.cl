@@ -35,6 +35,8 @@
  * of a different instruction order (tests/test_emitter.cpp compares the two). */
 
 #define PSF_LANES 8
+/* Up to this many lights the lanes choose one by counting cdf entries (below). */
+#define PSF_LANES_FEW_LIGHTS 16u
 /* Lane l of a private vector (a scalar view of its memory). */
 #define LANE_F(v, l) (((float*)&(v))[l])
 #define LANE_U(v, l) (((uint*)&(v))[l])
@@ -810,9 +812,14 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
     /* The light, by sample_cdf_guided for all lanes at once: each lane's guide
      * entry, then the forward steps of the lanes together, so that no lane's
-     * number of steps is a branch to mispredict. */
+     * number of steps is a branch to mispredict. With a few lights, the number
+     * of cdf entries at most u instead (the same index: the guide entry is at
+     * most it), from loads all lanes share rather than gathers. */
     uint8 light = (uint8)(0u);
-    if (params.num_emitters > 0u) {
+    if (params.num_emitters > 0u && params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
+      for (uint k = 0u; k + 1u < params.num_emitters; ++k)
+        light -= as_uint8(scatter & ((float8)(emitter_cdf[k]) <= u_light));
+    } else if (params.num_emitters > 0u) {
       const uint n = params.num_emitters;
       for (uint l = 0u; l < PSF_LANES; ++l)
         if (LANE_I(scatter, l))

@@ -1745,6 +1745,25 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     std::ofstream(path) << xml;
     cases.push_back({"cornell-box, every other BSDF", psf::load_scene(path), true});
   }
+  {
+    // Our Cornell box with 12 small lights of different colours beside its own:
+    // 26 light triangles, more than the lanes choose among by counting cdf
+    // entries (PSF_LANES_FEW_LIGHTS), so they search the guided cdf.
+    std::ifstream in(psf::test::source_path("scenes/cornell-box.xml"));
+    std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string lights;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 3; ++j)
+        lights += "<shape type=\"rectangle\"><transform name=\"to_world\"><scale x=\"12\" y=\"12\" z=\"1\"/>"
+                  "<rotate x=\"1\" angle=\"90\"/><translate x=\"" + std::to_string(80 + 130 * i) +
+                  "\" y=\"540\" z=\"" + std::to_string(100 + 180 * j) + "\"/></transform><ref id=\"light\"/>"
+                  "<emitter type=\"area\"><rgb name=\"radiance\" value=\"" + std::to_string(2 + i) + ", " +
+                  std::to_string(1 + j) + ", 3\"/></emitter></shape>";
+    xml.insert(xml.rfind("</scene>"), lights);
+    const std::string path = psf::test::temp_dir("lanes-lights") + "/box.xml";
+    std::ofstream(path) << xml;
+    cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true});
+  }
   // Analytic spheres: a sphere light over a rough conductor sphere, a glass
   // sphere on a sphere ground under a constant sky, principled spheres.
   for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres"})
@@ -1844,7 +1863,7 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   }
 }
 
-TEST_CASE("Render: on CPUs the lanes are the default but for principled and pplastic materials; GPUs keep the wavefront",
+TEST_CASE("Render: on CPUs the lanes are the default but for principled and pplastic; GPUs keep the wavefront",
           "[emitter]") {
   // host/render.cpp: with RenderOptions' defaults a CPU device renders the
   // lanes' class with trace_lanes unless a material is principled, thin
