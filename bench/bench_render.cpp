@@ -8,17 +8,23 @@
 //   kernel to the last finish; not the program build, BVH build, scene upload or
 //   the final image download). Also the summed device time of all kernels.
 // psf_render_filtered/<scene>: the same with path space filtering (defaults).
-// mitsuba3_render/<scene>: bench/mitsuba_render.py (Mitsuba 3, llvm_ad_rgb where
-//   it runs, else scalar_rgb; as many Dr.Jit threads as the device has compute
-//   units): one untimed render (JIT compilation), then --trials timed renders of
-//   mi.render(scene, spp) up to the developed film as a NumPy array; scene load and
-//   Python start-up are not timed. Mitsuba 0.5 scenes are upgraded by Mitsuba 3's
-//   loader; properties it rejects are removed from a temporary copy and listed.
+// The peer, Mitsuba 3, in psf_render/<scene>'s trials: before each of psf's
+//   timed renders, a process of bench/mitsuba_render.py (Mitsuba 3, llvm_ad_rgb
+//   where it runs, else scalar_rgb; as many Dr.Jit threads as the device has
+//   compute units) loads the scene, renders it once untimed (JIT compilation) and
+//   once timed: mi.render(scene, spp) up to the developed film as a NumPy array;
+//   scene load and Python start-up are not timed. Each psf trial thus follows
+//   one of Mitsuba's by seconds, so that the machine's drift (10-30 % within
+//   minutes here) falls on both of a pair. Mitsuba 0.5 scenes are upgraded by
+//   Mitsuba 3's loader; properties it rejects are removed from a temporary copy
+//   and listed.
 //   The interpreter: $PSF_PYTHON, else <build>/venv/bin/python3, else
 //   <source>/build/venv/bin/python3, else python3; without `import mitsuba` the peer
 //   is skipped with a message (python3 -m venv build/venv && build/venv/bin/pip
 //   install mitsuba==3.6.4 numpy).
-// Ratio printed: psf paths/s / Mitsuba paths/s (goal >= 1), both medians.
+// Ratios printed: psf paths/s / Mitsuba paths/s of the medians, and of each
+// trial's pair with their median, which the goal (>= 1) is judged by; the
+// filtered render against the plain trials' Mitsuba median.
 //
 // On a GPU device the peer is Mitsuba's cuda_ad_rgb variant (--peer_variant=NAME
 // picks another).
@@ -158,6 +164,30 @@ psf::RenderOptions render_options(const Bench& b, bool filter, int64_t tail_path
   return o;
 }
 
+// One run of bench/mitsuba_render.py (load, an untimed warm-up, `repeat` timed
+// renders): its JSON line, empty with the exit status where it printed none.
+struct PeerRun {
+  bool ok = false;
+  std::string line;
+  int status = 0;
+  std::vector<double> times;
+};
+PeerRun run_peer(const Bench& b, const std::string& python, const std::string& script, const std::string& variant,
+                 unsigned threads, int repeat) {
+  std::string cmd = quote(python) + " " + quote(script) + " --scene " + quote(b.path) + " --spp " +
+                    std::to_string(b.spp) + " --repeat " + std::to_string(repeat) + " --threads " +
+                    std::to_string(threads) + " --variant " + quote(variant);
+  auto [out, status] = run_command(cmd);
+  PeerRun r;
+  r.status = status;
+  for (std::stringstream in(out); std::getline(in, r.line);)
+    if (!r.line.empty() && r.line[0] == '{') break;
+  if (r.line.empty() || r.line[0] != '{') r.line.clear();
+  r.times = json_numbers(r.line, "times_s");
+  r.ok = json_raw(r.line, "ok") == "true" && r.times.size() == size_t(repeat);
+  return r;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -236,66 +266,33 @@ int main(int argc, char** argv) {
 
   for (auto& bp : benches) {
     Bench* b = bp.get();
-    if (have_mitsuba) {
-      benchmark::RegisterBenchmark(("mitsuba3_render/" + b->name).c_str(), [b, &opt, python, script, peer_variant,
-                                                                             threads](benchmark::State& state) {
-        std::string cmd = quote(python) + " " + quote(script) + " --scene " + quote(b->path) + " --spp " +
-                          std::to_string(b->spp) + " --repeat " + std::to_string(opt.trials) + " --threads " +
-                          std::to_string(threads) + " --variant " + quote(peer_variant);
-        auto [out, status] = run_command(cmd);
-        std::string line;
-        for (std::stringstream in(out); std::getline(in, line);)
-          if (!line.empty() && line[0] == '{') break;
-        bool ok = json_raw(line, "ok") == "true";
-        std::vector<double> times = json_numbers(line, "times_s");
-        if (!ok || times.size() < size_t(opt.trials)) {
-          report("%s: Mitsuba 3 failed: %s; tried: %s\n", b->name.c_str(),
-                 line.empty() ? ("exit status " + std::to_string(status)).c_str() : json_raw(line, "error").c_str(),
-                 json_raw(line, "tried").c_str());
-          state.SkipWithError("Mitsuba 3 could not render the scene");
-          for (auto _ : state) state.SetIterationTime(1.0);
-          return;
-        }
-        size_t k = 0;
-        for (auto _ : state) state.SetIterationTime(times[k++]);
-        Timing t = bench::summarize(times);
-        int w = int(json_number(line, "width")), h = int(json_number(line, "height"));
-        uint64_t paths = uint64_t(w) * h * b->spp;
-        b->mitsuba_paths_per_s = paths / t.median_s;
-        b->mitsuba_variant = json_raw(line, "variant");
-        state.counters["Mpaths_per_s"] = b->mitsuba_paths_per_s * 1e-6;
-        state.counters["Mpaths_per_s_best"] = paths / t.min_s * 1e-6;
-        state.counters["load_s"] = json_number(line, "load_s");
-        state.counters["warmup_s"] = json_number(line, "warmup_s");
-        state.counters["threads"] = json_number(line, "threads");
-        state.SetLabel(b->mitsuba_variant);
-        std::string removed = json_raw(line, "removed_properties");
-        report("%s: Mitsuba %s %s, %s, %.0f threads: %dx%d %d spp: median %.1f ms, min %.1f ms, %.3f M paths/s "
-               "(load %.2f s, warm-up render %.2f s, not timed); mean pixel %.4g%s%s%s\n",
-               b->name.c_str(), json_raw(line, "mitsuba").c_str(), b->mitsuba_variant.c_str(),
-               json_raw(line, "integrator").c_str(), json_number(line, "threads"), w, h, b->spp, t.median_s * 1e3,
-               t.min_s * 1e3, b->mitsuba_paths_per_s * 1e-6, json_number(line, "load_s"),
-               json_number(line, "warmup_s"), json_number(line, "mean"),
-               removed == "[]" ? "" : "; loaded after removing the properties Mitsuba 3 rejects: ",
-               removed == "[]" ? "" : removed.c_str(),
-               json_raw(line, "tried") == "[]" || json_raw(line, "tried").empty()
-                   ? ""
-                   : ("; failed before: " + json_raw(line, "tried")).c_str());
-        if (w != b->scene.width || h != b->scene.height)
-          report("%s: WARNING: Mitsuba's film is %dx%d, psf's %dx%d: compared per path\n", b->name.c_str(), w, h,
-                 b->scene.width, b->scene.height);
-      })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
-    }
     for (int filter = 0; filter <= (opt.filtered ? 1 : 0); ++filter) {
       std::string bname = (filter ? "psf_render_filtered/" : "psf_render/") + b->name;
-      benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, &opt, filter, bname](benchmark::State& state) {
+      const bool paired = have_mitsuba && !filter;
+      benchmark::RegisterBenchmark(bname.c_str(), [b, &rt, &opt, filter, bname, paired, python, script,
+                                                   peer_variant, threads](benchmark::State& state) {
         psf::Renderer renderer(rt, b->scene);
         renderer.render(render_options(*b, filter, opt.tail_paths));  // warm-up
         rt.finish();
-        std::vector<double> wall, device, trace, download, add;
+        std::vector<double> wall, device, trace, download, add, peer;
+        PeerRun first;  // the peer's first run, for its report
+        bool peer_failed = false;
         double mean = 0;
         size_t nonfinite = 0;
         for (auto _ : state) {
+          if (paired && !peer_failed) {  // the peer's render just before psf's
+            PeerRun m = run_peer(*b, python, script, peer_variant, threads, 1);
+            if (m.ok) {
+              peer.push_back(m.times[0]);
+              if (first.line.empty()) first = m;
+            } else {
+              peer_failed = true;
+              report("%s: Mitsuba 3 failed: %s; tried: %s\n", b->name.c_str(),
+                     m.line.empty() ? ("exit status " + std::to_string(m.status)).c_str()
+                                    : json_raw(m.line, "error").c_str(),
+                     json_raw(m.line, "tried").c_str());
+            }
+          }
           rt.reset_stats();
           psf::RenderResult r = renderer.render(render_options(*b, filter, opt.tail_paths));
           rt.finish();
@@ -326,11 +323,53 @@ int main(int argc, char** argv) {
                bname.c_str(), filter ? " and filtering" : "", bench::summarize(trace).median_s * 1e3,
                bench::summarize(download).median_s * 1e3, bench::summarize(add).median_s * 1e3);
         if (nonfinite) report("%s: %zu paths with NaN/Inf radiance\n", bname.c_str(), nonfinite);
+        std::vector<double> pair_ratios;  // psf / Mitsuba 3 per trial, each pair rendered back to back
+        if (paired && !peer_failed && peer.size() == wall.size()) {
+          const std::string& line = first.line;
+          int w = int(json_number(line, "width")), h = int(json_number(line, "height"));
+          const uint64_t peer_paths = uint64_t(w) * h * b->spp;
+          Timing m = bench::summarize(peer);
+          b->mitsuba_paths_per_s = peer_paths / m.median_s;
+          b->mitsuba_variant = json_raw(line, "variant");
+          for (size_t k = 0; k < wall.size(); ++k) pair_ratios.push_back((b->paths / wall[k]) / (peer_paths / peer[k]));
+          state.counters["mitsuba_Mpaths_per_s"] = b->mitsuba_paths_per_s * 1e-6;
+          state.counters["mitsuba_Mpaths_per_s_best"] = peer_paths / m.min_s * 1e-6;
+          std::string removed = json_raw(line, "removed_properties");
+          report("%s: Mitsuba %s %s, %s, %.0f threads: %dx%d %d spp: median %.1f ms, min %.1f ms, %.3f M paths/s "
+                 "(each trial a process of its own, before psf's: load %.2f s, warm-up render %.2f s, not timed); "
+                 "mean pixel %.4g%s%s%s\n",
+                 b->name.c_str(), json_raw(line, "mitsuba").c_str(), b->mitsuba_variant.c_str(),
+                 json_raw(line, "integrator").c_str(), json_number(line, "threads"), w, h, b->spp, m.median_s * 1e3,
+                 m.min_s * 1e3, b->mitsuba_paths_per_s * 1e-6, json_number(line, "load_s"),
+                 json_number(line, "warmup_s"), json_number(line, "mean"),
+                 removed == "[]" ? "" : "; loaded after removing the properties Mitsuba 3 rejects: ",
+                 removed == "[]" ? "" : removed.c_str(),
+                 json_raw(line, "tried") == "[]" || json_raw(line, "tried").empty()
+                     ? ""
+                     : ("; failed before: " + json_raw(line, "tried")).c_str());
+          if (w != b->scene.width || h != b->scene.height)
+            report("%s: WARNING: Mitsuba's film is %dx%d, psf's %dx%d: compared per path\n", b->name.c_str(), w, h,
+                   b->scene.width, b->scene.height);
+        }
         if (b->mitsuba_paths_per_s > 0) {
           double ratio = pps / b->mitsuba_paths_per_s;
           state.counters["ratio_psf_mitsuba"] = ratio;
-          report("%s: psf / Mitsuba 3 (%s) = %.3f / %.3f M paths/s = %.2f%s\n", bname.c_str(),
-                 b->mitsuba_variant.c_str(), pps * 1e-6, b->mitsuba_paths_per_s * 1e-6, ratio,
+          std::string pairs;
+          if (!pair_ratios.empty()) {
+            const double paired_median = bench::summarize(pair_ratios).median_s;
+            state.counters["ratio_paired_median"] = paired_median;
+            char buf[64];
+            for (double r : pair_ratios) {
+              std::snprintf(buf, sizeof buf, "%s%.2f", pairs.empty() ? "" : ", ", r);
+              pairs += buf;
+            }
+            std::snprintf(buf, sizeof buf, " (median %.2f)", paired_median);
+            pairs = "; trial by trial " + pairs + buf;
+            ratio = paired_median;  // the goal's figure: drift between the two runs cancels in each pair
+          }
+          report("%s: psf / Mitsuba 3 (%s) = %.3f / %.3f M paths/s = %.2f%s%s\n", bname.c_str(),
+                 b->mitsuba_variant.c_str(), pps * 1e-6, b->mitsuba_paths_per_s * 1e-6,
+                 pps / b->mitsuba_paths_per_s, pairs.c_str(),
                  filter ? "" : (ratio >= 1 ? " (goal >= 1: met)" : " (goal >= 1: NOT met)"));
         }
       })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
