@@ -247,7 +247,7 @@ BvhTriPack empty_pack() {
 class Collapser {
  public:
   // Writes a leaf's packs; returns the first and sets *count to their number.
-  using LeafFn = std::function<uint32_t(const BinaryNode&, uint32_t* count)>;
+  using LeafFn = std::function<uint32_t(const BinaryNode&)>;  // writes a leaf, returns its child reference
   Collapser(const std::vector<BinaryNode>& bin, std::vector<BvhNode>& out, LeafFn leaf)
       : bin_(bin), out_(out), leaf_(std::move(leaf)) {}
 
@@ -283,9 +283,7 @@ class Collapser {
       const BinaryNode& n = bin_[kids[s]];
       uint32_t child;
       if (n.count > 0) {
-        uint32_t packs = 0;
-        uint32_t first = leaf_(n, &packs);
-        child = PSF_LEAF_BIT | ((packs - 1u) << PSF_LEAF_COUNT_SHIFT) | first;
+        child = leaf_(n);
       } else {
         child = emit(kids[s], depth + 1);
       }
@@ -322,6 +320,12 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
               const std::vector<BvhSphere>& spheres, const BvhParams& params) {
   static_assert(PSF_BVH_WIDTH == 4 || PSF_BVH_WIDTH == 8, "PSF_BVH_WIDTH must be 4 or 8");
   auto t0 = std::chrono::steady_clock::now();
+  // A leaf's triangles and spheres fill packs of their own: at most
+  // max_leaf / PSF_BVH_WIDTH + 2 of them, which the reference's count must hold.
+  if (params.max_leaf / PSF_BVH_WIDTH + 2u > PSF_LEAF_COUNT_MASK + 1u)
+    throw std::invalid_argument("build_bvh: max_leaf " + std::to_string(params.max_leaf) +
+                                " exceeds the leaf encoding (" +
+                                std::to_string((PSF_LEAF_COUNT_MASK - 1u) * PSF_BVH_WIDTH) + ")");
   if (triangles.size() + spheres.size() > PSF_LEAF_FIRST_MASK)
     throw std::invalid_argument("build_bvh: " + std::to_string(triangles.size() + spheres.size()) +
                                 " primitives exceed the leaf encoding (2^27)");
@@ -374,7 +378,7 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
     const std::vector<uint32_t>& order = builder.index();
     // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, then its spheres in
     // packs of their own, appended in leaf order.
-    auto write_leaf = [&](const BinaryNode& leaf, uint32_t* count) {
+    auto write_leaf = [&](const BinaryNode& leaf) {
       uint32_t first = static_cast<uint32_t>(bvh.packs.size());
       uint32_t lanes = 0;
       for (uint32_t k = 0; k < leaf.count; ++k) {
@@ -399,6 +403,7 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
         p.inv_size[lane] = static_cast<float>(1.0 / std::sqrt(glm::length(n)));
         p.prim[lane] = t;
       }
+      const uint32_t triangle_packs = static_cast<uint32_t>(bvh.packs.size()) - first;
       lanes = 0;
       for (uint32_t k = 0; k < leaf.count; ++k) {
         uint32_t t = order[leaf.first + k];
@@ -413,8 +418,11 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
         p.e1_x[lane] = s.radius;
         p.prim[lane] = t | PSF_PRIM_SPHERE;
       }
-      *count = static_cast<uint32_t>(bvh.packs.size()) - first;
-      return first;
+      const uint32_t count = static_cast<uint32_t>(bvh.packs.size()) - first;
+      if (count - 1u > PSF_LEAF_COUNT_MASK)  // max_leaf is checked above: never
+        throw std::logic_error("build_bvh: a leaf of " + std::to_string(count) + " packs");
+      return PSF_LEAF_BIT | (count > triangle_packs ? PSF_LEAF_SPHERES : 0u) |
+             ((count - 1u) << PSF_LEAF_COUNT_SHIFT) | first;
     };
     Collapser collapser(builder.nodes(), bvh.nodes, write_leaf);
     collapser.emit(0, 1);

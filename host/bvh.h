@@ -50,11 +50,11 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
 Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uvec3>& triangles,
               const std::vector<BvhSphere>& spheres, const BvhParams& params = {});
 
-// Decodes a leaf child reference (PSF_LEAF_BIT set): first pack and number of packs.
+// Decodes a leaf child reference (PSF_LEAF_BIT set): first pack, number of packs,
+// and whether some of them hold spheres.
 inline uint32_t leaf_first(uint32_t child) { return child & PSF_LEAF_FIRST_MASK; }
-inline uint32_t leaf_count(uint32_t child) {
-  return ((child & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
-}
+inline uint32_t leaf_count(uint32_t child) { return ((child >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u; }
+inline bool leaf_spheres(uint32_t child) { return (child & PSF_LEAF_SPHERES) != 0u; }
 inline bool is_leaf(uint32_t child) { return child != PSF_EMPTY_CHILD && (child & PSF_LEAF_BIT); }
 
 // Sets PSF_PRIM_MASKED on the pack lanes of the primitives with masked[prim] set

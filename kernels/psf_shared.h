@@ -70,10 +70,14 @@ typedef cl_uint psf_uint;
 #define PSF_PRIM_SPHERE 0x40000000u
 #define PSF_EMPTY_CHILD 0xFFFFFFFFu
 /* A BVH child reference with this bit set is a leaf: bits 0..26 its first
- * triangle pack (BvhTriPack), bits 27..30 the number of packs minus one. */
+ * triangle pack (BvhTriPack), bits 27..29 the number of packs minus one, bit 30
+ * (PSF_LEAF_SPHERES) set when some of its packs hold spheres, so that the
+ * leaves of triangles alone never look at a pack's kind. */
 #define PSF_LEAF_BIT 0x80000000u
+#define PSF_LEAF_SPHERES 0x40000000u
 #define PSF_LEAF_MAX_TRIS 16u /* triangles in a leaf at most */
 #define PSF_LEAF_COUNT_SHIFT 27u
+#define PSF_LEAF_COUNT_MASK 0x7u /* packs minus one, after the shift: 8 packs at most */
 #define PSF_LEAF_FIRST_MASK 0x07FFFFFFu
 /* Deepest BVH (levels of wide nodes, root included) that host/bvh.cpp builds;
  * sizes the traversal stack of kernels/raycast.cl. */

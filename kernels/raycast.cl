@@ -403,14 +403,15 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
   return mask;
 }
 
-/* The closest hit among a leaf's packs [first, end), updating *hit. */
-BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, float3 org, float3 dir,
-                             float dir_len, float tmin, Hit* hit, const AlphaScene* as) {
+/* The closest hit among a leaf's packs [first, end), updating *hit; `spheres`:
+ * whether some of them hold spheres (PSF_LEAF_SPHERES). */
+BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, bool spheres, float3 org,
+                             float3 dir, float dir_len, float tmin, Hit* hit, const AlphaScene* as) {
   for (uint k = first; k < end; ++k) {
     __global const float* p = (__global const float*)(packs + k);
     bvh_floatw t, u, v;
     uint mask;
-    if (pack_is_spheres(p)) {
+    if (spheres && pack_is_spheres(p)) {
       mask = sphere_pack_test(p, org, dir, dir_len, tmin, hit->t, &t);
       u = v = (bvh_floatw)(0.0f);
     } else {
@@ -455,8 +456,8 @@ BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global c
   for (;;) {
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
-      uint end = first + ((ref & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
-      leaf_closest(packs, first, end, org, dir, dir_len, tmin, &hit, as);
+      uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
+      leaf_closest(packs, first, end, (ref & PSF_LEAF_SPHERES) != 0u, org, dir, dir_len, tmin, &hit, as);
     } else {
       __global const float* f = (__global const float*)(nodes + ref);
       bvh_floatw tn;
@@ -540,12 +541,13 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
     uint ref = stack_ref[--sp];
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
-      uint end = first + ((ref & ~PSF_LEAF_BIT) >> PSF_LEAF_COUNT_SHIFT) + 1u;
+      uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
+      const bool spheres = (ref & PSF_LEAF_SPHERES) != 0u;
       for (uint k = first; k < end; ++k) {
         __global const float* p = (__global const float*)(packs + k);
         bvh_floatw t, u, v;
         uint mask;
-        if (pack_is_spheres(p)) {
+        if (spheres && pack_is_spheres(p)) {
           mask = sphere_pack_test(p, org, dir, dir_len, tmin, hit.t, &t);
           u = v = (bvh_floatw)(0.0f);
         } else {

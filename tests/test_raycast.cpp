@@ -621,6 +621,7 @@ TEST_CASE("Raycast: BVH structure references every triangle once inside its boxe
             for (int v = 0; v < 3; ++v) CHECK(inside(m.positions[tri[v]]));
           }
         }
+        CHECK_FALSE(psf::leaf_spheres(c));
         CHECK(used <= PSF_LEAF_MAX_TRIS);
         CHECK(used > (count - 1) * PSF_BVH_WIDTH);  // no pack without a triangle
       } else {
@@ -677,6 +678,18 @@ TEST_CASE("Raycast: one leaf's worth of triangles gives a root with one leaf", "
   for (int s = 0; s < PSF_BVH_WIDTH; ++s) used += bvh.nodes[0].child[s] != PSF_EMPTY_CHILD;
   CHECK(used >= 1);
   check_scene(m, rays_in_box(8, 300, vec3(-0.5f), vec3(1.5f, 1.5f, 3.0f), 10.0f));
+}
+
+TEST_CASE("Raycast: a leaf size the child reference cannot count is refused", "[raycast]") {
+  // A leaf reference counts up to 8 packs; a leaf of max_leaf primitives, its
+  // triangles and spheres in packs of their own, takes up to max_leaf / W + 2.
+  Mesh m = random_soup(3, 200, 0.05f);
+  psf::BvhParams params;
+  params.max_leaf = 6 * PSF_BVH_WIDTH;
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, params);
+  CHECK(bvh.triangle_count == m.triangles.size());
+  params.max_leaf = 7 * PSF_BVH_WIDTH;
+  CHECK_THROWS_AS(psf::build_bvh(m.positions, m.triangles, params), std::invalid_argument);
 }
 
 namespace {
@@ -790,6 +803,25 @@ size_t check_mixed(const Mesh& m, const std::vector<psf::BvhSphere>& spheres, co
                    double min_exact = 0.99) {
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, spheres);
   CHECK(bvh.sphere_count == spheres.size());
+  // Each leaf says whether it holds spheres (PSF_LEAF_SPHERES), where the
+  // traversal looks at a pack's kind; its sphere packs follow its triangles'.
+  size_t sphere_leaves = 0;
+  for (const BvhNode& n : bvh.nodes)
+    for (uint32_t c : n.child) {
+      if (!psf::is_leaf(c)) continue;
+      const uint32_t first = psf::leaf_first(c), count = psf::leaf_count(c);
+      REQUIRE(first + count <= bvh.packs.size());
+      bool kinds_ordered = true, any_sphere = false;
+      for (uint32_t k = first; k < first + count; ++k) {
+        const bool sphere = (bvh.packs[k].prim[0] & PSF_PRIM_SPHERE) != 0u;
+        kinds_ordered &= sphere || !any_sphere;
+        any_sphere |= sphere;
+      }
+      CHECK(kinds_ordered);
+      CHECK(psf::leaf_spheres(c) == any_sphere);
+      sphere_leaves += any_sphere;
+    }
+  CHECK((sphere_leaves > 0) == !spheres.empty());
   std::vector<Hit> closest = cast(bvh, rays, false);
   std::vector<Hit> any = cast(bvh, rays, true);
   size_t exact = 0, sphere_hits = 0, failures = 0;
