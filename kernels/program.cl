@@ -23,6 +23,12 @@
 #define psf_prefetch_write(p) ((void)0)
 #endif
 
+/* PSF_CPU_DEVICE (set by the host for CPU devices): where a function is better
+ * out of line on a CPU and inlined on a GPU (raycast.cl's sphere test). */
+#ifndef PSF_CPU_DEVICE
+#define PSF_CPU_DEVICE 0
+#endif
+
 /* Forced inlining: raycast.cl's traversal (a call would keep the hit record in
  * memory), shade.cl's bounce, emitter.cl's light sample, filter.cl's queries.
  * PSF_NO_FORCE_INLINE (scripts/oclgrind) turns it off: inlining emits LLVM

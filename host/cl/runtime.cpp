@@ -223,6 +223,9 @@ Runtime::Runtime(const DeviceInfo& device, const std::string& extra_options) : d
   // Clang's builtin on CPU devices (PoCL), where OpenCL's prefetch() does nothing.
   if (device_.type == "CPU" && extra_options.find("PSF_PREFETCH") == std::string::npos)
     options += " -DPSF_PREFETCH=1";
+  // Code placement that differs by device kind (kernels/program.cl PSF_CPU_DEVICE).
+  if (device_.type == "CPU" && extra_options.find("PSF_CPU_DEVICE") == std::string::npos)
+    options += " -DPSF_CPU_DEVICE=1";
   if (!extra_options.empty()) options += " " + extra_options;
   auto t0 = std::chrono::steady_clock::now();
   program_ = cl::Program(context_, source);
