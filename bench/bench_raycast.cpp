@@ -1,6 +1,12 @@
 // bench_raycast: closest-hit ray casting throughput of kernels/raycast.cl on
-// incoherent diffuse rays, against Embree 3 (rtcIntersect1) on the same rays with
-// as many threads as the OpenCL device has compute units (every core when it is a GPU).
+// incoherent diffuse rays, against Embree 3 on the same rays with as many threads
+// as the OpenCL device has compute units (every core when it is a GPU), twice:
+// embree_raycast, one ray at a time (rtcIntersect1) through Embree's default
+// (medium-quality) BVH; embree16_raycast, Embree as Mitsuba 3.6.4's llvm_ad_rgb
+// runs it on an AVX-512 machine (`perf` of its renders: the spatial-split
+// builder, Embree's high quality, and the hybrid traversal of packets of 16):
+// RTC_BUILD_QUALITY_HIGH and rtcIntersect16 on 16 consecutive rays. The rays
+// are incoherent either way.
 //
 // Rays: 2^21 (--rays_log2) area-uniform points on the scene's triangles, offset
 // along the geometric normal by 1e-5 of the scene's bounding-box diagonal, with
@@ -13,8 +19,9 @@
 //
 // Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
 //                      [--trials=N]
-// Without --scene: scenes/cornell-box.xml of the source tree and Dabrovic Sponza
-// from $PSF_SHARED (else ../shared beside the source tree); absent ones are skipped.
+// Without --scene: scenes/cornell-box.xml of the source tree, Dabrovic Sponza and
+// Bitterli's living room from $PSF_SHARED (else ../shared beside the source tree);
+// absent ones are skipped.
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -67,6 +74,7 @@ struct Bench {
   std::vector<uint32_t> embree_prims;
   double embree_build_ms = 0;
   Timing embree;                     // wall time of one pass over all rays
+  Timing embree16;                   // the same, high-quality build and packets of 16
 };
 
 // Area-uniform surface points with cosine-distributed directions about the
@@ -122,12 +130,16 @@ std::vector<Ray> diffuse_rays(const std::vector<glm::vec3>& p, const std::vector
 struct Embree {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
+  bool packets = false;  // rtcIntersect16 instead of rtcIntersect1
 
-  Embree(const Bench& b) {
+  // packets16: Mitsuba 3's configuration (RTC_BUILD_QUALITY_HIGH, packets of 16).
+  Embree(const Bench& b, bool packets16) : packets(packets16) {
     device = rtcNewDevice(nullptr);
     auto t0 = std::chrono::steady_clock::now();
     scene = rtcNewScene(device);
+    if (packets16) rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    if (packets16) rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
     auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                           3 * sizeof(float), b.positions.size()));
     for (size_t i = 0; i < b.positions.size(); ++i)
@@ -173,6 +185,38 @@ struct Embree {
     }
   }
 
+  // The same in packets of 16 consecutive rays (the last one partly valid).
+  void trace16(const std::vector<Ray>& rays, size_t begin, size_t end, uint32_t* prims) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (size_t i0 = begin; i0 < end; i0 += 16) {
+      alignas(64) RTCRayHit16 rh;
+      alignas(64) int valid[16];
+      for (int k = 0; k < 16; ++k) {
+        const size_t i = std::min(i0 + k, end - 1);
+        const Ray& r = rays[i];
+        valid[k] = i0 + k < end ? -1 : 0;
+        rh.ray.org_x[k] = r.org.s[0];
+        rh.ray.org_y[k] = r.org.s[1];
+        rh.ray.org_z[k] = r.org.s[2];
+        rh.ray.tnear[k] = r.org.s[3];
+        rh.ray.dir_x[k] = r.dir.s[0];
+        rh.ray.dir_y[k] = r.dir.s[1];
+        rh.ray.dir_z[k] = r.dir.s[2];
+        rh.ray.tfar[k] = r.dir.s[3];
+        rh.ray.time[k] = 0.0f;
+        rh.ray.mask[k] = 0xFFFFFFFFu;
+        rh.ray.id[k] = 0;
+        rh.ray.flags[k] = 0;
+        rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
+      }
+      rtcIntersect16(valid, scene, &ctx, &rh);
+      for (int k = 0; k < 16 && i0 + k < end; ++k)
+        prims[i0 + k] = rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID ? PSF_NO_HIT : rh.hit.primID[k];
+    }
+  }
+
   // All rays on `threads` threads, each a contiguous chunk.
   void trace_all(const std::vector<Ray>& rays, unsigned threads, std::vector<uint32_t>& prims) const {
     prims.resize(rays.size());
@@ -180,7 +224,12 @@ struct Embree {
     size_t chunk = (rays.size() + threads - 1) / threads;
     for (unsigned t = 0; t < threads; ++t) {
       size_t begin = std::min(rays.size(), t * chunk), end = std::min(rays.size(), begin + chunk);
-      pool.emplace_back([&, begin, end] { trace(rays, begin, end, prims.data()); });
+      pool.emplace_back([&, begin, end] {
+        if (packets)
+          trace16(rays, begin, end, prims.data());
+        else
+          trace(rays, begin, end, prims.data());
+      });
     }
     for (auto& th : pool) th.join();
   }
@@ -189,10 +238,10 @@ struct Embree {
 };
 #endif
 
-std::string sponza_path() {
-  if (const char* env = std::getenv("PSF_SHARED"); env && *env)
-    return (fs::path(env) / "scenes/sponza-dabrovic/sponza.obj").string();
-  return (fs::path(PSF_SOURCE_DIR) / "../shared/scenes/sponza-dabrovic/sponza.obj").string();
+// A scene of the shared data: $PSF_SHARED, else ../shared beside the source tree.
+std::string shared_path(const char* relative) {
+  if (const char* env = std::getenv("PSF_SHARED"); env && *env) return (fs::path(env) / relative).string();
+  return (fs::path(PSF_SOURCE_DIR) / "../shared" / relative).string();
 }
 
 std::string scene_name(const std::string& path) {
@@ -236,7 +285,8 @@ int main(int argc, char** argv) {
   }
   if (opt.scenes.empty()) {
     opt.scenes.push_back((fs::path(PSF_SOURCE_DIR) / "scenes/cornell-box.xml").string());
-    opt.scenes.push_back(sponza_path());
+    opt.scenes.push_back(shared_path("scenes/sponza-dabrovic/sponza.obj"));
+    opt.scenes.push_back(shared_path("scenes/living-room/scene.xml"));
   }
 
   psf::DeviceInfo dev = psf::choose_device(std::getenv("PSF_DEVICE") ? std::getenv("PSF_DEVICE") : "");
@@ -286,28 +336,42 @@ int main(int argc, char** argv) {
   for (auto& bp : benches) {
     Bench* b = bp.get();
 #ifdef PSF_HAVE_EMBREE
-    // Embree first, so the psf benchmark can report the ratio and the agreement.
-    benchmark::RegisterBenchmark(("embree_raycast/" + b->name).c_str(), [b, threads, &opt](benchmark::State& state) {
-      Embree e(*b);
-      b->embree_build_ms = e.build_ms;
-      std::vector<double> wall;
-      e.trace_all(b->rays, threads, b->embree_prims);  // warm-up
-      for (auto _ : state) {
-        auto t0 = std::chrono::steady_clock::now();
-        e.trace_all(b->rays, threads, b->embree_prims);
-        double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        state.SetIterationTime(s);
-        wall.push_back(s);
-      }
-      b->embree = summarize(wall);
-      state.counters["Mrays_per_s"] = b->rays.size() / b->embree.median_s * 1e-6;
-      state.counters["Mrays_per_s_best"] = b->rays.size() / b->embree.min_s * 1e-6;
-      state.counters["build_ms"] = b->embree_build_ms;
-      state.counters["threads"] = threads;
-      report("%s: embree %u threads: build %.1f ms, %.2f Mrays/s (median %.1f ms, min %.1f ms)\n", b->name.c_str(),
-             threads, b->embree_build_ms, b->rays.size() / b->embree.median_s * 1e-6, b->embree.median_s * 1e3,
-             b->embree.min_s * 1e3);
-    })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
+    // Embree first, so the psf benchmark can report the ratios and the agreement.
+    for (bool packets : {false, true}) {
+      const std::string bench_name = std::string(packets ? "embree16_raycast/" : "embree_raycast/") + b->name;
+      benchmark::RegisterBenchmark(bench_name.c_str(), [b, threads, packets](benchmark::State& state) {
+        Embree e(*b, packets);
+        if (!packets) b->embree_build_ms = e.build_ms;
+        std::vector<uint32_t> packet_prims;
+        std::vector<uint32_t>& prims = packets ? packet_prims : b->embree_prims;
+        std::vector<double> wall;
+        e.trace_all(b->rays, threads, prims);  // warm-up
+        for (auto _ : state) {
+          auto t0 = std::chrono::steady_clock::now();
+          e.trace_all(b->rays, threads, prims);
+          double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          state.SetIterationTime(s);
+          wall.push_back(s);
+        }
+        Timing& t = packets ? b->embree16 : b->embree;
+        t = summarize(wall);
+        state.counters["Mrays_per_s"] = b->rays.size() / t.median_s * 1e-6;
+        state.counters["Mrays_per_s_best"] = b->rays.size() / t.min_s * 1e-6;
+        state.counters["build_ms"] = e.build_ms;
+        state.counters["threads"] = threads;
+        std::string agreement;
+        if (packets && b->embree_prims.size() == prims.size()) {
+          size_t agree = 0;
+          for (size_t i = 0; i < prims.size(); ++i) agree += prims[i] == b->embree_prims[i];
+          state.counters["agreement_embree1"] = double(agree) / prims.size();
+          agreement = "; hit triangles agree with rtcIntersect1's for " +
+                      std::to_string(100.0 * agree / prims.size()) + "% of rays";
+        }
+        report("%s: embree%s %u threads: build %.1f ms, %.2f Mrays/s (median %.1f ms, min %.1f ms)%s\n",
+               b->name.c_str(), packets ? " (high-quality build, packets of 16)" : "", threads, e.build_ms,
+               b->rays.size() / t.median_s * 1e-6, t.median_s * 1e3, t.min_s * 1e3, agreement.c_str());
+      })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
+    }
 #endif
     benchmark::RegisterBenchmark(("psf_raycast/" + b->name).c_str(), [b, &rt, &opt](benchmark::State& state) {
       psf::RayCaster caster(rt, b->bvh);
@@ -356,10 +420,13 @@ int main(int argc, char** argv) {
         for (uint32_t i = 0; i < n; ++i) agree += b->psf_hits[i].prim == b->embree_prims[i];
         double agreement = double(agree) / n;
         double ratio = mrays / (n / b->embree.median_s * 1e-6);
+        double ratio16 = b->embree16.median_s > 0 ? mrays / (n / b->embree16.median_s * 1e-6) : 0.0;
         state.counters["agreement"] = agreement;
         state.counters["ratio_psf_embree"] = ratio;
-        report("%s: psf/embree = %.2f; hit triangles agree for %.4f%% of rays%s\n", b->name.c_str(), ratio,
-               100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
+        if (ratio16 > 0) state.counters["ratio_psf_embree16"] = ratio16;
+        report("%s: psf/embree = %.2f, psf/embree (high-quality build, packets of 16) = %.2f; hit triangles agree for "
+               "%.4f%% of rays%s\n",
+               b->name.c_str(), ratio, ratio16, 100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
         if (agreement <= 0.999) state.SkipWithError("hit triangles agree with Embree for <= 99.9% of rays");
       }
 #endif
