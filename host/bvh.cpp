@@ -323,9 +323,10 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
   // A leaf's triangles and spheres fill packs of their own: at most
   // max_leaf / PSF_BVH_WIDTH + 2 of them, which the reference's count must hold.
   if (params.max_leaf / PSF_BVH_WIDTH + 2u > PSF_LEAF_COUNT_MASK + 1u)
-    throw std::invalid_argument("build_bvh: max_leaf " + std::to_string(params.max_leaf) +
-                                " exceeds the leaf encoding (" +
-                                std::to_string((PSF_LEAF_COUNT_MASK - 1u) * PSF_BVH_WIDTH) + ")");
+    throw std::invalid_argument("build_bvh: max_leaf " + std::to_string(params.max_leaf) + " may need " +
+                                std::to_string(params.max_leaf / PSF_BVH_WIDTH + 2u) +
+                                " packs in a leaf; its reference counts " +
+                                std::to_string(PSF_LEAF_COUNT_MASK + 1u));
   if (triangles.size() + spheres.size() > PSF_LEAF_FIRST_MASK)
     throw std::invalid_argument("build_bvh: " + std::to_string(triangles.size() + spheres.size()) +
                                 " primitives exceed the leaf encoding (2^27)");

@@ -25,6 +25,11 @@
  * lanes stay full until the run's end. The kernel draws its camera rays itself
  * (camera_rays8: camera.cl's rays from the same samples, eight paths in
  * vectors), so that no camera_rays pass writes rays and states for it to read.
+ * Where nothing after the trace reads the paths' states and filtering vertices
+ * (`direct`: a batch neither filtered nor kept, without AOVs or emission rays),
+ * a path's end writes its contribution instead, as accumulate.cl computes it
+ * (the radiance before its filtering vertex plus alpha * c), and no state or
+ * vertex: 16 bytes a path where there were 160, and no accumulate pass.
  *
  * The scene class (host/render.cpp lanes_materials_supported): no medium, null
  * boundary or camera medium (an analytic sphere's lanes take their frame from
@@ -149,6 +154,7 @@ typedef struct {
   float8 radiance_w;
   Vec8 vertex_radiance; /* PathState.vertex_radiance */
   float8 vertex_radiance_w;
+  Vec8 alpha; /* PathVertex.alpha: the throughput to the filtering vertex (0 before one) */
   Vec8 prev; /* PathState.prev_pos */
   float8 path_length;
   uint8 pixel, sample, depth, flags, path;
@@ -274,6 +280,7 @@ inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, con
   LANE_F(ln->radiance_w, l) = 0.0f;
   vec8_set(&ln->vertex_radiance, l, (float3)(0.0f));
   LANE_F(ln->vertex_radiance_w, l) = 0.0f;
+  vec8_set(&ln->alpha, l, (float3)(0.0f));
   vec8_set(&ln->prev, l, org);
   LANE_F(ln->path_length, l) = 0.0f;
   LANE_U(ln->pixel, l) = LANE_U(c->pixel, k);
@@ -286,9 +293,16 @@ inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, con
 
 /* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
  * light sample's contribution where its shadow ray was blocked), and the
- * empty filtering vertex of a path that met none (camera_rays' default). */
+ * empty filtering vertex of a path that met none (camera_rays' default); or,
+ * where `contrib` is not null (direct), its contribution as accumulate.cl's. */
 inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states,
-                        __global PathVertex* vertices) {
+                        __global PathVertex* vertices, __global float4* contrib) {
+  if (contrib) {
+    float3 c = vec8_get(ln->radiance, l);
+    if (LANE_U(ln->flags, l) & PSF_PATH_VERTEX) c += vec8_get(ln->alpha, l) * vec8_get(ln->vertex_radiance, l);
+    contrib[LANE_U(ln->path, l)] = (float4)(c, 1.0f);
+    return;
+  }
   PathState st;
   st.throughput = (float4)(vec8_get(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
   st.radiance = (float4)(vec8_get(ln->radiance, l), LANE_F(ln->radiance_w, l));
@@ -574,15 +588,17 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                           Camera camera, __global PathState* restrict states, __global PathVertex* restrict vertices,
                           __global const TriAttrib* restrict tri_attribs, __global const TextureInfo* restrict textures,
                           __global const half* restrict texels, Environment env,
-                          __global const float* restrict env_data, uint masked, uint count, uint per_item) {
+                          __global const float* restrict env_data, uint masked, uint count, uint per_item,
+                          uint direct, __global float4* restrict contrib_unfiltered) {
   const uint first = get_global_id(0) * per_item;
+  __global float4* contrib = direct ? contrib_unfiltered : 0;
   if (first >= count) return;
   const uint end = min(first + per_item, count);
   uint next = first;
   Lanes ln;
   {
     const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
-    ln.org = ln.dir = ln.beta = ln.radiance = ln.vertex_radiance = ln.prev = zero;
+    ln.org = ln.dir = ln.beta = ln.radiance = ln.vertex_radiance = ln.prev = ln.alpha = zero;
     ln.tmin = ln.tmax = ln.bsdf_pdf = ln.radiance_w = ln.vertex_radiance_w = ln.path_length = (float8)(0.0f);
     ln.pixel = ln.sample = ln.depth = ln.flags = ln.path = (uint8)(0u);
     ln.live = (int8)(0);
@@ -1012,7 +1028,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_I(visible, l) = h.prim != PSF_NO_HIT ? 0 : -1;
     }
     lanes_add_radiance(&ln, pending, visible, false);
-    for (uint l = 0u; l < PSF_LANES; ++l) {
+    ln.alpha = vec8_select(ln.alpha, ln.beta, new_vertex);
+    for (uint l = 0u; l < PSF_LANES && !contrib; ++l) {
       if (!LANE_I(new_vertex, l)) continue;
       PathVertex v;
       v.position = (float4)(vec8_get(pos, l), LANE_F(ln.path_length, l));
@@ -1038,7 +1055,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(ends, l)) continue;
-      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states, vertices);
+      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states, vertices, contrib);
       LANE_I(ln.live, l) = 0;
       if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
     }

@@ -1863,6 +1863,57 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   }
 }
 
+TEST_CASE("Render: the lanes' own contributions equal accumulate's from their states", "[emitter]") {
+  // Unfiltered, without tuples, AOVs or emission rays, trace_lanes writes each
+  // path's contribution itself (radiance before the filtering vertex plus
+  // alpha * c) and no state or vertex; keeping the last batch's tuples makes
+  // it store them for accumulate.cl instead. The two images must agree to the
+  // rounding of alpha * c. Scenes: area light (alpha 1 at a diffuse first hit),
+  // rough conductor spheres (filtering vertices behind glossy bounces, alpha < 1),
+  // an environment map, and with ../shared the living room.
+  auto& rt = psf::test::runtime();
+  std::vector<std::pair<std::string, psf::Scene>> scenes;
+  scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
+  scenes.emplace_back("sphere light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")));
+  scenes.emplace_back("envmap floor", envmap_floor());
+  if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
+    scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
+  else
+    WARN("the living room is left out (../shared not found, or PSF_TEST_SMALL)");
+  for (auto& [name, s] : scenes) {
+    INFO(name);
+    s.width = std::min(s.width, 64);
+    s.height = std::min(s.height, 48);
+    psf::Renderer r(rt, s);
+    psf::RenderOptions o;
+    o.spp = 4;
+    o.max_depth = s.max_depth;
+    o.filter.enabled = false;
+    o.lanes = 1;
+    rt.finish();
+    rt.reset_stats();
+    psf::RenderResult direct = r.render(o);
+    rt.finish();
+    CHECK(rt.stats().count("trace_lanes") == 1);
+    CHECK(rt.stats().count("accumulate") == 0);
+    o.keep_last_batch = true;
+    rt.reset_stats();
+    psf::RenderResult stored = r.render(o);
+    rt.finish();
+    CHECK(rt.stats().count("accumulate") == 1);
+    REQUIRE(direct.image.rgb.size() == stored.image.rgb.size());
+    double worst = 0.0, sum = 0.0;
+    for (size_t i = 0; i < direct.image.rgb.size(); ++i) {
+      const double a = direct.image.rgb[i], b = stored.image.rgb[i];
+      worst = std::max(worst, std::abs(a - b) / std::max(1e-3, std::abs(b)));
+      sum += b;
+    }
+    INFO("largest relative difference " << worst << ", image sum " << sum);
+    CHECK(sum > 0.0);
+    CHECK(worst <= 1e-5);
+  }
+}
+
 TEST_CASE("Render: on CPUs the lanes are the default but for principled and pplastic; GPUs keep the wavefront",
           "[emitter]") {
   // host/render.cpp: with RenderOptions' defaults a CPU device renders the
