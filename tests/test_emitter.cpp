@@ -1155,6 +1155,26 @@ TEST_CASE("Render: an orthographic camera images a square at the same size at an
   CHECK(pixel(near_image, 1, 1).x == 0.0);
 }
 
+using NamedScenes = std::vector<std::pair<std::string, psf::Scene>>;
+
+// Adds ../shared's living room, unless it is absent or PSF_TEST_SMALL is set.
+static void add_living_room(NamedScenes& scenes) {
+  if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
+    scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
+  else
+    WARN("the living room is left out (../shared not found, or PSF_TEST_SMALL)");
+}
+
+// Shrinks the film to at most 64x48 pixels; options for 4 spp at the scene's max depth.
+static psf::RenderOptions small_render(psf::Scene& s) {
+  s.width = std::min(s.width, 64);
+  s.height = std::min(s.height, 48);
+  psf::RenderOptions o;
+  o.spp = 4;
+  o.max_depth = s.max_depth;
+  return o;
+}
+
 // A diffuse floor (y = 0, albedo 0.5) seen from above under test_envmap(), 16x16.
 static psf::Scene envmap_floor() {
   psf::Scene s;
@@ -1872,22 +1892,15 @@ TEST_CASE("Render: the lanes' own contributions equal accumulate's from their st
   // rough conductor spheres (filtering vertices behind glossy bounces, alpha < 1),
   // an environment map, and with ../shared the living room.
   auto& rt = psf::test::runtime();
-  std::vector<std::pair<std::string, psf::Scene>> scenes;
+  NamedScenes scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("sphere light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")));
   scenes.emplace_back("envmap floor", envmap_floor());
-  if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
-    scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
-  else
-    WARN("the living room is left out (../shared not found, or PSF_TEST_SMALL)");
+  add_living_room(scenes);
   for (auto& [name, s] : scenes) {
     INFO(name);
-    s.width = std::min(s.width, 64);
-    s.height = std::min(s.height, 48);
+    psf::RenderOptions o = small_render(s);
     psf::Renderer r(rt, s);
-    psf::RenderOptions o;
-    o.spp = 4;
-    o.max_depth = s.max_depth;
     o.filter.enabled = false;
     o.lanes = 1;
     rt.finish();
@@ -1977,24 +1990,17 @@ TEST_CASE("Render: per-path kernels give the wavefront's image bit for bit", "[e
   // ../shared the living room (envmap, textures, alpha-masked leaves, glass, max
   // depth 65).
   auto& rt = psf::test::runtime();
-  std::vector<std::pair<std::string, psf::Scene>> scenes;
+  NamedScenes scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("envmap floor", envmap_floor());
   scenes.emplace_back("cornell-box, max depth 3", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.back().second.max_depth = 3;  // where the tail starts counting its bounces matters
   scenes.emplace_back("fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")));
-  if (auto shared = psf::test::shared_dir(); shared && !psf::test::small_sizes())
-    scenes.emplace_back("living room", psf::load_scene(*shared + "/scenes/living-room/scene.xml"));
-  else
-    WARN("the living room is left out (../shared not found, or PSF_TEST_SMALL)");
+  add_living_room(scenes);
   for (auto& [name, s] : scenes) {
     INFO(name);
-    s.width = std::min(s.width, 64);
-    s.height = std::min(s.height, 48);
+    psf::RenderOptions o = small_render(s);
     psf::Renderer r(rt, s);
-    psf::RenderOptions o;
-    o.spp = 4;
-    o.max_depth = s.max_depth;
     o.per_path = 0;
     o.tail_paths = 0;
     psf::RenderResult wave = r.render(o);
