@@ -246,8 +246,8 @@ BvhTriPack empty_pack() {
 // Collapses the binary BVH into wide nodes, depth first (a node before its children).
 class Collapser {
  public:
-  // Writes a leaf's packs; returns the first and sets *count to their number.
-  using LeafFn = std::function<uint32_t(const BinaryNode&)>;  // writes a leaf, returns its child reference
+  // Writes a leaf's packs; returns its child reference (PSF_LEAF_BIT set).
+  using LeafFn = std::function<uint32_t(const BinaryNode&)>;
   Collapser(const std::vector<BinaryNode>& bin, std::vector<BvhNode>& out, LeafFn leaf)
       : bin_(bin), out_(out), leaf_(std::move(leaf)) {}
 
