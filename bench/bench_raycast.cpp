@@ -11,6 +11,8 @@
 // Rays: 2^21 (--rays_log2) area-uniform points on the scene's triangles, offset
 // along the geometric normal by 1e-5 of the scene's bounding-box diagonal, with
 // cosine-distributed directions about that normal; tmin 0, tmax infinity; fixed seed.
+// After timing, a scalar host replica of the closest-hit traversal counts the
+// wide nodes, leaves and triangle packs each ray visits (traversal_stats).
 // Timing: one warm-up launch, then --trials launches; the device time of each
 // comes from its OpenCL profiling event (Runtime::stats), the wall time from a
 // steady clock around enqueue + finish. Reported: min and median of both, Mrays/s
@@ -251,6 +253,82 @@ std::string scene_name(const std::string& path) {
   return stem;
 }
 
+// Traversal statistics of psf's BVH (a scalar host replica of raycast.cl's
+// closest-hit traversal: the same slab and Moller-Trumbore tests, the same
+// near-first order and culling): wide nodes visited and triangle packs tested
+// per ray, for comparing BVH builds by the work a ray does rather than by time.
+struct TraversalStats {
+  double nodes = 0, packs = 0, leaves = 0;  // per ray
+  size_t agree = 0;                         // rays whose hit triangle equals `hits`'
+};
+
+TraversalStats traversal_stats(const psf::Bvh& bvh, const std::vector<Ray>& rays, const std::vector<Hit>& hits) {
+  TraversalStats st;
+  uint64_t nodes = 0, packs = 0, leaves = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Ray& r = rays[i];
+    const glm::vec3 o(r.org.s[0], r.org.s[1], r.org.s[2]), d(r.dir.s[0], r.dir.s[1], r.dir.s[2]);
+    glm::vec3 inv;
+    for (int k = 0; k < 3; ++k) inv[k] = 1.0f / (std::fabs(d[k]) < 1e-12f ? std::copysign(1e-12f, d[k]) : d[k]);
+    float tmin = r.org.s[3], tmax = r.dir.s[3];
+    uint32_t prim = PSF_NO_HIT;
+    std::vector<std::pair<float, uint32_t>> stack;
+    stack.push_back({tmin, 0u});
+    while (!stack.empty()) {
+      auto [tn, ref] = stack.back();
+      stack.pop_back();
+      if (tn > tmax) continue;
+      if (ref & PSF_LEAF_BIT) {
+        ++leaves;
+        const uint32_t first = psf::leaf_first(ref), count = psf::leaf_count(ref);
+        for (uint32_t k = first; k < first + count; ++k) {
+          ++packs;
+          const BvhTriPack& p = bvh.packs[k];
+          for (int l = 0; l < PSF_BVH_WIDTH; ++l) {
+            if (p.prim[l] == PSF_NO_HIT) continue;
+            glm::vec3 v0(p.v0_x[l], p.v0_y[l], p.v0_z[l]), e1(p.e1_x[l], p.e1_y[l], p.e1_z[l]),
+                e2(p.e2_x[l], p.e2_y[l], p.e2_z[l]);
+            glm::vec3 pv = glm::cross(d, e2);
+            float det = glm::dot(e1, pv);
+            if (det == 0.0f) continue;
+            float inv_det = 1.0f / det;
+            glm::vec3 s = o - v0;
+            float u = glm::dot(s, pv) * inv_det;
+            glm::vec3 q = glm::cross(s, e1);
+            float v = glm::dot(d, q) * inv_det, t = glm::dot(e2, q) * inv_det;
+            if (u >= -1e-6f && v >= -1e-6f && u + v <= 1.0f + 1e-6f && t > tmin && t < tmax) {
+              tmax = t;
+              prim = p.prim[l] & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE);
+            }
+          }
+        }
+        continue;
+      }
+      ++nodes;
+      const BvhNode& n = bvh.nodes[ref];
+      std::vector<std::pair<float, uint32_t>> hit;
+      for (int c = 0; c < PSF_BVH_WIDTH; ++c) {
+        if (n.child[c] == PSF_EMPTY_CHILD) continue;
+        float t0 = tmin, t1 = tmax;
+        const float lo[3] = {n.min_x[c], n.min_y[c], n.min_z[c]}, hi[3] = {n.max_x[c], n.max_y[c], n.max_z[c]};
+        for (int k = 0; k < 3; ++k) {
+          float a = (lo[k] - o[k]) * inv[k], b = (hi[k] - o[k]) * inv[k];
+          t0 = std::max(t0, std::min(a, b));
+          t1 = std::min(t1, std::max(a, b));
+        }
+        if (t0 <= t1 * 1.0000004f) hit.push_back({t0, n.child[c]});
+      }
+      std::sort(hit.begin(), hit.end(), [](auto& a, auto& b) { return a.first > b.first; });
+      for (auto& h : hit) stack.push_back(h);
+    }
+    st.agree += i < hits.size() && hits[i].prim == prim;
+  }
+  st.nodes = double(nodes) / rays.size();
+  st.packs = double(packs) / rays.size();
+  st.leaves = double(leaves) / rays.size();
+  return st;
+}
+
 void report(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 void report(const char* fmt, ...) {
   va_list ap;
@@ -324,8 +402,11 @@ int main(int argc, char** argv) {
     }
     b->bvh = psf::build_bvh(b->positions, b->triangles);
     b->rays = diffuse_rays(b->positions, b->triangles, num_rays, 1234567u);
-    report("%s: %zu triangles, BVH build %.1f ms, %zu nodes, depth %d, %u triangles left out\n", b->name.c_str(),
-           b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.depth, b->bvh.skipped);
+    report("%s: %zu triangles, BVH build %.1f ms, %zu nodes and %zu triangle packs (%.1f MiB), depth %d, %u triangles "
+           "left out\n",
+           b->name.c_str(), b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.packs.size(),
+           (b->bvh.nodes.size() * sizeof(BvhNode) + b->bvh.packs.size() * sizeof(BvhTriPack)) / 1048576.0,
+           b->bvh.depth, b->bvh.skipped);
     if (b->rays.empty()) {
       report("skipped %s: no surface to start rays from\n", path.c_str());
       continue;
@@ -414,6 +495,15 @@ int main(int argc, char** argv) {
              b->name.c_str(), PSF_BVH_WIDTH, opt.local, b->bvh.build_ms, mrays, dt.median_s * 1e3, dt.min_s * 1e3,
              wt.median_s * 1e3, wt.min_s * 1e3, 100.0 * hit / n);
       if (nan) state.SkipWithError("NaN in the hits");
+      {
+        TraversalStats ts = traversal_stats(b->bvh, b->rays, b->psf_hits);
+        state.counters["nodes_per_ray"] = ts.nodes;
+        state.counters["packs_per_ray"] = ts.packs;
+        state.counters["leaves_per_ray"] = ts.leaves;
+        report("%s: per ray %.2f wide nodes, %.2f leaves, %.2f packs tested (host replica; its hits equal the "
+               "kernel's for %.3f%% of rays)\n",
+               b->name.c_str(), ts.nodes, ts.leaves, ts.packs, 100.0 * ts.agree / n);
+      }
 #ifdef PSF_HAVE_EMBREE
       if (b->embree_prims.size() == n) {
         size_t agree = 0;
