@@ -254,8 +254,9 @@ std::string scene_name(const std::string& path) {
 }
 
 // Traversal statistics of psf's BVH (a scalar host replica of raycast.cl's
-// closest-hit traversal: the same slab and Moller-Trumbore tests, the same
-// near-first order and culling): wide nodes visited and triangle packs tested
+// closest-hit traversal: its slab test and near-first order and culling, and
+// Moller-Trumbore with a fixed 1e-6 tolerance where the kernel's grows with
+// distance): wide nodes visited and triangle packs tested
 // per ray, for comparing BVH builds by the work a ray does rather than by time.
 struct TraversalStats {
   double nodes = 0, packs = 0, leaves = 0;  // per ray
@@ -272,7 +273,8 @@ TraversalStats traversal_stats(const psf::Bvh& bvh, const std::vector<Ray>& rays
     for (int k = 0; k < 3; ++k) inv[k] = 1.0f / (std::fabs(d[k]) < 1e-12f ? std::copysign(1e-12f, d[k]) : d[k]);
     float tmin = r.org.s[3], tmax = r.dir.s[3];
     uint32_t prim = PSF_NO_HIT;
-    std::vector<std::pair<float, uint32_t>> stack;
+    std::vector<std::pair<float, uint32_t>> stack;  // (entry distance, child reference)
+    std::vector<std::pair<float, uint32_t>> hit;    // a node's children hit, reused
     stack.push_back({tmin, 0u});
     while (!stack.empty()) {
       auto [tn, ref] = stack.back();
@@ -306,7 +308,7 @@ TraversalStats traversal_stats(const psf::Bvh& bvh, const std::vector<Ray>& rays
       }
       ++nodes;
       const BvhNode& n = bvh.nodes[ref];
-      std::vector<std::pair<float, uint32_t>> hit;
+      hit.clear();
       for (int c = 0; c < PSF_BVH_WIDTH; ++c) {
         if (n.child[c] == PSF_EMPTY_CHILD) continue;
         float t0 = tmin, t1 = tmax;
