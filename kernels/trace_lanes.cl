@@ -346,23 +346,44 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
   const uint8 key = psf_hash_combine8((uint8)(seed_hash), ln->pixel);
   const uint8 dim = (uint8)(dim0) + (uint8)(PSF_DIMS_PER_BOUNCE)*ln->depth;
   const int8 table = dim <= (uint8)(PSF_SOBOL_DIMS - 8u);
-  uint8 rows[PSF_LANES];
   uint any_bits = 0u;
-  for (uint l = 0u; l < PSF_LANES; ++l) {
-    rows[l] = (uint8)(0u);
+  for (uint l = 0u; l < PSF_LANES; ++l)
     if (LANE_I(active, l) && LANE_I(table, l)) any_bits |= LANE_U(ln->sample, l);
-  }
   const uint bits = 32u - clz(any_bits);
-  for (uint b = 0u; b < bits; ++b)
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      const uint d = LANE_I(table, l) ? LANE_U(dim, l) : 0u;
-      const uint select_row = 0u - ((LANE_U(ln->sample, l) >> b) & 1u);
-      rows[l] ^= vload8(0, sobol + b * PSF_SOBOL_DIMS + d) & (uint8)(select_row);
-    }
-  __private const uint* r = (__private const uint*)rows;
+  uint8 rows[PSF_LANES];
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    __global const uint* m = sobol + (LANE_I(table, l) ? LANE_U(dim, l) : 0u);
+    const uint sample = LANE_U(ln->sample, l);
+    uint8 row = (uint8)(0u);
+    for (uint b = 0u; b < bits; ++b)
+      row ^= vload8(0, m + b * PSF_SOBOL_DIMS) & (uint8)(0u - ((sample >> b) & 1u));
+    rows[l] = row;
+  }
+  /* The transpose, a vector per dimension, in three rounds of shuffles. */
+#if PSF_DIMS_PER_BOUNCE != 7
+#error "lanes_samples transposes seven dimensions"
+#endif
+  const uint8 lo = (uint8)(0, 8, 1, 9, 2, 10, 3, 11), hi = (uint8)(4, 12, 5, 13, 6, 14, 7, 15);
+  const uint8 p01e = shuffle2(rows[0], rows[1], lo), p01h = shuffle2(rows[0], rows[1], hi);
+  const uint8 p23e = shuffle2(rows[2], rows[3], lo), p23h = shuffle2(rows[2], rows[3], hi);
+  const uint8 p45e = shuffle2(rows[4], rows[5], lo), p45h = shuffle2(rows[4], rows[5], hi);
+  const uint8 p67e = shuffle2(rows[6], rows[7], lo), p67h = shuffle2(rows[6], rows[7], hi);
+  const uint8 q_a = (uint8)(0, 1, 8, 9, 2, 3, 10, 11), q_b = (uint8)(4, 5, 12, 13, 6, 7, 14, 15);
+  const uint8 q0 = shuffle2(p01e, p23e, q_a), q1 = shuffle2(p01e, p23e, q_b);
+  const uint8 q2 = shuffle2(p01h, p23h, q_a), q3 = shuffle2(p01h, p23h, q_b);
+  const uint8 q4 = shuffle2(p45e, p67e, q_a), q5 = shuffle2(p45e, p67e, q_b);
+  const uint8 q6 = shuffle2(p45h, p67h, q_a), q7 = shuffle2(p45h, p67h, q_b);
+  const uint8 c_a = (uint8)(0, 1, 2, 3, 8, 9, 10, 11), c_b = (uint8)(4, 5, 6, 7, 12, 13, 14, 15);
+  uint8 cols[PSF_DIMS_PER_BOUNCE];
+  cols[0] = shuffle2(q0, q4, c_a);
+  cols[1] = shuffle2(q0, q4, c_b);
+  cols[2] = shuffle2(q1, q5, c_a);
+  cols[3] = shuffle2(q1, q5, c_b);
+  cols[4] = shuffle2(q2, q6, c_a);
+  cols[5] = shuffle2(q2, q6, c_b);
+  cols[6] = shuffle2(q3, q7, c_a);
   for (uint o = 0u; o < PSF_DIMS_PER_BOUNCE; ++o) {
-    const uint8 x = (uint8)(r[o], r[8 + o], r[16 + o], r[24 + o], r[32 + o], r[40 + o], r[48 + o], r[56 + o]);
-    const uint8 v = nested_uniform_scramble8(x, psf_hash_combine8(key, dim + o));
+    const uint8 v = nested_uniform_scramble8(cols[o], psf_hash_combine8(key, dim + o));
     u[o] = convert_float8(v >> 8) * (1.0f / 16777216.0f);
   }
   if (all(table | ~active)) return;
