@@ -13,6 +13,10 @@
 // cosine-distributed directions about that normal; tmin 0, tmax infinity; fixed seed.
 // After timing, a scalar host replica of the closest-hit traversal counts the
 // wide nodes, leaves and triangle packs each ray visits (traversal_stats).
+// Before timing, each scene's line gives its BVH's surface area heuristic in the
+// terms of Embree's build statistics (sah_cost), which --embree_config=verbose=3
+// makes Embree print for its own BVHs ("getAABBNodes" and "leaves": a leaf's
+// blocks hold up to 4 triangles, psf's packs PSF_BVH_WIDTH).
 // Timing: one warm-up launch, then --trials launches; the device time of each
 // comes from its OpenCL profiling event (Runtime::stats), the wall time from a
 // steady clock around enqueue + finish. Reported: min and median of both, Mrays/s
@@ -20,7 +24,7 @@
 // with Embree's.
 //
 // Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
-//                      [--trials=N]
+//                      [--trials=N] [--embree_config=STRING]
 // Without --scene: scenes/cornell-box.xml of the source tree, Dabrovic Sponza and
 // Bitterli's living room from $PSF_SHARED (else ../shared beside the source tree);
 // absent ones are skipped.
@@ -59,6 +63,7 @@ struct Options {
   size_t local = 64;                // work-group size of the launches
   int rays_log2 = 21;               // 2^rays_log2 rays per scene
   int trials = 7;                   // timed launches per scene
+  std::string embree_config;        // rtcNewDevice's configuration string ("verbose=3": its BVH statistics)
 };
 
 using bench::summarize;
@@ -135,8 +140,8 @@ struct Embree {
   bool packets = false;  // rtcIntersect16 instead of rtcIntersect1
 
   // packets16: Mitsuba 3's configuration (RTC_BUILD_QUALITY_HIGH, packets of 16).
-  Embree(const Bench& b, bool packets16) : packets(packets16) {
-    device = rtcNewDevice(nullptr);
+  Embree(const Bench& b, bool packets16, const std::string& config) : packets(packets16) {
+    device = rtcNewDevice(config.empty() ? nullptr : config.c_str());
     auto t0 = std::chrono::steady_clock::now();
     scene = rtcNewScene(device);
     if (packets16) rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
@@ -331,6 +336,53 @@ TraversalStats traversal_stats(const psf::Bvh& bvh, const std::vector<Ray>& rays
   return st;
 }
 
+// The BVH's surface area heuristic as Embree's statistics state it (its verbose
+// build output): for a random line through the root's box, the expected number
+// of wide nodes tested (each node's box area over the root's, the root 1) and of
+// packs tested (each leaf's area times its packs), and of triangles in them.
+struct SahCost {
+  double nodes = 0, packs = 0, triangles = 0;
+};
+
+SahCost sah_cost(const psf::Bvh& bvh) {
+  auto half_area = [](const BvhNode& n, int c) {
+    const float dx = n.max_x[c] - n.min_x[c], dy = n.max_y[c] - n.min_y[c], dz = n.max_z[c] - n.min_z[c];
+    return double(dx) * dy + double(dy) * dz + double(dz) * dx;
+  };
+  SahCost cost;
+  const BvhNode& root = bvh.nodes[0];
+  BvhNode box{};  // the root's bounds, as a one-child node
+  box.min_x[0] = box.min_y[0] = box.min_z[0] = std::numeric_limits<float>::infinity();
+  box.max_x[0] = box.max_y[0] = box.max_z[0] = -std::numeric_limits<float>::infinity();
+  for (int c = 0; c < PSF_BVH_WIDTH; ++c) {
+    if (root.child[c] == PSF_EMPTY_CHILD) continue;
+    box.min_x[0] = std::min(box.min_x[0], root.min_x[c]);
+    box.min_y[0] = std::min(box.min_y[0], root.min_y[c]);
+    box.min_z[0] = std::min(box.min_z[0], root.min_z[c]);
+    box.max_x[0] = std::max(box.max_x[0], root.max_x[c]);
+    box.max_y[0] = std::max(box.max_y[0], root.max_y[c]);
+    box.max_z[0] = std::max(box.max_z[0], root.max_z[c]);
+  }
+  const double root_area = half_area(box, 0);
+  if (!(root_area > 0.0)) return cost;
+  cost.nodes = 1.0;
+  for (const BvhNode& n : bvh.nodes)
+    for (int c = 0; c < PSF_BVH_WIDTH; ++c) {
+      const uint32_t child = n.child[c];
+      if (child == PSF_EMPTY_CHILD) continue;
+      const double p = half_area(n, c) / root_area;
+      if (!psf::is_leaf(child)) {
+        cost.nodes += p;
+        continue;
+      }
+      const uint32_t first = psf::leaf_first(child), count = psf::leaf_count(child);
+      cost.packs += p * count;
+      for (uint32_t k = first; k < first + count; ++k)
+        for (int l = 0; l < PSF_BVH_WIDTH; ++l) cost.triangles += p * (bvh.packs[k].prim[l] != PSF_NO_HIT);
+    }
+  return cost;
+}
+
 void report(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 void report(const char* fmt, ...) {
   va_list ap;
@@ -358,6 +410,8 @@ int main(int argc, char** argv) {
       opt.rays_log2 = bench::number<int>("bench_raycast", "rays_log2", v);
     } else if (const char* v = value("--trials=")) {
       opt.trials = std::max(1, bench::number<int>("bench_raycast", "trials", v));
+    } else if (const char* v = value("--embree_config=")) {
+      opt.embree_config = v;
     } else {
       std::fprintf(stderr, "bench_raycast: unknown argument '%s'\n", a.c_str());
       return 2;
@@ -409,6 +463,10 @@ int main(int argc, char** argv) {
            b->name.c_str(), b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.packs.size(),
            (b->bvh.nodes.size() * sizeof(BvhNode) + b->bvh.packs.size() * sizeof(BvhTriPack)) / 1048576.0,
            b->bvh.depth, b->bvh.skipped);
+    const SahCost sah = sah_cost(b->bvh);
+    report("%s: SAH of a random line through the root's box (Embree's statistics): %.2f nodes, %.2f packs, %.1f "
+           "triangles\n",
+           b->name.c_str(), sah.nodes, sah.packs, sah.triangles);
     if (b->rays.empty()) {
       report("skipped %s: no surface to start rays from\n", path.c_str());
       continue;
@@ -422,8 +480,8 @@ int main(int argc, char** argv) {
     // Embree first, so the psf benchmark can report the ratios and the agreement.
     for (bool packets : {false, true}) {
       const std::string bench_name = std::string(packets ? "embree16_raycast/" : "embree_raycast/") + b->name;
-      benchmark::RegisterBenchmark(bench_name.c_str(), [b, threads, packets](benchmark::State& state) {
-        Embree e(*b, packets);
+      benchmark::RegisterBenchmark(bench_name.c_str(), [b, threads, packets, &opt](benchmark::State& state) {
+        Embree e(*b, packets, opt.embree_config);
         if (!packets) b->embree_build_ms = e.build_ms;
         std::vector<uint32_t> packet_prims;
         std::vector<uint32_t>& prims = packets ? packet_prims : b->embree_prims;
