@@ -19,9 +19,10 @@
  *   an edge or of zero thickness are not missed.
  * - Traversal: depth first with a private stack of child references and their
  *   entry distances. For the closest hit: one child hit, descend into it; two,
- *   push the farther; more, push all sorted far to near (insertion sort) and
- *   descend into the nearest. Popped entries farther than the closest hit so far
- *   are dropped. The any-hit traversal stops at the first hit.
+ *   push the farther; more, push all sorted far to near (three or four by a
+ *   sorting network of selects, more by insertion) and descend into the
+ *   nearest. Popped entries farther than the closest hit so far are dropped.
+ *   The any-hit traversal stops at the first hit.
  * - Ray/triangle: Moller & Trumbore, "Fast, minimum storage ray/triangle
  *   intersection", JGT 1997, without back-face culling, on the PSF_BVH_WIDTH
  *   triangles of a pack at once. Its barycentrics carry an error of a few ulps
@@ -93,6 +94,19 @@ typedef int4 bvh_intw;
  * can reach them, see slab_ray). */
 #define BVH_MAX(a, b) select((b), (a), (a) > (b))
 #define BVH_MIN(a, b) select((b), (a), (a) < (b))
+
+/* Compare and swap of two (distance, reference) pairs so that the first holds
+ * the farther: selects, not branches. */
+#define BVH_SORT2(da, ca, db, cb) \
+  do {                            \
+    const bool sw_ = (da) < (db); \
+    const float dt_ = (da);       \
+    const uint ct_ = (ca);        \
+    (da) = sw_ ? (db) : (da);     \
+    (ca) = sw_ ? (cb) : (ca);     \
+    (db) = sw_ ? dt_ : (db);      \
+    (cb) = sw_ ? ct_ : (cb);      \
+  } while (0)
 
 inline float bvh_hmin4(float4 x) {
   float2 m = BVH_MIN(x.lo, x.hi);
@@ -491,8 +505,39 @@ BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global c
           ref = swap ? c1 : c0;
           continue;
         }
-        /* More: push all so that the stack stays sorted far to near (insertion
-         * sort of the few entries), then continue with the nearest. */
+        const uint k2 = bvh_first_lane(mask);
+        mask &= mask - 1u;
+        if ((mask & (mask - 1u)) == 0u) {
+          /* Three or four: a sorting network far to near (Knuth, TAOCP vol. 3,
+           * Sec. 5.3.4: five comparators for four, the fourth at -infinity when
+           * there are three) of selects, where an insertion sort's loop exits
+           * were mispredicted; push all but the nearest and descend into it. */
+          float d2 = tnear[k2], d3 = -INFINITY;
+          uint c2 = child[k2], c3 = 0u;
+          const bool four = mask != 0u;
+          if (four) {
+            const uint k3 = bvh_first_lane(mask);
+            d3 = tnear[k3];
+            c3 = child[k3];
+          }
+          BVH_SORT2(d0, c0, d1, c1);
+          BVH_SORT2(d2, c2, d3, c3);
+          BVH_SORT2(d0, c0, d2, c2);
+          BVH_SORT2(d1, c1, d3, c3);
+          BVH_SORT2(d1, c1, d2, c2);
+          stack_ref[sp] = c0;
+          stack_t[sp] = d0;
+          stack_ref[sp + 1] = c1;
+          stack_t[sp + 1] = d1;
+          stack_ref[sp + 2] = c2; /* the nearest of three: above the stack's top, not pushed */
+          stack_t[sp + 2] = d2;
+          sp += four ? 3 : 2;
+          ref = four ? c3 : c2;
+          continue;
+        }
+        mask |= 1u << k2;
+        /* Five or more: push all so that the stack stays sorted far to near
+         * (insertion sort of the few entries), then continue with the nearest. */
         int base = sp;
         stack_ref[sp] = c0;
         stack_t[sp] = d0;
