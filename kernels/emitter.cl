@@ -60,6 +60,17 @@ typedef struct {
  * living room's time on PoCL). */
 inline uint sample_cdf_guided(__global const float* cdf, uint n, __global const float* guide, float u) {
   uint i = as_uint(guide[min((uint)(u * (float)n), n - 1u)]);
+#if PSF_CPU_DEVICE
+  /* On CPUs eight entries at a time: those at or below u are a prefix of the
+   * window (the cdf does not decrease), counted without a branch per entry,
+   * whose data-dependent loop exit a processor mispredicts. */
+  while (i + 8u <= n - 1u) {
+    const int8 below = vload8(0, cdf + i) <= (float8)(u);
+    const uint k = (uint)popcount(as_ulong(convert_uchar8(below) & (uchar8)(1)));
+    i += k;
+    if (k < 8u) return i;
+  }
+#endif
   while (i < n - 1u && cdf[i] <= u) ++i;
   return i;
 }
