@@ -21,7 +21,11 @@
 // comes from its OpenCL profiling event (Runtime::stats), the wall time from a
 // steady clock around enqueue + finish. Reported: min and median of both, Mrays/s
 // of the median device time, and after timing the agreement of the hit triangles
-// with Embree's.
+// with Embree's. The ratios to Embree come twice: of the medians of each
+// benchmark's own trials, and paired: each psf trial runs right after one pass
+// of each Embree configuration (their scenes kept from their benchmarks), and
+// the median of the trials' ratios is reported with their range, so that the
+// machine's drift between benchmarks does not enter the ratio.
 //
 // Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
 //                      [--trials=N] [--embree_config=STRING]
@@ -69,6 +73,8 @@ struct Options {
 using bench::summarize;
 using bench::Timing;
 
+struct Embree;
+
 // A scene prepared for the benchmark: geometry, BVH and rays, and the results.
 struct Bench {
   std::string name;                  // short name for the benchmark
@@ -82,6 +88,7 @@ struct Bench {
   double embree_build_ms = 0;
   Timing embree;                     // wall time of one pass over all rays
   Timing embree16;                   // the same, high-quality build and packets of 16
+  std::shared_ptr<Embree> embree1_scene, embree16_scene;  // kept for psf's paired trials
 };
 
 // Area-uniform surface points with cosine-distributed directions about the
@@ -481,7 +488,9 @@ int main(int argc, char** argv) {
     for (bool packets : {false, true}) {
       const std::string bench_name = std::string(packets ? "embree16_raycast/" : "embree_raycast/") + b->name;
       benchmark::RegisterBenchmark(bench_name.c_str(), [b, threads, packets, &opt](benchmark::State& state) {
-        Embree e(*b, packets, opt.embree_config);
+        auto scene = std::make_shared<Embree>(*b, packets, opt.embree_config);
+        (packets ? b->embree16_scene : b->embree1_scene) = scene;
+        const Embree& e = *scene;
         if (!packets) b->embree_build_ms = e.build_ms;
         std::vector<uint32_t> packet_prims;
         std::vector<uint32_t>& prims = packets ? packet_prims : b->embree_prims;
@@ -514,7 +523,7 @@ int main(int argc, char** argv) {
       })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
     }
 #endif
-    benchmark::RegisterBenchmark(("psf_raycast/" + b->name).c_str(), [b, &rt, &opt](benchmark::State& state) {
+    benchmark::RegisterBenchmark(("psf_raycast/" + b->name).c_str(), [b, &rt, &opt, threads](benchmark::State& state) {
       psf::RayCaster caster(rt, b->bvh);
       caster.local_size = opt.local;
       const uint32_t n = static_cast<uint32_t>(b->rays.size());
@@ -522,8 +531,24 @@ int main(int argc, char** argv) {
       cl::Buffer hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
       caster.closest(rays, hits, n);  // warm-up: first launch with this local size
       rt.finish();
-      std::vector<double> device, wall;
+      std::vector<double> device, wall, paired1, paired16;
       for (auto _ : state) {
+#ifdef PSF_HAVE_EMBREE
+        // Each trial right after a pass of each Embree configuration, so that
+        // the machine's drift falls on both sides of a trial's ratios.
+        double e1 = 0.0, e16 = 0.0;
+        {
+          std::vector<uint32_t> scratch;
+          auto timed = [&](const std::shared_ptr<Embree>& e) {
+            if (!e) return 0.0;
+            auto s0 = std::chrono::steady_clock::now();
+            e->trace_all(b->rays, threads, scratch);
+            return std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+          };
+          e1 = timed(b->embree1_scene);
+          e16 = timed(b->embree16_scene);
+        }
+#endif
         rt.reset_stats();
         auto t0 = std::chrono::steady_clock::now();
         caster.closest(rays, hits, n);
@@ -533,6 +558,10 @@ int main(int argc, char** argv) {
         state.SetIterationTime(d);
         device.push_back(d);
         wall.push_back(w);
+#ifdef PSF_HAVE_EMBREE
+        if (e1 > 0.0) paired1.push_back(e1 / d);
+        if (e16 > 0.0) paired16.push_back(e16 / d);
+#endif
       }
       Timing dt = summarize(device), wt = summarize(wall);
       // Check the output after timing: NaN-free, and against Embree where present.
@@ -577,6 +606,23 @@ int main(int argc, char** argv) {
         report("%s: psf/embree = %.2f, psf/embree (high-quality build, packets of 16) = %.2f; hit triangles agree for "
                "%.4f%% of rays%s\n",
                b->name.c_str(), ratio, ratio16, 100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
+        auto paired = [](std::vector<double> r) {
+          std::sort(r.begin(), r.end());
+          return r.empty() ? 0.0 : r.size() % 2 ? r[r.size() / 2] : 0.5 * (r[r.size() / 2 - 1] + r[r.size() / 2]);
+        };
+        auto range = [](const std::vector<double>& r) {
+          if (r.empty()) return std::string("-");
+          auto [lo, hi] = std::minmax_element(r.begin(), r.end());
+          char text[32];
+          std::snprintf(text, sizeof text, "%.2f-%.2f", *lo, *hi);
+          return std::string(text);
+        };
+        const double p1 = paired(paired1), p16 = paired(paired16);
+        state.counters["ratio_paired_embree"] = p1;
+        if (p16 > 0) state.counters["ratio_paired_embree16"] = p16;
+        report("%s: paired trials (each psf launch right after a pass of each Embree): psf/embree median %.2f (%s), "
+               "psf/embree (high-quality build, packets of 16) median %.2f (%s)\n",
+               b->name.c_str(), p1, range(paired1).c_str(), p16, range(paired16).c_str());
         if (agreement <= 0.999) state.SkipWithError("hit triangles agree with Embree for <= 99.9% of rays");
       }
 #endif
