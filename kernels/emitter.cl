@@ -66,7 +66,7 @@ inline uint sample_cdf_guided(__global const float* cdf, uint n, __global const 
    * whose data-dependent loop exit a processor mispredicts. */
   while (i + 8u <= n - 1u) {
     const int8 below = vload8(0, cdf + i) <= (float8)(u);
-    const uint k = (uint)popcount(as_ulong(convert_uchar8(below) & (uchar8)(1)));
+    const uint k = popcount(psf_lanes8(below));
     i += k;
     if (k < 8u) return i;
   }
@@ -251,8 +251,7 @@ inline float3 env_sample_cell(Environment env, __global const float* data, float
 #endif
   const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   int16 below = (vload16(0, fine) <= (float16)(ub)) & (lane < (int16)((int)last));
-  ulong2 bits = as_ulong2(convert_uchar16(below) & (uchar16)(1));
-  uint k = (uint)(popcount(bits.x) + popcount(bits.y));
+  uint k = popcount(psf_lanes8(below.lo)) + popcount(psf_lanes8(below.hi));
   float texel_lo = k > 0u ? fine[k - 1u] : 0.0f, texel_p = fine[k] - texel_lo;
   uint x = b * PSF_ENV_BLOCK + k;
   float col_p = block_p * texel_p;

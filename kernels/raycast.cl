@@ -114,16 +114,10 @@ inline float bvh_hmin4(float4 x) {
 }
 /* Bit k set where lane k of a comparison result is true. */
 inline uint bvh_lane_mask(bvh_intw c) {
-#if PSF_BVH_WIDTH == 8 && defined(__AVX__)
-  /* The lanes' sign bits in one instruction (vmovmskps) where the target has
-   * AVX (PoCL on x86): bench_raycast's paired ratios to Embree 5 % higher in
-   * Sponza and the living room than with the multiplication below. */
-  return (uint)__builtin_ia32_movmskps256(as_float8(c));
-#elif PSF_BVH_WIDTH == 8
-  /* One byte per lane (0 or 1), gathered into the top byte by a multiplication. */
-  ulong bytes = as_ulong(convert_uchar8(c) & (uchar8)(1));
-  return (uint)((bytes * 0x0102040810204080ul) >> 56);
+#if PSF_BVH_WIDTH == 8
+  return psf_lanes8(c); /* program.cl */
 #else
+  /* One byte per lane (0 or 1), gathered into the top byte by a multiplication. */
   uint bytes = as_uint(convert_uchar4(c) & (uchar4)(1));
   return (bytes * 0x01020408u) >> 24;
 #endif
