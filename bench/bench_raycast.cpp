@@ -1,5 +1,5 @@
 // bench_raycast: closest-hit ray casting throughput of kernels/raycast.cl on
-// incoherent diffuse rays, against Embree 3 on the same rays with as many threads
+// incoherent diffuse rays (and any-hit on shadow rays, psf_any), against Embree 3 on the same rays with as many threads
 // as the OpenCL device has compute units (every core when it is a GPU), twice:
 // embree_raycast, one ray at a time (rtcIntersect1) through Embree's default
 // (medium-quality) BVH; embree16_raycast, Embree as Mitsuba 3.6.4's llvm_ad_rgb
@@ -26,6 +26,10 @@
 // of each Embree configuration (their scenes kept from their benchmarks), and
 // the median of the trials' ratios is reported with their range, so that the
 // machine's drift between benchmarks does not enter the ratio.
+// psf_any/<scene>: shadow rays (any hit): segments between two sets of 2^21
+// surface points (shadow_rays), psf's raycast_any paired trial by trial with
+// Embree's rtcOccluded1 (default build) and rtcOccluded16 (high-quality build),
+// their occlusion checked against rtcOccluded1's.
 //
 // Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
 //                      [--trials=N] [--embree_config=STRING]
@@ -83,6 +87,7 @@ struct Bench {
   std::vector<glm::uvec3> triangles;
   psf::Bvh bvh;                      // the wide BVH
   std::vector<Ray> rays;             // the incoherent rays
+  std::vector<Ray> shadow;           // segments between two surface points (shadow_rays)
   std::vector<Hit> psf_hits;         // after timing, for the comparison
   std::vector<uint32_t> embree_prims;
   double embree_build_ms = 0;
@@ -136,6 +141,20 @@ std::vector<Ray> diffuse_rays(const std::vector<glm::vec3>& p, const std::vector
     ray.org = {{o.x, o.y, o.z, 0.0f}};
     ray.dir = {{d.x, d.y, d.z, std::numeric_limits<float>::infinity()}};
     rays.push_back(ray);
+  }
+  return rays;
+}
+
+// Shadow rays: from each ray's origin in `from` to the origin of the ray of the
+// same index in `to` (another set of surface points, off their surfaces like
+// these), tmin 0 and tmax 0.999 in units of the unnormalized direction: the
+// segments of next-event estimation towards points on area lights.
+std::vector<Ray> shadow_rays(const std::vector<Ray>& from, const std::vector<Ray>& to) {
+  std::vector<Ray> rays(std::min(from.size(), to.size()));
+  for (size_t i = 0; i < rays.size(); ++i) {
+    rays[i].org = {{from[i].org.s[0], from[i].org.s[1], from[i].org.s[2], 0.0f}};
+    rays[i].dir = {{to[i].org.s[0] - from[i].org.s[0], to[i].org.s[1] - from[i].org.s[1],
+                    to[i].org.s[2] - from[i].org.s[2], 0.999f}};
   }
   return rays;
 }
@@ -244,6 +263,66 @@ struct Embree {
         else
           trace(rays, begin, end, prims.data());
       });
+    }
+    for (auto& th : pool) th.join();
+  }
+
+  // Occlusion of rays [begin, end): 1 where something lies within (tnear, tfar).
+  void occlude(const std::vector<Ray>& rays, size_t begin, size_t end, uint8_t* out) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    if (!packets) {
+      for (size_t i = begin; i < end; ++i) {
+        RTCRay ray;
+        const Ray& r = rays[i];
+        ray.org_x = r.org.s[0];
+        ray.org_y = r.org.s[1];
+        ray.org_z = r.org.s[2];
+        ray.tnear = r.org.s[3];
+        ray.dir_x = r.dir.s[0];
+        ray.dir_y = r.dir.s[1];
+        ray.dir_z = r.dir.s[2];
+        ray.tfar = r.dir.s[3];
+        ray.time = 0.0f;
+        ray.mask = 0xFFFFFFFFu;
+        ray.id = 0;
+        ray.flags = 0;
+        rtcOccluded1(scene, &ctx, &ray);
+        out[i] = ray.tfar < 0.0f ? 1 : 0;  // Embree sets tfar to -inf on a hit
+      }
+      return;
+    }
+    for (size_t i0 = begin; i0 < end; i0 += 16) {
+      alignas(64) RTCRay16 ray;
+      alignas(64) int valid[16];
+      for (int k = 0; k < 16; ++k) {
+        const size_t i = std::min(i0 + k, end - 1);
+        const Ray& r = rays[i];
+        valid[k] = i0 + k < end ? -1 : 0;
+        ray.org_x[k] = r.org.s[0];
+        ray.org_y[k] = r.org.s[1];
+        ray.org_z[k] = r.org.s[2];
+        ray.tnear[k] = r.org.s[3];
+        ray.dir_x[k] = r.dir.s[0];
+        ray.dir_y[k] = r.dir.s[1];
+        ray.dir_z[k] = r.dir.s[2];
+        ray.tfar[k] = r.dir.s[3];
+        ray.time[k] = 0.0f;
+        ray.mask[k] = 0xFFFFFFFFu;
+        ray.id[k] = 0;
+        ray.flags[k] = 0;
+      }
+      rtcOccluded16(valid, scene, &ctx, &ray);
+      for (int k = 0; k < 16 && i0 + k < end; ++k) out[i0 + k] = ray.tfar[k] < 0.0f ? 1 : 0;
+    }
+  }
+  void occlude_all(const std::vector<Ray>& rays, unsigned threads, std::vector<uint8_t>& out) const {
+    out.resize(rays.size());
+    std::vector<std::thread> pool;
+    size_t chunk = (rays.size() + threads - 1) / threads;
+    for (unsigned t = 0; t < threads; ++t) {
+      size_t begin = std::min(rays.size(), t * chunk), end = std::min(rays.size(), begin + chunk);
+      pool.emplace_back([&, begin, end] { occlude(rays, begin, end, out.data()); });
     }
     for (auto& th : pool) th.join();
   }
@@ -465,6 +544,7 @@ int main(int argc, char** argv) {
     }
     b->bvh = psf::build_bvh(b->positions, b->triangles);
     b->rays = diffuse_rays(b->positions, b->triangles, num_rays, 1234567u);
+    b->shadow = shadow_rays(b->rays, diffuse_rays(b->positions, b->triangles, num_rays, 7654321u));
     report("%s: %zu triangles, BVH build %.1f ms, %zu nodes and %zu triangle packs (%.1f MiB), depth %d, %u triangles "
            "left out\n",
            b->name.c_str(), b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.packs.size(),
@@ -606,10 +686,7 @@ int main(int argc, char** argv) {
         report("%s: psf/embree = %.2f, psf/embree (high-quality build, packets of 16) = %.2f; hit triangles agree for "
                "%.4f%% of rays%s\n",
                b->name.c_str(), ratio, ratio16, 100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
-        auto paired = [](std::vector<double> r) {
-          std::sort(r.begin(), r.end());
-          return r.empty() ? 0.0 : r.size() % 2 ? r[r.size() / 2] : 0.5 * (r[r.size() / 2 - 1] + r[r.size() / 2]);
-        };
+        auto paired = [](const std::vector<double>& r) { return r.empty() ? 0.0 : summarize(r).median_s; };
         auto range = [](const std::vector<double>& r) {
           if (r.empty()) return std::string("-");
           auto [lo, hi] = std::minmax_element(r.begin(), r.end());
@@ -625,6 +702,74 @@ int main(int argc, char** argv) {
                b->name.c_str(), p1, range(paired1).c_str(), p16, range(paired16).c_str());
         if (agreement <= 0.999) state.SkipWithError("hit triangles agree with Embree for <= 99.9% of rays");
       }
+#endif
+    })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
+    // Shadow rays (any hit), paired trial by trial with Embree's rtcOccluded1 and,
+    // as Mitsuba 3 runs it, rtcOccluded16 on the high-quality build.
+    benchmark::RegisterBenchmark(("psf_any/" + b->name).c_str(), [b, &rt, &opt, threads](benchmark::State& state) {
+      psf::RayCaster caster(rt, b->bvh);
+      caster.local_size = opt.local;
+      const uint32_t n = static_cast<uint32_t>(b->shadow.size());
+      cl::Buffer rays = rt.upload(b->shadow);
+      cl::Buffer hits = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(Hit));
+      caster.any(rays, hits, n);
+      rt.finish();
+#ifdef PSF_HAVE_EMBREE
+      if (!b->embree1_scene) b->embree1_scene = std::make_shared<Embree>(*b, false, opt.embree_config);
+      if (!b->embree16_scene) b->embree16_scene = std::make_shared<Embree>(*b, true, opt.embree_config);
+      std::vector<uint8_t> occluded1, occluded16;
+      b->embree1_scene->occlude_all(b->shadow, threads, occluded1);  // warm-up, and the reference
+      b->embree16_scene->occlude_all(b->shadow, threads, occluded16);
+#endif
+      std::vector<double> device, e1_times, e16_times, paired1, paired16;
+      for (auto _ : state) {
+#ifdef PSF_HAVE_EMBREE
+        auto timed = [&](const Embree& e, std::vector<uint8_t>& out) {
+          auto s0 = std::chrono::steady_clock::now();
+          e.occlude_all(b->shadow, threads, out);
+          return std::chrono::duration<double>(std::chrono::steady_clock::now() - s0).count();
+        };
+        const double e1 = timed(*b->embree1_scene, occluded1), e16 = timed(*b->embree16_scene, occluded16);
+#endif
+        rt.reset_stats();
+        caster.any(rays, hits, n);
+        rt.finish();
+        const double d = rt.stats().at("raycast_any").ms * 1e-3;
+        state.SetIterationTime(d);
+        device.push_back(d);
+#ifdef PSF_HAVE_EMBREE
+        e1_times.push_back(e1);
+        e16_times.push_back(e16);
+        paired1.push_back(e1 / d);
+        paired16.push_back(e16 / d);
+#endif
+      }
+      const std::vector<Hit> out = rt.download<Hit>(hits, n);
+      size_t blocked = 0;
+      for (const Hit& h : out) blocked += h.prim != PSF_NO_HIT;
+      const Timing dt = summarize(device);
+      state.counters["Mrays_per_s"] = n / dt.median_s * 1e-6;
+      state.counters["occluded_fraction"] = double(blocked) / n;
+      report("%s: psf any hit, %u shadow rays between surface points: %.2f Mrays/s (device median %.1f ms), %.1f%% "
+             "occluded\n",
+             b->name.c_str(), n, n / dt.median_s * 1e-6, dt.median_s * 1e3, 100.0 * blocked / n);
+#ifdef PSF_HAVE_EMBREE
+      size_t agree = 0;
+      for (uint32_t i = 0; i < n; ++i) agree += (out[i].prim != PSF_NO_HIT) == (occluded1[i] != 0);
+      const double agreement = double(agree) / n;
+      const double p1 = summarize(paired1).median_s, p16 = summarize(paired16).median_s;
+      state.counters["agreement"] = agreement;
+      state.counters["ratio_paired_embree"] = p1;
+      state.counters["ratio_paired_embree16"] = p16;
+      report("%s: embree rtcOccluded1 %.2f Mrays/s, rtcOccluded16 (high-quality build) %.2f Mrays/s (medians of the "
+             "passes before psf's); paired psf/embree median %.2f (%.2f-%.2f), psf/embree16 median %.2f (%.2f-%.2f); "
+             "occlusion agrees with rtcOccluded1's for %.4f%% of rays%s\n",
+             b->name.c_str(), n / summarize(e1_times).median_s * 1e-6, n / summarize(e16_times).median_s * 1e-6, p1,
+             *std::min_element(paired1.begin(), paired1.end()), *std::max_element(paired1.begin(), paired1.end()),
+             p16, *std::min_element(paired16.begin(), paired16.end()),
+             *std::max_element(paired16.begin(), paired16.end()), 100.0 * agreement,
+             agreement > 0.999 ? "" : " (BELOW 99.9%)");
+      if (agreement <= 0.999) state.SkipWithError("occlusion agrees with Embree for <= 99.9% of rays");
 #endif
     })->UseManualTime()->Iterations(opt.trials)->Unit(benchmark::kMillisecond);
   }
