@@ -1,6 +1,7 @@
 // bench_raycast: closest-hit ray casting throughput of kernels/raycast.cl on
-// incoherent diffuse rays (and any-hit on shadow rays, psf_any), against Embree 3 on the same rays with as many threads
-// as the OpenCL device has compute units (every core when it is a GPU), twice:
+// incoherent diffuse rays (and any-hit on shadow rays, psf_any), against
+// Embree 3 on the same rays with as many threads as the OpenCL device has
+// compute units (every core when it is a GPU), twice:
 // embree_raycast, one ray at a time (rtcIntersect1) through Embree's default
 // (medium-quality) BVH; embree16_raycast, Embree as Mitsuba 3.6.4's llvm_ad_rgb
 // runs it on an AVX-512 machine (`perf` of its renders: the spatial-split
