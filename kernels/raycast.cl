@@ -586,10 +586,9 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
   SlabRay s = slab_ray(org, dir);
 
   uint stack_ref[PSF_BVH_STACK];
-  int sp = 1;
-  stack_ref[0] = 0u;
-  while (sp > 0) {
-    uint ref = stack_ref[--sp];
+  int sp = 0;
+  uint ref = 0u; /* the root */
+  for (;;) {
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
@@ -610,19 +609,29 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
           return hit;
         }
       }
-      continue;
+    } else {
+      __global const float* f = (__global const float*)(nodes + ref);
+      bvh_floatw tn;
+      uint mask = slab_test(f, &s, tmin, hit.t, &tn);
+      if (mask != 0u) {
+        /* Descend into the last hit child at once and push the others (the
+         * order of pushing them all and popping the last, without its store
+         * and load, and no stack at all for a single child). */
+        __global const uint* child = (__global const uint*)(f + BVH_CHILD);
+        const uint last = 31u - clz(mask);
+        mask &= ~(1u << last);
+        while (mask != 0u) {
+          uint k = bvh_first_lane(mask);
+          mask &= mask - 1u;
+          stack_ref[sp++] = child[k];
+        }
+        ref = child[last];
+        continue;
+      }
     }
-    __global const float* f = (__global const float*)(nodes + ref);
-    bvh_floatw tn;
-    uint mask = slab_test(f, &s, tmin, hit.t, &tn);
-    __global const uint* child = (__global const uint*)(f + BVH_CHILD);
-    while (mask != 0u) {
-      uint k = bvh_first_lane(mask);
-      mask &= mask - 1u;
-      stack_ref[sp++] = child[k];
-    }
+    if (sp == 0) return hit;
+    ref = stack_ref[--sp];
   }
-  return hit;
 }
 
 /* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none. */
