@@ -20,8 +20,8 @@
  * - Traversal: depth first with a private stack of child references and their
  *   entry distances. For the closest hit: one child hit, descend into it; two,
  *   push the farther; more, push all sorted far to near (three or four by a
- *   sorting network of selects, more by insertion) and descend into the
- *   nearest. Popped entries farther than the closest hit so far are dropped.
+ *   sorting network of selects, more by one over the node's vectors) and
+ *   descend into the nearest. Popped entries farther than the closest hit so far are dropped.
  *   The any-hit traversal stops at the first hit.
  * - Ray/triangle: Moller & Trumbore, "Fast, minimum storage ray/triangle
  *   intersection", JGT 1997, without back-face culling, on the PSF_BVH_WIDTH
@@ -124,6 +124,30 @@ inline uint bvh_lane_mask(bvh_intw c) {
 }
 /* Index of the lowest set bit of a nonzero mask. */
 inline uint bvh_first_lane(uint mask) { return 31u - clz(mask & (0u - mask)); }
+
+#if PSF_BVH_WIDTH == 8
+/* One round of a sorting network over the eight lanes: lane k and lane
+ * partner[k] (a pair, or k itself) end with the larger distance in the pair's
+ * lane marked in `first`; the child references move with their distances. */
+BVH_INLINE void bvh_sort_round(float8* d, uint8* c, uint8 partner, int8 first) {
+  const float8 dp = shuffle(*d, partner);
+  const uint8 cp = shuffle(*c, partner);
+  const int8 swap = select(dp < *d, *d < dp, first);
+  *d = select(*d, dp, swap);
+  *c = select(*c, cp, as_uint8(swap));
+}
+/* The eight lanes sorted by distance, farthest first, in the six rounds of an
+ * optimal network of 19 comparators (Knuth, TAOCP vol. 3, Sec. 5.3.4):
+ * shuffles and selects, no branches. */
+BVH_INLINE void bvh_sort_far_first(float8* d, uint8* c) {
+  bvh_sort_round(d, c, (uint8)(2, 3, 0, 1, 6, 7, 4, 5), (int8)(-1, -1, 0, 0, -1, -1, 0, 0));
+  bvh_sort_round(d, c, (uint8)(4, 5, 6, 7, 0, 1, 2, 3), (int8)(-1, -1, -1, -1, 0, 0, 0, 0));
+  bvh_sort_round(d, c, (uint8)(1, 0, 3, 2, 5, 4, 7, 6), (int8)(-1, 0, -1, 0, -1, 0, -1, 0));
+  bvh_sort_round(d, c, (uint8)(0, 1, 4, 5, 2, 3, 6, 7), (int8)(0, 0, -1, -1, 0, 0, 0, 0));
+  bvh_sort_round(d, c, (uint8)(0, 4, 2, 6, 1, 5, 3, 7), (int8)(0, -1, 0, -1, 0, 0, 0, 0));
+  bvh_sort_round(d, c, (uint8)(0, 2, 1, 4, 3, 6, 5, 7), (int8)(0, -1, 0, -1, 0, -1, 0, 0));
+}
+#endif
 
 /* The per-ray constants of the slab test. */
 typedef struct {
@@ -534,29 +558,23 @@ BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global c
           ref = four ? c3 : c2;
           continue;
         }
-        mask |= 1u << k2;
-        /* Five or more: push all so that the stack stays sorted far to near
-         * (insertion sort of the few entries), then continue with the nearest. */
-        int base = sp;
-        stack_ref[sp] = c0;
-        stack_t[sp] = d0;
-        ++sp;
-        mask |= 1u << k1;
-        while (mask != 0u) {
-          uint k = bvh_first_lane(mask);
-          mask &= mask - 1u;
-          float d = tnear[k];
-          uint c = child[k];
-          int j = sp++;
-          while (j > base && stack_t[j - 1] < d) {
-            stack_t[j] = stack_t[j - 1];
-            stack_ref[j] = stack_ref[j - 1];
-            --j;
-          }
-          stack_t[j] = d;
-          stack_ref[j] = c;
-        }
-        ref = stack_ref[--sp];
+        mask |= (1u << k0) | (1u << k1) | (1u << k2);
+#if PSF_BVH_WIDTH == 8
+        /* Five or more: the node's eight slots sorted far to near at once, the
+         * slots not hit at -infinity, so the hit ones lead; push all but the
+         * nearest and descend into it. */
+        float8 d = select((float8)(-INFINITY), tn,
+                          (((int8)((int)mask)) & (int8)(1, 2, 4, 8, 16, 32, 64, 128)) != (int8)(0));
+        uint8 c = vload8(0, child);
+        bvh_sort_far_first(&d, &c);
+        vstore8(d, 0, stack_t + sp); /* up to index 7 L at level L: within the stack */
+        vstore8(c, 0, stack_ref + sp);
+        sp += (int)popcount(mask) - 1;
+        ref = stack_ref[sp];
+#else
+        /* Four children at most in a BVH4: not reached. */
+        ref = c0;
+#endif
         continue;
       }
     }
