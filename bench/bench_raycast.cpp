@@ -193,58 +193,75 @@ struct Embree {
     rtcReleaseDevice(device);
   }
 
-  // Closest hits of rays [begin, end): the hit triangle or PSF_NO_HIT.
+  // psf's ray as Embree's, one ray or lane k of a packet of 16.
+  static void set_ray(RTCRay& ray, const Ray& r) {
+    ray.org_x = r.org.s[0];
+    ray.org_y = r.org.s[1];
+    ray.org_z = r.org.s[2];
+    ray.tnear = r.org.s[3];
+    ray.dir_x = r.dir.s[0];
+    ray.dir_y = r.dir.s[1];
+    ray.dir_z = r.dir.s[2];
+    ray.tfar = r.dir.s[3];
+    ray.time = 0.0f;
+    ray.mask = 0xFFFFFFFFu;
+    ray.id = 0;
+    ray.flags = 0;
+  }
+  static void set_ray(RTCRay16& ray, int k, const Ray& r) {
+    ray.org_x[k] = r.org.s[0];
+    ray.org_y[k] = r.org.s[1];
+    ray.org_z[k] = r.org.s[2];
+    ray.tnear[k] = r.org.s[3];
+    ray.dir_x[k] = r.dir.s[0];
+    ray.dir_y[k] = r.dir.s[1];
+    ray.dir_z[k] = r.dir.s[2];
+    ray.tfar[k] = r.dir.s[3];
+    ray.time[k] = 0.0f;
+    ray.mask[k] = 0xFFFFFFFFu;
+    ray.id[k] = 0;
+    ray.flags[k] = 0;
+  }
+  // Packet i0's 16 rays from [i0, end) (the rays past end repeat the last, invalid).
+  static void set_packet(RTCRay16& ray, int* valid, const std::vector<Ray>& rays, size_t i0, size_t end) {
+    for (int k = 0; k < 16; ++k) {
+      valid[k] = i0 + k < end ? -1 : 0;
+      set_ray(ray, k, rays[std::min(i0 + k, end - 1)]);
+    }
+  }
+  // f(begin, end) over `threads` contiguous chunks of [0, n), one thread each.
+  template <typename F>
+  static void in_chunks(size_t n, unsigned threads, F f) {
+    std::vector<std::thread> pool;
+    const size_t chunk = (n + threads - 1) / threads;
+    for (unsigned t = 0; t < threads; ++t) {
+      const size_t begin = std::min(n, t * chunk), end = std::min(n, begin + chunk);
+      pool.emplace_back([&f, begin, end] { f(begin, end); });
+    }
+    for (auto& th : pool) th.join();
+  }
+
+  // Closest hits of rays [begin, end): the hit triangle or PSF_NO_HIT; one at a
+  // time, or in packets of 16 consecutive rays (the last one partly valid).
   void trace(const std::vector<Ray>& rays, size_t begin, size_t end, uint32_t* prims) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    for (size_t i = begin; i < end; ++i) {
-      RTCRayHit rh;
-      const Ray& r = rays[i];
-      rh.ray.org_x = r.org.s[0];
-      rh.ray.org_y = r.org.s[1];
-      rh.ray.org_z = r.org.s[2];
-      rh.ray.tnear = r.org.s[3];
-      rh.ray.dir_x = r.dir.s[0];
-      rh.ray.dir_y = r.dir.s[1];
-      rh.ray.dir_z = r.dir.s[2];
-      rh.ray.tfar = r.dir.s[3];
-      rh.ray.time = 0.0f;
-      rh.ray.mask = 0xFFFFFFFFu;
-      rh.ray.id = 0;
-      rh.ray.flags = 0;
-      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-      rtcIntersect1(scene, &ctx, &rh);
-      prims[i] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? PSF_NO_HIT : rh.hit.primID;
+    if (!packets) {
+      for (size_t i = begin; i < end; ++i) {
+        RTCRayHit rh;
+        set_ray(rh.ray, rays[i]);
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(scene, &ctx, &rh);
+        prims[i] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? PSF_NO_HIT : rh.hit.primID;
+      }
+      return;
     }
-  }
-
-  // The same in packets of 16 consecutive rays (the last one partly valid).
-  void trace16(const std::vector<Ray>& rays, size_t begin, size_t end, uint32_t* prims) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
     for (size_t i0 = begin; i0 < end; i0 += 16) {
       alignas(64) RTCRayHit16 rh;
       alignas(64) int valid[16];
-      for (int k = 0; k < 16; ++k) {
-        const size_t i = std::min(i0 + k, end - 1);
-        const Ray& r = rays[i];
-        valid[k] = i0 + k < end ? -1 : 0;
-        rh.ray.org_x[k] = r.org.s[0];
-        rh.ray.org_y[k] = r.org.s[1];
-        rh.ray.org_z[k] = r.org.s[2];
-        rh.ray.tnear[k] = r.org.s[3];
-        rh.ray.dir_x[k] = r.dir.s[0];
-        rh.ray.dir_y[k] = r.dir.s[1];
-        rh.ray.dir_z[k] = r.dir.s[2];
-        rh.ray.tfar[k] = r.dir.s[3];
-        rh.ray.time[k] = 0.0f;
-        rh.ray.mask[k] = 0xFFFFFFFFu;
-        rh.ray.id[k] = 0;
-        rh.ray.flags[k] = 0;
-        rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
-      }
+      set_packet(rh.ray, valid, rays, i0, end);
+      for (int k = 0; k < 16; ++k) rh.hit.geomID[k] = rh.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;
       rtcIntersect16(valid, scene, &ctx, &rh);
       for (int k = 0; k < 16 && i0 + k < end; ++k)
         prims[i0 + k] = rh.hit.geomID[k] == RTC_INVALID_GEOMETRY_ID ? PSF_NO_HIT : rh.hit.primID[k];
@@ -254,78 +271,34 @@ struct Embree {
   // All rays on `threads` threads, each a contiguous chunk.
   void trace_all(const std::vector<Ray>& rays, unsigned threads, std::vector<uint32_t>& prims) const {
     prims.resize(rays.size());
-    std::vector<std::thread> pool;
-    size_t chunk = (rays.size() + threads - 1) / threads;
-    for (unsigned t = 0; t < threads; ++t) {
-      size_t begin = std::min(rays.size(), t * chunk), end = std::min(rays.size(), begin + chunk);
-      pool.emplace_back([&, begin, end] {
-        if (packets)
-          trace16(rays, begin, end, prims.data());
-        else
-          trace(rays, begin, end, prims.data());
-      });
-    }
-    for (auto& th : pool) th.join();
+    in_chunks(rays.size(), threads, [&](size_t begin, size_t end) { trace(rays, begin, end, prims.data()); });
   }
 
-  // Occlusion of rays [begin, end): 1 where something lies within (tnear, tfar).
+  // Occlusion of rays [begin, end): 1 where something lies within (tnear, tfar)
+  // (Embree sets tfar to -inf on a hit).
   void occlude(const std::vector<Ray>& rays, size_t begin, size_t end, uint8_t* out) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     if (!packets) {
       for (size_t i = begin; i < end; ++i) {
         RTCRay ray;
-        const Ray& r = rays[i];
-        ray.org_x = r.org.s[0];
-        ray.org_y = r.org.s[1];
-        ray.org_z = r.org.s[2];
-        ray.tnear = r.org.s[3];
-        ray.dir_x = r.dir.s[0];
-        ray.dir_y = r.dir.s[1];
-        ray.dir_z = r.dir.s[2];
-        ray.tfar = r.dir.s[3];
-        ray.time = 0.0f;
-        ray.mask = 0xFFFFFFFFu;
-        ray.id = 0;
-        ray.flags = 0;
+        set_ray(ray, rays[i]);
         rtcOccluded1(scene, &ctx, &ray);
-        out[i] = ray.tfar < 0.0f ? 1 : 0;  // Embree sets tfar to -inf on a hit
+        out[i] = ray.tfar < 0.0f ? 1 : 0;
       }
       return;
     }
     for (size_t i0 = begin; i0 < end; i0 += 16) {
       alignas(64) RTCRay16 ray;
       alignas(64) int valid[16];
-      for (int k = 0; k < 16; ++k) {
-        const size_t i = std::min(i0 + k, end - 1);
-        const Ray& r = rays[i];
-        valid[k] = i0 + k < end ? -1 : 0;
-        ray.org_x[k] = r.org.s[0];
-        ray.org_y[k] = r.org.s[1];
-        ray.org_z[k] = r.org.s[2];
-        ray.tnear[k] = r.org.s[3];
-        ray.dir_x[k] = r.dir.s[0];
-        ray.dir_y[k] = r.dir.s[1];
-        ray.dir_z[k] = r.dir.s[2];
-        ray.tfar[k] = r.dir.s[3];
-        ray.time[k] = 0.0f;
-        ray.mask[k] = 0xFFFFFFFFu;
-        ray.id[k] = 0;
-        ray.flags[k] = 0;
-      }
+      set_packet(ray, valid, rays, i0, end);
       rtcOccluded16(valid, scene, &ctx, &ray);
       for (int k = 0; k < 16 && i0 + k < end; ++k) out[i0 + k] = ray.tfar[k] < 0.0f ? 1 : 0;
     }
   }
   void occlude_all(const std::vector<Ray>& rays, unsigned threads, std::vector<uint8_t>& out) const {
     out.resize(rays.size());
-    std::vector<std::thread> pool;
-    size_t chunk = (rays.size() + threads - 1) / threads;
-    for (unsigned t = 0; t < threads; ++t) {
-      size_t begin = std::min(rays.size(), t * chunk), end = std::min(rays.size(), begin + chunk);
-      pool.emplace_back([&, begin, end] { occlude(rays, begin, end, out.data()); });
-    }
-    for (auto& th : pool) th.join();
+    in_chunks(rays.size(), threads, [&](size_t begin, size_t end) { occlude(rays, begin, end, out.data()); });
   }
 
   double build_ms = 0;
@@ -468,6 +441,16 @@ SahCost sah_cost(const psf::Bvh& bvh) {
         for (int l = 0; l < PSF_BVH_WIDTH; ++l) cost.triangles += p * (bvh.packs[k].prim[l] != PSF_NO_HIT);
     }
   return cost;
+}
+
+// The median of paired trials' ratios (0 without trials), and their range as text.
+double paired_median(const std::vector<double>& r) { return r.empty() ? 0.0 : summarize(r).median_s; }
+std::string paired_range(const std::vector<double>& r) {
+  if (r.empty()) return "-";
+  const auto [lo, hi] = std::minmax_element(r.begin(), r.end());
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f-%.2f", *lo, *hi);
+  return text;
 }
 
 void report(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
@@ -687,20 +670,12 @@ int main(int argc, char** argv) {
         report("%s: psf/embree = %.2f, psf/embree (high-quality build, packets of 16) = %.2f; hit triangles agree for "
                "%.4f%% of rays%s\n",
                b->name.c_str(), ratio, ratio16, 100.0 * agreement, agreement > 0.999 ? "" : " (BELOW 99.9%)");
-        auto paired = [](const std::vector<double>& r) { return r.empty() ? 0.0 : summarize(r).median_s; };
-        auto range = [](const std::vector<double>& r) {
-          if (r.empty()) return std::string("-");
-          auto [lo, hi] = std::minmax_element(r.begin(), r.end());
-          char text[32];
-          std::snprintf(text, sizeof text, "%.2f-%.2f", *lo, *hi);
-          return std::string(text);
-        };
-        const double p1 = paired(paired1), p16 = paired(paired16);
+        const double p1 = paired_median(paired1), p16 = paired_median(paired16);
         state.counters["ratio_paired_embree"] = p1;
         if (p16 > 0) state.counters["ratio_paired_embree16"] = p16;
         report("%s: paired trials (each psf launch right after a pass of each Embree): psf/embree median %.2f (%s), "
                "psf/embree (high-quality build, packets of 16) median %.2f (%s)\n",
-               b->name.c_str(), p1, range(paired1).c_str(), p16, range(paired16).c_str());
+               b->name.c_str(), p1, paired_range(paired1).c_str(), p16, paired_range(paired16).c_str());
         if (agreement <= 0.999) state.SkipWithError("hit triangles agree with Embree for <= 99.9% of rays");
       }
 #endif
@@ -758,17 +733,15 @@ int main(int argc, char** argv) {
       size_t agree = 0;
       for (uint32_t i = 0; i < n; ++i) agree += (out[i].prim != PSF_NO_HIT) == (occluded1[i] != 0);
       const double agreement = double(agree) / n;
-      const double p1 = summarize(paired1).median_s, p16 = summarize(paired16).median_s;
+      const double p1 = paired_median(paired1), p16 = paired_median(paired16);
       state.counters["agreement"] = agreement;
       state.counters["ratio_paired_embree"] = p1;
       state.counters["ratio_paired_embree16"] = p16;
       report("%s: embree rtcOccluded1 %.2f Mrays/s, rtcOccluded16 (high-quality build) %.2f Mrays/s (medians of the "
-             "passes before psf's); paired psf/embree median %.2f (%.2f-%.2f), psf/embree16 median %.2f (%.2f-%.2f); "
+             "passes before psf's); paired psf/embree median %.2f (%s), psf/embree16 median %.2f (%s); "
              "occlusion agrees with rtcOccluded1's for %.4f%% of rays%s\n",
              b->name.c_str(), n / summarize(e1_times).median_s * 1e-6, n / summarize(e16_times).median_s * 1e-6, p1,
-             *std::min_element(paired1.begin(), paired1.end()), *std::max_element(paired1.begin(), paired1.end()),
-             p16, *std::min_element(paired16.begin(), paired16.end()),
-             *std::max_element(paired16.begin(), paired16.end()), 100.0 * agreement,
+             paired_range(paired1).c_str(), p16, paired_range(paired16).c_str(), 100.0 * agreement,
              agreement > 0.999 ? "" : " (BELOW 99.9%)");
       if (agreement <= 0.999) state.SkipWithError("occlusion agrees with Embree for <= 99.9% of rays");
 #endif
