@@ -12,7 +12,8 @@
 //   timed renders, a process of bench/mitsuba_render.py (Mitsuba 3, llvm_ad_rgb
 //   where it runs, else scalar_rgb; as many Dr.Jit threads as the device has
 //   compute units) loads the scene, renders it once untimed (JIT compilation) and
-//   once timed: mi.render(scene, spp) up to the developed film as a NumPy array;
+//   once timed: mi.render(scene, spp) up to the developed film as a NumPy array
+//   (without numpy: the evaluated Dr.Jit tensor);
 //   scene load and Python start-up are not timed. Each psf trial thus follows
 //   one of Mitsuba's by seconds, so that the machine's drift (10-30 % within
 //   minutes here) falls on both of a pair. Mitsuba 0.5 scenes are upgraded by
