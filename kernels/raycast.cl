@@ -245,18 +245,25 @@ BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float
  * without spheres paid for it (PoCL, Mitsuba's cbox: 4-7 % of its tracing
  * time). Inlined on GPUs: the call cost NVIDIA's OpenCL 10 % of Sponza's casts
  * (H200, 724 -> 649 Mrays/s, although Sponza has no sphere). */
-#if defined(cl_khr_fp64)
+#if defined(cl_khr_fp64) && PSF_BVH_WIDTH == 8
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
-typedef double4 sphere_real4;
-#define SPHERE_REAL4(x) convert_double4(x)
-#define SPHERE_FLOAT4(x) convert_float4(x)
-#define SPHERE_INT4(x) convert_int4(x)
+typedef double8 sphere_realw;
+#define SPHERE_REAL(x) convert_double8(x)
+#define SPHERE_FLOATW(x) convert_float8(x)
+#define SPHERE_INTW(x) convert_int8(x)
+#define SPHERE_SCALAR double
+#elif defined(cl_khr_fp64) && PSF_BVH_WIDTH == 4
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double4 sphere_realw;
+#define SPHERE_REAL(x) convert_double4(x)
+#define SPHERE_FLOATW(x) convert_float4(x)
+#define SPHERE_INTW(x) convert_int4(x)
 #define SPHERE_SCALAR double
 #else
-typedef float4 sphere_real4;
-#define SPHERE_REAL4(x) (x)
-#define SPHERE_FLOAT4(x) (x)
-#define SPHERE_INT4(x) (x)
+typedef bvh_floatw sphere_realw;
+#define SPHERE_REAL(x) (x)
+#define SPHERE_FLOATW(x) (x)
+#define SPHERE_INTW(x) (x)
 #define SPHERE_SCALAR float
 #endif
 #if PSF_CPU_DEVICE
@@ -264,55 +271,30 @@ typedef float4 sphere_real4;
 #else
 #define SPHERE_TEST_PLACEMENT BVH_INLINE
 #endif
-
-/* Lanes 4 h to 4 h + 3 of sphere pack `p` (see sphere_pack_test): whether each
- * is hit, *t_out its ray parameter (infinity where not). o: the ray's origin,
- * d its unit direction, inv_len 1 / |dir| (t in dir's units). */
-BVH_INLINE int4 sphere_test4(__global const float* p, uint h, SPHERE_SCALAR ox, SPHERE_SCALAR oy, SPHERE_SCALAR oz,
-                             SPHERE_SCALAR dx, SPHERE_SCALAR dy, SPHERE_SCALAR dz, SPHERE_SCALAR inv_len, float tmin,
-                             float tmax, float4* t_out) {
-  sphere_real4 fx = ox - SPHERE_REAL4(vload4(h, p + PACK_V0));
-  sphere_real4 fy = oy - SPHERE_REAL4(vload4(h, p + PACK_V0 + PSF_BVH_WIDTH));
-  sphere_real4 fz = oz - SPHERE_REAL4(vload4(h, p + PACK_V0 + 2 * PSF_BVH_WIDTH));
-  float4 rf = vload4(h, p + PACK_E1);
-  sphere_real4 r = SPHERE_REAL4(rf);
-  sphere_real4 b = -(fx * dx + fy * dy + fz * dz);
-  sphere_real4 lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
-  sphere_real4 r2 = r * r;
-  sphere_real4 disc = r2 - (lx * lx + ly * ly + lz * lz);
-  sphere_real4 c = (fx * fx + fy * fy + fz * fz) - r2;
-  sphere_real4 q = b + copysign(sqrt(fmax(disc, (sphere_real4)(0))), b);
-  /* q = 0: t0 NaN, which fails below */
-  float4 t0 = SPHERE_FLOAT4(c / q * inv_len), t1 = SPHERE_FLOAT4(q * inv_len);
-  int4 hit = SPHERE_INT4(disc >= (sphere_real4)(0)) & (rf > 0.0f);
-  float4 tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
-  int4 ok_n = hit & (tn > tmin) & (tn < tmax);
-  int4 ok_f = hit & (tf > tmin) & (tf < tmax);
-  *t_out = select(select((float4)(INFINITY), tf, ok_f), tn, ok_n);
-  return ok_n | ok_f;
-}
-
 SPHERE_TEST_PLACEMENT uint sphere_pack_test(__global const float* p, float3 org, float3 dir, float dir_len,
                                             float tmin, float tmax, bvh_floatw* t_out) {
   SPHERE_SCALAR len = sqrt((SPHERE_SCALAR)dir.x * dir.x + (SPHERE_SCALAR)dir.y * dir.y + (SPHERE_SCALAR)dir.z * dir.z);
   SPHERE_SCALAR inv_len = (SPHERE_SCALAR)1 / len;
   SPHERE_SCALAR dx = dir.x * inv_len, dy = dir.y * inv_len, dz = dir.z * inv_len;
-  SPHERE_SCALAR ox = org.x, oy = org.y, oz = org.z;
-  float4 t_lo;
-  int4 ok_lo = sphere_test4(p, 0u, ox, oy, oz, dx, dy, dz, inv_len, tmin, tmax, &t_lo);
-#if PSF_BVH_WIDTH == 8
-  /* The pack's spheres fill its lanes from the first (host/bvh.cpp), the rest
-   * at radius 0: a pack of four or fewer skips the upper half's test, half of
-   * the work in double precision. */
-  float4 t_hi = (float4)(INFINITY);
-  int4 ok_hi = (int4)(0);
-  if (any(vload4(1, p + PACK_E1) > 0.0f)) ok_hi = sphere_test4(p, 1u, ox, oy, oz, dx, dy, dz, inv_len, tmin, tmax, &t_hi);
-  *t_out = (float8)(t_lo, t_hi);
-  return bvh_lane_mask((int8)(ok_lo, ok_hi));
-#else
-  *t_out = t_lo;
-  return bvh_lane_mask(ok_lo);
-#endif
+  sphere_realw fx = (SPHERE_SCALAR)org.x - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0));
+  sphere_realw fy = (SPHERE_SCALAR)org.y - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH));
+  sphere_realw fz = (SPHERE_SCALAR)org.z - SPHERE_REAL(BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH));
+  bvh_floatw rf = BVH_VLOAD(0, p + PACK_E1);
+  sphere_realw r = SPHERE_REAL(rf);
+  sphere_realw b = -(fx * dx + fy * dy + fz * dz);
+  sphere_realw lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
+  sphere_realw r2 = r * r;
+  sphere_realw disc = r2 - (lx * lx + ly * ly + lz * lz);
+  sphere_realw c = (fx * fx + fy * fy + fz * fz) - r2;
+  sphere_realw q = b + copysign(sqrt(fmax(disc, (sphere_realw)(0))), b);
+  /* q = 0: t0 NaN, which fails below */
+  bvh_floatw t0 = SPHERE_FLOATW(c / q * inv_len), t1 = SPHERE_FLOATW(q * inv_len);
+  bvh_intw hit = SPHERE_INTW(disc >= (sphere_realw)(0)) & (rf > 0.0f);
+  bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
+  bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
+  bvh_intw ok_f = hit & (tf > tmin) & (tf < tmax);
+  *t_out = select(select((bvh_floatw)(INFINITY), tf, ok_f), tn, ok_n);
+  return bvh_lane_mask(ok_n | ok_f);
 }
 
 /* Whether pack `p` holds spheres (its first lane, always used, says). */
