@@ -81,13 +81,17 @@ inline void vec8_set(Vec8* v, uint l, float3 a) {
   LANE_F(v->y, l) = a.y;
   LANE_F(v->z, l) = a.z;
 }
-inline float3 vec8_get(Vec8 v, uint l) { return (float3)(LANE_F(v.x, l), LANE_F(v.y, l), LANE_F(v.z, l)); }
+/* Lane l of v (an lvalue), read lane by lane where v lies. A function taking
+ * the Vec8 by value copied its three vectors whole first, and such a load
+ * stalls on the lane stores lanes_load has just made to them (the store
+ * buffer cannot forward a scalar store to a wider load). */
+#define VEC8_GET(v, l) ((float3)(LANE_F((v).x, l), LANE_F((v).y, l), LANE_F((v).z, l)))
 /* Lane l's frame (bsdf.cl Frame) of tangents s, t and normal n. */
-inline Frame vec8_frame(Vec8 s, Vec8 t, Vec8 n, uint l) {
+inline Frame vec8_frame(const Vec8* s, const Vec8* t, const Vec8* n, uint l) {
   Frame f;
-  f.s = vec8_get(s, l);
-  f.t = vec8_get(t, l);
-  f.n = vec8_get(n, l);
+  f.s = VEC8_GET(*s, l);
+  f.t = VEC8_GET(*t, l);
+  f.n = VEC8_GET(*n, l);
   return f;
 }
 
@@ -269,9 +273,9 @@ inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, con
                        __global const uint* sobol, CameraRays8* c) {
   if (j - c->first >= (uint)PSF_LANES) camera_rays8(params, camera, sobol, j, c);
   const uint k = j - c->first;
-  const float3 org = vec8_get(c->org, k);
+  const float3 org = VEC8_GET(c->org, k);
   vec8_set(&ln->org, l, org);
-  vec8_set(&ln->dir, l, vec8_get(c->dir, k));
+  vec8_set(&ln->dir, l, VEC8_GET(c->dir, k));
   LANE_F(ln->tmin, l) = LANE_F(c->tmin, k);
   LANE_F(ln->tmax, l) = LANE_F(c->tmax, k);
   vec8_set(&ln->beta, l, (float3)(1.0f));
@@ -298,17 +302,17 @@ inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, con
 inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states,
                         __global PathVertex* vertices, __global float4* contrib) {
   if (contrib) {
-    float3 c = vec8_get(ln->radiance, l);
-    if (LANE_U(ln->flags, l) & PSF_PATH_VERTEX) c += vec8_get(ln->alpha, l) * vec8_get(ln->vertex_radiance, l);
+    float3 c = VEC8_GET(ln->radiance, l);
+    if (LANE_U(ln->flags, l) & PSF_PATH_VERTEX) c += VEC8_GET(ln->alpha, l) * VEC8_GET(ln->vertex_radiance, l);
     contrib[LANE_U(ln->path, l)] = (float4)(c, 1.0f);
     return;
   }
   PathState st;
-  st.throughput = (float4)(vec8_get(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
-  st.radiance = (float4)(vec8_get(ln->radiance, l), LANE_F(ln->radiance_w, l));
-  st.vertex_radiance = (float4)(vec8_get(ln->vertex_radiance, l), LANE_F(ln->vertex_radiance_w, l));
+  st.throughput = (float4)(VEC8_GET(ln->beta, l), LANE_F(ln->bsdf_pdf, l));
+  st.radiance = (float4)(VEC8_GET(ln->radiance, l), LANE_F(ln->radiance_w, l));
+  st.vertex_radiance = (float4)(VEC8_GET(ln->vertex_radiance, l), LANE_F(ln->vertex_radiance_w, l));
   st.pending = (float4)(pending, 0.0f);
-  st.prev_pos = (float4)(vec8_get(ln->prev, l), LANE_F(ln->path_length, l));
+  st.prev_pos = (float4)(VEC8_GET(ln->prev, l), LANE_F(ln->path_length, l));
   st.pixel = LANE_U(ln->pixel, l);
   st.sample = LANE_U(ln->sample, l);
   st.depth = LANE_U(ln->depth, l);
@@ -462,7 +466,7 @@ inline void lanes_env_sample(Environment env, __global const float* data, int8 m
   for (uint l = 0u; l < PSF_LANES; ++l)
     vec8_set(radiance, l,
              LANE_I(mask, l) && LANE_F(*pdf, l) > 0.0f ? env_lookup(env, data, uv[l]) * env.scale.xyz
-                                                       : vec8_get(*radiance, l));
+                                                       : VEC8_GET(*radiance, l));
 }
 
 /* One lane's casts (raycast.cl), out of line: the kernel calls each in a loop
@@ -639,8 +643,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(ln.live, l)) continue;
       Ray r;
-      r.org = (float4)(vec8_get(ln.org, l), LANE_F(ln.tmin, l));
-      r.dir = (float4)(vec8_get(ln.dir, l), LANE_F(ln.tmax, l));
+      r.org = (float4)(VEC8_GET(ln.org, l), LANE_F(ln.tmin, l));
+      r.dir = (float4)(VEC8_GET(ln.dir, l), LANE_F(ln.tmax, l));
       Hit h;
       if (masked)
         lane_closest_masked(nodes, packs, &alpha, &r, &h);
@@ -668,17 +672,17 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       int8 sees = (int8)(0);
       if (PSF_PREFETCH && env.width > 0u) /* first what the lanes' lookups read, so that their misses overlap */
         for (uint l = 0u; l < PSF_LANES; ++l)
-          if (LANE_I(escaped, l)) env_prefetch_lookup(env, env_data, normalize(vec8_get(ln.dir, l)));
+          if (LANE_I(escaped, l)) env_prefetch_lookup(env, env_data, normalize(VEC8_GET(ln.dir, l)));
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(escaped, l)) continue;
         const uint depth = LANE_U(ln.depth, l);
         if (depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT)) continue;
-        const float3 d = normalize(vec8_get(ln.dir, l));
+        const float3 d = normalize(VEC8_GET(ln.dir, l));
         float w = 1.0f, pdf;
         const bool mis = depth > 0u && !(LANE_U(ln.flags, l) & PSF_PATH_SPECULAR);
         const float3 radiance = env_radiance_pdf(env, env_data, d, mis ? &pdf : 0);
         if (mis) w = power_heuristic(LANE_F(ln.bsdf_pdf, l), env.scale.w * pdf);
-        vec8_set(&seen, l, vec8_get(ln.beta, l) * radiance * w);
+        vec8_set(&seen, l, VEC8_GET(ln.beta, l) * radiance * w);
         LANE_I(sees, l) = -1;
       }
       lanes_add_radiance(&ln, seen, sees, true);
@@ -730,7 +734,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(sphere, l)) continue;
         float3 n, a, b, c;
-        surface_sphere(tri_pos + 3u * LANE_U(prim, l), vec8_get(pos, l), &n, &LANE_F(bu, l), &LANE_F(bv, l), &a, &b,
+        surface_sphere(tri_pos + 3u * LANE_U(prim, l), VEC8_GET(pos, l), &n, &LANE_F(bu, l), &LANE_F(bv, l), &a, &b,
                        &c);
         vec8_set(&ng, l, n);
         vec8_set(&p0, l, a);
@@ -750,7 +754,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         for (uint l = 0u; l < PSF_LANES; ++l)
           if (LANE_I(sphere_light, l))
             LANE_F(pdf_hit, l) = emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
-                                                    LANE_I(two_sided, l) ? 1u : 0u, vec8_get(ln.prev, l),
+                                                    LANE_I(two_sided, l) ? 1u : 0u, VEC8_GET(ln.prev, l),
                                                     LANE_F(dist, l), LANE_F(cos_l, l));
       const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
       /* An emission texture multiplies the emission there (surface.cl surface_emission). */
@@ -759,7 +763,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         for (uint l = 0u; l < PSF_LANES; ++l)
           if (LANE_I(emits_textured, l))
             vec8_set(&emission, l,
-                     vec8_get(emission, l) *
+                     VEC8_GET(emission, l) *
                          texture_eval(textures, texels, LANE_U(emission_tex, l),
                                       surface_uv(tri_attribs + LANE_U(prim, l), LANE_F(bu, l), LANE_F(bv, l)))
                              .xyz);
@@ -802,8 +806,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                                                             LANE_U(ln.sample, l), LANE_U(ln.depth, l))
                                           : 0.0f;
       Frame f;
-      lane_surface(&m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), vec8_get(p0, l), vec8_get(p1, l),
-                   vec8_get(p2, l), vec8_get(ng, l), vec8_get(wo, l), textures, texels, u_blend, &f, &unperturbed[l]);
+      lane_surface(&m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), VEC8_GET(p0, l), VEC8_GET(p1, l),
+                   VEC8_GET(p2, l), VEC8_GET(ng, l), VEC8_GET(wo, l), textures, texels, u_blend, &f, &unperturbed[l]);
       vec8_set(&fs, l, f.s);
       vec8_set(&ft, l, f.t);
       vec8_set(&fn, l, f.n);
@@ -926,7 +930,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         for (uint l = 0u; l < PSF_LANES; ++l)
           if (LANE_I(light_textured, l))
             vec8_set(&le, l,
-                     vec8_get(le, l) * texture_eval(textures, texels, LANE_U(light_tex, l),
+                     VEC8_GET(le, l) * texture_eval(textures, texels, LANE_U(light_tex, l),
                                                     surface_uv(tri_attribs + LANE_U(light_prim, l),
                                                                LANE_F(su, l) * (1.0f - LANE_F(u_lb, l)),
                                                                LANE_F(su, l) * LANE_F(u_lb, l)))
@@ -934,7 +938,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       int8 delta = (int8)(0);
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(other_light, l)) continue;
-        LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, vec8_get(pos, l),
+        LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, VEC8_GET(pos, l),
                                         LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
         light_sample_textured(&ls, tri_attribs, textures, texels);
         vec8_set(&wi, l, ls.wi);
@@ -954,11 +958,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(evaluate, l) || LANE_I(plastic, l)) continue;
-        const Frame fr = vec8_frame(fs, ft, fn, l);
+        const Frame fr = vec8_frame(&fs, &ft, &fn, l);
         float pdf_l;
         vec8_set(
             &f, l,
-            lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), vec8_get(wi, l), &pdf_l));
+            lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), VEC8_GET(wi, l), &pdf_l));
         LANE_F(bpdf, l) = pdf_l;
       }
       const int8 evaluate_plastic = evaluate & plastic;
@@ -994,9 +998,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const int8 sample_own = general & scatter;
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(sample_own, l) || LANE_I(plastic, l)) continue;
-      const Frame fr = vec8_frame(fs, ft, fn, l);
+      const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
-      lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], vec8_get(wo, l), LANE_F(u_b1, l),
+      lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), LANE_F(u_b1, l),
                        LANE_F(u_b2, l), LANE_F(u_lobe, l), &bs);
       vec8_set(&wi, l, bs.wi);
       LANE_F(pdf, l) = bs.pdf;
@@ -1039,8 +1043,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(contributes, l)) continue;
       Ray r;
-      r.org = (float4)(vec8_get(shadow_org, l), 0.0f);
-      r.dir = (float4)(vec8_get(shadow_dir, l), LANE_F(shadow_tmax, l));
+      r.org = (float4)(VEC8_GET(shadow_org, l), 0.0f);
+      r.dir = (float4)(VEC8_GET(shadow_dir, l), LANE_F(shadow_tmax, l));
       Hit h;
       if (masked)
         lane_any_masked(nodes, packs, &alpha, &r, &h);
@@ -1053,10 +1057,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     for (uint l = 0u; l < PSF_LANES && !contrib; ++l) {
       if (!LANE_I(new_vertex, l)) continue;
       PathVertex v;
-      v.position = (float4)(vec8_get(pos, l), LANE_F(ln.path_length, l));
-      v.normal = (float4)(vec8_get(n_camera, l), LANE_I(visible, l) || !LANE_I(contributes, l) ? 1.0f : 0.0f);
-      v.albedo = (float4)(vec8_get(albedo, l), rsqrt(fmax(fabs(LANE_F(ng_wo, l)), PSF_FOOTPRINT_MIN_COS)));
-      v.alpha = (float4)(vec8_get(ln.beta, l), 0.0f);
+      v.position = (float4)(VEC8_GET(pos, l), LANE_F(ln.path_length, l));
+      v.normal = (float4)(VEC8_GET(n_camera, l), LANE_I(visible, l) || !LANE_I(contributes, l) ? 1.0f : 0.0f);
+      v.albedo = (float4)(VEC8_GET(albedo, l), rsqrt(fmax(fabs(LANE_F(ng_wo, l)), PSF_FOOTPRINT_MIN_COS)));
+      v.alpha = (float4)(VEC8_GET(ln.beta, l), 0.0f);
       vertices[LANE_U(ln.path, l)] = v;
     }
 
@@ -1076,7 +1080,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(ends, l)) continue;
-      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : vec8_get(pending, l), states, vertices, contrib);
+      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, contrib);
       LANE_I(ln.live, l) = 0;
       if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
     }
