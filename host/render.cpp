@@ -52,14 +52,15 @@ bool lanes_vector_material(const Material& m) {
          m.tex_alpha == PSF_NO_TEXTURE && m.tex_table == PSF_NO_TEXTURE && m.alpha_u == m.alpha_v;
 }
 // Whether the lanes render a scene with device material m slower than the
-// other path kernels: the principled BSDFs and pplastic, large scalar
-// functions that the lanes call out of line for one lane at a time (PoCL,
-// medians of alternating renders, lanes / per path: principled spheres 502 /
-// 438 ms, pplastic spheres 454 / 405, thin principled sheets 531 / 390).
-bool lanes_slow_material(const Material& m) {
-  return m.type == PSF_MATERIAL_PRINCIPLED || m.type == PSF_MATERIAL_PRINCIPLED_THIN ||
-         m.type == PSF_MATERIAL_PPLASTIC;
-}
+// other path kernels: the thin principled BSDF, a large scalar function that
+// the lanes call out of line for one lane at a time (PoCL, medians of 10
+// alternating renders at 32 spp, lanes / per path: thin principled sheets 0.899 /
+// 0.876 s). The principled BSDF and pplastic were slower too (principled spheres
+// 502 / 438 ms, pplastic spheres 454 / 405) until the lanes read their frames
+// and vectors lane by lane where they lie (101a8a1): then principled spheres
+// 1.084 / 1.137 s (8 each), pplastic spheres 0.788 / 0.891 (6), the glTF
+// material spheres 11.0 / 13.4 (6).
+bool lanes_slow_material(const Material& m) { return m.type == PSF_MATERIAL_PRINCIPLED_THIN; }
 
 }  // namespace
 

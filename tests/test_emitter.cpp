@@ -1927,13 +1927,13 @@ TEST_CASE("Render: the lanes' own contributions equal accumulate's from their st
   }
 }
 
-TEST_CASE("Render: on CPUs the lanes are the default but for principled and pplastic; GPUs keep the wavefront",
+TEST_CASE("Render: on CPUs the lanes are the default but for thin principled; GPUs keep the wavefront",
           "[emitter]") {
   // host/render.cpp: with RenderOptions' defaults a CPU device renders the
-  // lanes' class with trace_lanes unless a material is principled, thin
-  // principled or pplastic (lanes_slow_material); those scenes go per path
-  // (trace_paths) without an environment map and to the wavefront (shade)
-  // with one. Other devices (GPUs) render every scene with the wavefront.
+  // lanes' class with trace_lanes unless a material is thin principled
+  // (lanes_slow_material); those scenes go per path (trace_paths) without an
+  // environment map and to the wavefront (shade) with one. Other devices
+  // (GPUs) render every scene with the wavefront.
   auto& rt = psf::test::runtime();
   const bool cpu = rt.device().type == "CPU";
   psf::Scene glossy_under_map = envmap_floor();
@@ -1943,6 +1943,8 @@ TEST_CASE("Render: on CPUs the lanes are the default but for principled and ppla
   psf::Scene principled_under_map = envmap_floor();
   principled_under_map.materials[0].type = PSF_MATERIAL_PRINCIPLED;
   principled_under_map.materials[0].alpha_u = principled_under_map.materials[0].alpha_v = 0.3f;
+  psf::Scene thin_under_map = principled_under_map;
+  thin_under_map.materials[0].type = PSF_MATERIAL_PRINCIPLED_THIN;
   struct Case {
     const char* name;
     psf::Scene scene;
@@ -1954,9 +1956,12 @@ TEST_CASE("Render: on CPUs the lanes are the default but for principled and ppla
       {"spheres, rough conductor, area light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")),
        "trace_lanes"},
       {"principled spheres, area light and constant sky",
-       psf::load_scene(psf::test::source_path("scenes/principled-spheres.xml")), "trace_paths"},
-      {"pplastic spheres", psf::load_scene(psf::test::source_path("scenes/pplastic-spheres.xml")), "trace_paths"},
-      {"principled, map", principled_under_map, "shade"},
+       psf::load_scene(psf::test::source_path("scenes/principled-spheres.xml")), "trace_lanes"},
+      {"pplastic spheres", psf::load_scene(psf::test::source_path("scenes/pplastic-spheres.xml")), "trace_lanes"},
+      {"principled, map", principled_under_map, "trace_lanes"},
+      {"thin principled sheets, sphere light",
+       psf::load_scene(psf::test::source_path("scenes/principledthin-sheets.xml")), "trace_paths"},
+      {"thin principled, map", thin_under_map, "shade"},
   };
   for (auto& c : cases) {
     INFO(c.name);
