@@ -654,7 +654,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         psf_prefetch(tri_pos + 3u * h.prim);
         psf_prefetch(tri_pos + 3u * h.prim + 2u);
         psf_prefetch(tri_material + h.prim);
-        psf_prefetch(tri_attribs + h.prim);
+        psf_prefetch(tri_light_pdf + h.prim);
+        psf_prefetch(tri_attribs + h.prim); /* its 96 bytes span two lines: flags and uvs in the second */
+        psf_prefetch((__global const char*)(tri_attribs + h.prim) + 64);
       }
       LANE_F(t, l) = h.t;
       LANE_U(prim, l) = h.prim;
