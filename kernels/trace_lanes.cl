@@ -803,20 +803,22 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(own_frame, l)) continue;
       const uint pr = LANE_U(prim, l);
-      Material m = materials[tri_material[pr]];
-      const float u_blend = m.blend != 0u ? surface_blend_u(psf_hash_combine(seed_hash, LANE_U(ln.pixel, l)),
-                                                            LANE_U(ln.sample, l), LANE_U(ln.depth, l))
-                                          : 0.0f;
+      /* lane_surface changes the lane's material in place: a copy of it made
+       * after those field stores would wait on them (store forwarding). */
+      Material* m = &mats[l];
+      *m = materials[tri_material[pr]];
+      const float u_blend = m->blend != 0u ? surface_blend_u(psf_hash_combine(seed_hash, LANE_U(ln.pixel, l)),
+                                                             LANE_U(ln.sample, l), LANE_U(ln.depth, l))
+                                           : 0.0f;
       Frame f;
-      lane_surface(&m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), VEC8_GET(p0, l), VEC8_GET(p1, l),
+      lane_surface(m, materials, tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l), VEC8_GET(p0, l), VEC8_GET(p1, l),
                    VEC8_GET(p2, l), VEC8_GET(ng, l), VEC8_GET(wo, l), textures, texels, u_blend, &f, &unperturbed[l]);
       vec8_set(&fs, l, f.s);
       vec8_set(&ft, l, f.t);
       vec8_set(&fn, l, f.n);
-      vec8_set(&albedo, l, bsdf_albedo(m));
-      LANE_I(scatters, l) = bsdf_scatters(m) ? -1 : 0;
-      LANE_I(diffuse, l) = bsdf_is_diffuse(m) ? -1 : 0;
-      mats[l] = m;
+      vec8_set(&albedo, l, bsdf_albedo(*m));
+      LANE_I(scatters, l) = bsdf_scatters(*m) ? -1 : 0;
+      LANE_I(diffuse, l) = bsdf_is_diffuse(*m) ? -1 : 0;
     }
     const float8 fn_wo = vec8_dot(fn, wo);
     /* The rough plastics that scatter in vectors (Plastic8): their parameters
