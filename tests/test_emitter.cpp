@@ -1883,6 +1883,21 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   }
 }
 
+// Every value of `test` within 1e-5 of `ref`'s, relative (1e-3 absolute near
+// zero), and `ref` not black.
+static void check_within_1e5(const psf::Image& test, const psf::Image& ref) {
+  REQUIRE(test.rgb.size() == ref.rgb.size());
+  double worst = 0.0, sum = 0.0;
+  for (size_t i = 0; i < ref.rgb.size(); ++i) {
+    const double a = test.rgb[i], b = ref.rgb[i];
+    worst = std::max(worst, std::abs(a - b) / std::max(1e-3, std::abs(b)));
+    sum += b;
+  }
+  INFO("largest relative difference " << worst << ", image sum " << sum);
+  CHECK(sum > 0.0);
+  CHECK(worst <= 1e-5);
+}
+
 TEST_CASE("Render: the lanes' own contributions equal accumulate's from their states", "[emitter]") {
   // Unfiltered, without tuples, AOVs or emission rays, trace_lanes writes each
   // path's contribution itself (radiance before the filtering vertex plus
@@ -1914,16 +1929,7 @@ TEST_CASE("Render: the lanes' own contributions equal accumulate's from their st
     psf::RenderResult stored = r.render(o);
     rt.finish();
     CHECK(rt.stats().count("accumulate") == 1);
-    REQUIRE(direct.image.rgb.size() == stored.image.rgb.size());
-    double worst = 0.0, sum = 0.0;
-    for (size_t i = 0; i < direct.image.rgb.size(); ++i) {
-      const double a = direct.image.rgb[i], b = stored.image.rgb[i];
-      worst = std::max(worst, std::abs(a - b) / std::max(1e-3, std::abs(b)));
-      sum += b;
-    }
-    INFO("largest relative difference " << worst << ", image sum " << sum);
-    CHECK(sum > 0.0);
-    CHECK(worst <= 1e-5);
+    check_within_1e5(direct.image, stored.image);
   }
 }
 
@@ -1958,18 +1964,7 @@ TEST_CASE("Render: the program as GPUs build it renders on PoCL as the CPU build
       INFO(name << ", " << (mode == 0 ? "wavefront" : mode == 1 ? "per path" : "lanes"));
       o.per_path = mode == 1 ? 1 : 0;
       o.lanes = mode == 2 ? 1 : 0;
-      const psf::RenderResult a = cpu_r.render(o);
-      const psf::RenderResult b = gpu_r.render(o);
-      REQUIRE(a.image.rgb.size() == b.image.rgb.size());
-      double worst = 0.0, sum = 0.0;
-      for (size_t i = 0; i < a.image.rgb.size(); ++i) {
-        const double x = a.image.rgb[i], y = b.image.rgb[i];
-        worst = std::max(worst, std::abs(x - y) / std::max(1e-3, std::abs(x)));
-        sum += x;
-      }
-      INFO("largest relative difference " << worst << ", image sum " << sum);
-      CHECK(sum > 0.0);
-      CHECK(worst <= 1e-5);
+      check_within_1e5(gpu_r.render(o).image, cpu_r.render(o).image);
     }
   }
 }
