@@ -893,29 +893,57 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0);
       uint8 light_tex = (uint8)(PSF_NO_TEXTURE), light_prim = (uint8)(0u);
       v0 = e1 = e2 = le = pending;
-      for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(scatter, l)) continue;
-        __global const Emitter* em = emitters + LANE_U(light, l);
-        if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
-          LANE_I(env_light, l) = -1;
-          LANE_F(choose, l) = em->radiance.w;
-          continue;
+      if (params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
+        /* A few lights: each light's data into the lanes that chose it, by
+         * selects, where lane stores would leave the vectors in memory for
+         * loads that wait on them (store forwarding). */
+        for (uint k = 0u; k < params.num_emitters; ++k) {
+          const int8 pick = scatter & as_int8(light == (uint8)(k));
+          if (!any(pick)) continue;
+          __global const Emitter* em = emitters + k;
+          if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
+            env_light |= pick;
+            choose = select(choose, (float8)(em->radiance.w), pick);
+          } else if (em->type != PSF_EMITTER_TRIANGLE) {
+            other_light |= pick;
+          } else {
+            const float4 a = em->v0, b = em->e1, c = em->e2, r = em->radiance;
+            v0 = vec8_select(v0, vec8((float8)(a.x), (float8)(a.y), (float8)(a.z)), pick);
+            e1 = vec8_select(e1, vec8((float8)(b.x), (float8)(b.y), (float8)(b.z)), pick);
+            e2 = vec8_select(e2, vec8((float8)(c.x), (float8)(c.y), (float8)(c.z)), pick);
+            le = vec8_select(le, vec8((float8)(r.x), (float8)(r.y), (float8)(r.z)), pick);
+            area = select(area, (float8)(a.w), pick);
+            choose = select(choose, (float8)(r.w), pick);
+            light_two_sided = select(light_two_sided, (int8)(em->two_sided ? -1 : 0), pick);
+            light_tex = select(light_tex, (uint8)(em->tex_emission), as_uint8(pick));
+            light_prim = select(light_prim, (uint8)(em->prim), as_uint8(pick));
+          }
         }
-        if (em->type != PSF_EMITTER_TRIANGLE) {
-          LANE_I(other_light, l) = -1;
-          continue;
+      } else {
+        for (uint l = 0u; l < PSF_LANES; ++l) {
+          if (!LANE_I(scatter, l)) continue;
+          __global const Emitter* em = emitters + LANE_U(light, l);
+          if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
+            LANE_I(env_light, l) = -1;
+            LANE_F(choose, l) = em->radiance.w;
+            continue;
+          }
+          if (em->type != PSF_EMITTER_TRIANGLE) {
+            LANE_I(other_light, l) = -1;
+            continue;
+          }
+          const float4 a = em->v0;
+          vec8_set(&v0, l, a.xyz);
+          LANE_F(area, l) = a.w;
+          vec8_set(&e1, l, em->e1.xyz);
+          vec8_set(&e2, l, em->e2.xyz);
+          const float4 r = em->radiance;
+          vec8_set(&le, l, r.xyz);
+          LANE_F(choose, l) = r.w;
+          LANE_I(light_two_sided, l) = em->two_sided ? -1 : 0;
+          LANE_U(light_tex, l) = em->tex_emission;
+          LANE_U(light_prim, l) = em->prim;
         }
-        const float4 a = em->v0;
-        vec8_set(&v0, l, a.xyz);
-        LANE_F(area, l) = a.w;
-        vec8_set(&e1, l, em->e1.xyz);
-        vec8_set(&e2, l, em->e2.xyz);
-        const float4 r = em->radiance;
-        vec8_set(&le, l, r.xyz);
-        LANE_F(choose, l) = r.w;
-        LANE_I(light_two_sided, l) = em->two_sided ? -1 : 0;
-        LANE_U(light_tex, l) = em->tex_emission;
-        LANE_U(light_prim, l) = em->prim;
       }
       const float8 su = sqrt(u_la);
       const Vec8 lp = vec8_add(v0, vec8_add(vec8_scale(e1, su * (1.0f - u_lb)), vec8_scale(e2, su * u_lb)));
