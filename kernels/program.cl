@@ -44,9 +44,13 @@
  * Where the target has AVX (PoCL on x86) the lanes' sign bits in one
  * instruction (vmovmskps; bench_raycast's paired ratios to Embree 5 % higher
  * than with the multiplication), elsewhere one byte per lane gathered into
- * the top byte by a multiplication. */
+ * the top byte by a multiplication (PSF_PORTABLE_LANES=1 asks for it on AVX
+ * targets too: a test builds the GPUs' program on PoCL so). */
+#ifndef PSF_PORTABLE_LANES
+#define PSF_PORTABLE_LANES 0
+#endif
 inline uint psf_lanes8(int8 c) {
-#if defined(__AVX__)
+#if defined(__AVX__) && !PSF_PORTABLE_LANES
   return (uint)__builtin_ia32_movmskps256(as_float8(c));
 #else
   const ulong bytes = as_ulong(convert_uchar8(c) & (uchar8)(1));

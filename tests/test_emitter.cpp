@@ -1936,7 +1936,8 @@ TEST_CASE("Render: the lanes' own contributions equal accumulate's from their st
 TEST_CASE("Render: the program as GPUs build it renders on PoCL as the CPU build does", "[emitter]") {
   // GPUs build kernels/program.cl without PSF_CPU_DEVICE and PSF_PREFETCH (the
   // host sets both for CPUs): the sphere test inlined, the guided cdf search as
-  // a loop, no prefetches. Those branches otherwise compile only where a GPU
+  // a loop, no prefetches; and lane masks by multiplication, as targets without
+  // AVX take them (PSF_PORTABLE_LANES). Those branches otherwise compile only where a GPU
   // is; here PoCL builds them too, and each path kernel (the wavefront GPUs
   // use, one path per work-item, the lanes) renders with both builds. The same
   // samples and arithmetic, so the images must agree to float rounding (the
@@ -1950,7 +1951,7 @@ TEST_CASE("Render: the program as GPUs build it renders on PoCL as the CPU build
     WARN("the test device is no CPU: its default build is the GPU one (skipped)");
     return;
   }
-  psf::Runtime gpu_build(rt.device(), "-DPSF_CPU_DEVICE=0 -DPSF_PREFETCH=0");
+  psf::Runtime gpu_build(rt.device(), "-DPSF_CPU_DEVICE=0 -DPSF_PREFETCH=0 -DPSF_PORTABLE_LANES=1");
   NamedScenes scenes;
   scenes.emplace_back("cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")));
   scenes.emplace_back("sphere light", psf::load_scene(psf::test::source_path("scenes/sphere-light.xml")));
