@@ -19,10 +19,11 @@
  * environment an escaped ray sees, a light sample
  * on a point, spot, directional or sphere light (emitter.cl emitter_sample),
  * a hit on an analytic sphere. A light sample on an environment map takes its
- * steps over all lanes before the next (lanes_env_sample), so that the lanes'
- * cache misses overlap. A lane whose path ends stores the path's state and
- * takes the next path of the work-item's run of `per_item` paths, so the
- * lanes stay full until the run's end. The kernel draws its camera rays itself
+ * steps over all lanes before the next, between the closest-hit casts
+ * (EnvLanes), so that the lanes' cache misses overlap and wait behind casts.
+ * A lane whose path ends stores the path's state and takes the next path of
+ * the work-item's run of `per_item` paths, so the lanes stay full until the
+ * run's end. The kernel draws its camera rays itself
  * (camera_rays8: camera.cl's rays from the same samples, eight paths in
  * vectors), so that no camera_rays pass writes rays and states for it to read.
  * Where nothing after the trace reads the paths' states and filtering vertices
@@ -428,45 +429,68 @@ inline void env_prefetch_lookup(Environment env, __global const float* data, flo
   env_prefetch_texels(env, data, uv);
 }
 
-/* Light samples on an environment map (env.width > 0) for the lanes of `mask`,
- * as emitter_sample draws them (emitter.cl env_sample: the row, the block, the
- * texel and its direction, then the radiance), each step over the lanes before
- * the next, with a prefetch of what the next step reads: the lanes' cache
- * misses then overlap, where one lane's chain of them waits on each in turn
- * (shade.cl's wavefront does the same with a kernel per step). The sample's
- * direction, pdf (times the environment's selection probability `choose`) and
- * radiance go into the lanes of wi, pdf and radiance; a lane whose texel has no
- * probability gets pdf 0, as emitter_sample. */
-inline void lanes_env_sample(Environment env, __global const float* data, int8 mask, float8 u1, float8 u2,
-                             float8 choose, Vec8* wi, float8* pdf, Vec8* radiance) {
-  float4 r[PSF_LANES];
-  uint y[PSF_LANES], b[PSF_LANES];
+/* Light samples on an environment map (env.width > 0) for the lanes of
+ * `mask`, as emitter_sample draws them (emitter.cl env_sample: the row, the
+ * block, the texel and its direction, then the radiance), in five steps, each
+ * over the lanes before the next and each prefetching what the next reads.
+ * A sample depends on the lane's two numbers only, not on the hit, so the
+ * kernel starts the lanes' samples before their closest-hit casts and takes
+ * the steps between them (trace_lanes): each chain of cache misses (the row's
+ * block guide, its block cdf, the block's texel cdf, the texels) then waits
+ * behind a cast instead of stalling the kernel, where a step right after the
+ * one before waited on its prefetch. A lane whose texel has no probability
+ * gets pdf 0, as emitter_sample. */
+typedef struct {
+  float4 r[PSF_LANES]; /* env_sample_row's, then env_sample_block's record */
+  uint y[PSF_LANES];   /* the row */
+  uint b[PSF_LANES];   /* the block */
   float2 uv[PSF_LANES];
+  int8 mask;  /* the lanes with a sample */
+  Vec8 wi;    /* the direction (world), where pdf > 0 */
+  float8 pdf; /* its solid-angle pdf times the environment's selection probability */
+} EnvLanes;
+
+/* Step 1: the rows, from the marginal cdf (small, in cache); prefetches the
+ * rows' block guide entries. */
+inline void env_lanes_row(Environment env, __global const float* data, int8 mask, float8 u1, float8 u2, EnvLanes* e) {
+  e->mask = mask;
   for (uint l = 0u; l < PSF_LANES; ++l) {
     if (!LANE_I(mask, l)) continue;
-    r[l] = env_sample_row(env, data, LANE_F(u1, l), LANE_F(u2, l), &y[l]);
-    psf_prefetch(data + env_block_guide_at(env, y[l], r[l].x));
+    e->r[l] = env_sample_row(env, data, LANE_F(u1, l), LANE_F(u2, l), &e->y[l]);
+    psf_prefetch(data + env_block_guide_at(env, e->y[l], e->r[l].x));
   }
+}
+/* Step 2: the guide entries; prefetches the block cdf entries they point at. */
+inline void env_lanes_guide(Environment env, __global const float* data, const EnvLanes* e) {
   for (uint l = 0u; l < PSF_LANES; ++l)
-    if (LANE_I(mask, l))
-      psf_prefetch(data + env_block_cdf_at(env, y[l]) + as_uint(data[env_block_guide_at(env, y[l], r[l].x)]));
+    if (LANE_I(e->mask, l))
+      psf_prefetch(data + env_block_cdf_at(env, e->y[l]) + as_uint(data[env_block_guide_at(env, e->y[l], e->r[l].x)]));
+}
+/* Step 3: the blocks; prefetches their texel cdfs. */
+inline void env_lanes_block(Environment env, __global const float* data, EnvLanes* e) {
   for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(mask, l)) continue;
-    r[l] = env_sample_block(env, data, r[l], y[l], &b[l]);
-    psf_prefetch(data + env_texel_cdf_offset(env, y[l], b[l]));
+    if (!LANE_I(e->mask, l)) continue;
+    e->r[l] = env_sample_block(env, data, e->r[l], e->y[l], &e->b[l]);
+    psf_prefetch(data + env_texel_cdf_offset(env, e->y[l], e->b[l]));
   }
+}
+/* Step 4: the texels, the directions and their pdfs (times `choose`); prefetches the texels. */
+inline void env_lanes_cell(Environment env, __global const float* data, float choose, EnvLanes* e) {
   for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(mask, l)) continue;
+    if (!LANE_I(e->mask, l)) continue;
     float p;
-    const float3 w = env_sample_cell(env, data, r[l], (uint2)(y[l], b[l]), &p, &uv[l]);
-    vec8_set(wi, l, p > 0.0f ? w : (float3)(0.0f, 0.0f, 1.0f));
-    LANE_F(*pdf, l) = p > 0.0f ? LANE_F(choose, l) * p : 0.0f;
-    if (p > 0.0f) env_prefetch_texels(env, data, uv[l]);
+    const float3 w = env_sample_cell(env, data, e->r[l], (uint2)(e->y[l], e->b[l]), &p, &e->uv[l]);
+    vec8_set(&e->wi, l, p > 0.0f ? w : (float3)(0.0f, 0.0f, 1.0f));
+    LANE_F(e->pdf, l) = p > 0.0f ? choose * p : 0.0f;
+    if (p > 0.0f) env_prefetch_texels(env, data, e->uv[l]);
   }
+}
+/* Step 5: the radiance of the lanes of `mask` (among e's) into radiance, where pdf > 0. */
+inline void env_lanes_radiance(Environment env, __global const float* data, const EnvLanes* e, int8 mask,
+                               Vec8* radiance) {
   for (uint l = 0u; l < PSF_LANES; ++l)
-    vec8_set(radiance, l,
-             LANE_I(mask, l) && LANE_F(*pdf, l) > 0.0f ? env_lookup(env, data, uv[l]) * env.scale.xyz
-                                                       : VEC8_GET(*radiance, l));
+    if (LANE_I(mask, l) && LANE_F(e->pdf, l) > 0.0f)
+      vec8_set(radiance, l, env_lookup(env, data, e->uv[l]) * env.scale.xyz);
 }
 
 /* One lane's casts (raycast.cl), out of line: the kernel calls each in a loop
@@ -637,10 +661,62 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
   const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
 
   while (any(ln.live)) {
+    /* The bounce's samples (shade.cl bounce_samples), across the lanes, and
+     * its light choice: before the casts, for every live lane (those that
+     * scatter are among them, and a lane's numbers do not depend on the
+     * others'), so that the environment map's light samples can start. */
+    float8 u[PSF_DIMS_PER_BOUNCE];
+    lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, ln.live, u);
+    const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
+    const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
+    const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
+    /* The light, by sample_cdf_guided for all lanes at once: each lane's guide
+     * entry, then the forward steps of the lanes together, so that no lane's
+     * number of steps is a branch to mispredict. With a few lights, the number
+     * of cdf entries at most u instead (the same index: the guide entry is at
+     * most it), from loads all lanes share rather than gathers. */
+    uint8 light = (uint8)(0u);
+    if (params.num_emitters > 0u && params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
+      for (uint k = 0u; k + 1u < params.num_emitters; ++k)
+        light -= as_uint8(ln.live & ((float8)(emitter_cdf[k]) <= u_light));
+    } else if (params.num_emitters > 0u) {
+      const uint n = params.num_emitters;
+      for (uint l = 0u; l < PSF_LANES; ++l)
+        if (LANE_I(ln.live, l))
+          LANE_U(light, l) = as_uint(emitter_cdf[n + min((uint)(LANE_F(u_light, l) * (float)n), n - 1u)]);
+      for (;;) {
+        float8 c;
+        for (uint l = 0u; l < PSF_LANES; ++l) LANE_F(c, l) = emitter_cdf[LANE_U(light, l)];
+        const int8 step = ln.live & (light < (uint8)(n - 1u)) & (c <= u_light);
+        if (!any(step)) break;
+        light = select(light, light + 1u, as_uint8(step));
+      }
+    }
+
+    /* The lanes that chose an environment map start their samples (EnvLanes):
+     * the steps run between the closest-hit casts. */
+    EnvLanes env_lanes;
+    int8 env_choice = (int8)(0);
+    if (env.width > 0u && params.num_emitters > 0u) {
+      if (params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
+        for (uint k = 0u; k < params.num_emitters; ++k)
+          if (emitters[k].type == PSF_EMITTER_ENVIRONMENT) env_choice |= ln.live & as_int8(light == (uint8)(k));
+      } else {
+        for (uint l = 0u; l < PSF_LANES; ++l)
+          if (LANE_I(ln.live, l) && emitters[LANE_U(light, l)].type == PSF_EMITTER_ENVIRONMENT)
+            LANE_I(env_choice, l) = -1;
+      }
+    }
+    const bool env_samples = any(env_choice);
+    if (env_samples) env_lanes_row(env, env_data, env_choice, u_la, u_lb, &env_lanes);
+
     /* The closest hits, lane by lane. */
     float8 t = (float8)(0.0f), bu = (float8)(0.0f), bv = (float8)(0.0f);
     uint8 prim = (uint8)(PSF_NO_HIT);
     for (uint l = 0u; l < PSF_LANES; ++l) {
+      if (env_samples && l == 2u) env_lanes_guide(env, env_data, &env_lanes);
+      if (env_samples && l == 4u) env_lanes_block(env, env_data, &env_lanes);
+      if (env_samples && l == 6u) env_lanes_cell(env, env_data, env.scale.w, &env_lanes);
       if (!LANE_I(ln.live, l)) continue;
       Ray r;
       r.org = (float4)(VEC8_GET(ln.org, l), LANE_F(ln.tmin, l));
@@ -849,39 +925,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.flags = select(ln.flags, ln.flags | (PSF_PATH_VERTEX | PSF_PATH_VERTEX_NEW), as_uint8(new_vertex));
     Vec8 beta = vec8_select(ln.beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), new_vertex);
 
-    /* The bounce's samples (shade.cl bounce_samples), across the lanes. */
-    float8 u[PSF_DIMS_PER_BOUNCE];
-    lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, scatter, u);
-    const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
-    const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
-    const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
-    /* The light, by sample_cdf_guided for all lanes at once: each lane's guide
-     * entry, then the forward steps of the lanes together, so that no lane's
-     * number of steps is a branch to mispredict. With a few lights, the number
-     * of cdf entries at most u instead (the same index: the guide entry is at
-     * most it), from loads all lanes share rather than gathers. */
-    uint8 light = (uint8)(0u);
-    if (params.num_emitters > 0u && params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
-      for (uint k = 0u; k + 1u < params.num_emitters; ++k)
-        light -= as_uint8(scatter & ((float8)(emitter_cdf[k]) <= u_light));
-    } else if (params.num_emitters > 0u) {
-      const uint n = params.num_emitters;
-      for (uint l = 0u; l < PSF_LANES; ++l)
-        if (LANE_I(scatter, l))
-          LANE_U(light, l) = as_uint(emitter_cdf[n + min((uint)(LANE_F(u_light, l) * (float)n), n - 1u)]);
-      for (;;) {
-        float8 c;
-        for (uint l = 0u; l < PSF_LANES; ++l) LANE_F(c, l) = emitter_cdf[LANE_U(light, l)];
-        const int8 step = scatter & (light < (uint8)(n - 1u)) & (c <= u_light);
-        if (!any(step)) break;
-        light = select(light, light + 1u, as_uint8(step));
-      }
-    }
-
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
      * emitter_sample) in vectors, any other light (a constant environment,
      * point, spot, directional and sphere lights) by emitter_sample itself,
-     * lane by lane, and an environment map's by lanes_env_sample; the sample's
+     * lane by lane, and an environment map's from EnvLanes; the sample's
      * MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     Vec8 shadow_org = pending, shadow_dir = pending;
@@ -980,7 +1027,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         LANE_I(delta, l) = ls.delta ? -1 : 0;
       }
       if (any(env_light)) {
-        lanes_env_sample(env, env_data, env_light, u_la, u_lb, choose, &wi, &lpdf, &le);
+        wi = vec8_select(wi, env_lanes.wi, env_light);
+        lpdf = select(lpdf, env_lanes.pdf, env_light);
+        env_lanes_radiance(env, env_data, &env_lanes, env_light, &le);
         ldist = select(ldist, (float8)(INFINITY), env_light);
       }
       const float8 cos_i = vec8_dot(wi, fn);

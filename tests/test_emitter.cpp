@@ -1689,6 +1689,19 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     psf::Scene t = envmap_floor();
     add_quad(t, {-1, 0.5f, -1}, {0, 0, 1}, {1, 0, 0}, t.tri_material[0]);
     cases.push_back({"envmap floor, occluder", t, true});
+    // Nine small lights facing the floor beside the map: 19 lights, more than
+    // the lanes choose among by counting cdf entries, so the lanes that chose
+    // the map are found through the guided cdf before their casts (EnvLanes).
+    Material light{};
+    light.type = PSF_MATERIAL_DIFFUSE;
+    light.emission = {{1.5f, 1.0f, 0.5f, 0}};
+    t.materials.push_back(light);
+    t.material_names.push_back("light");
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        add_quad(t, {-0.9f + 0.7f * i, 0.9f, -0.9f + 0.7f * j}, {0.1f, 0, 0}, {0, 0, 0.1f},
+                 uint32_t(t.materials.size() - 1));
+    cases.push_back({"envmap floor, occluder, 18 light triangles", t, true});
   }
   {
     // A textured floor under an area light and a point light, with a leaf
