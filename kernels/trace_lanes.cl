@@ -733,6 +733,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         psf_prefetch(tri_light_pdf + h.prim);
         psf_prefetch(tri_attribs + h.prim); /* its 96 bytes span two lines: flags and uvs in the second */
         psf_prefetch((__global const char*)(tri_attribs + h.prim) + 64);
+      } else if (PSF_PREFETCH && env.width > 0u) { /* what the environment's lookup below reads */
+        env_prefetch_lookup(env, env_data, normalize(VEC8_GET(ln.dir, l)));
       }
       LANE_F(t, l) = h.t;
       LANE_U(prim, l) = h.prim;
@@ -748,9 +750,6 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const int8 escaped = ln.live & ~hit;
       Vec8 seen = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
       int8 sees = (int8)(0);
-      if (PSF_PREFETCH && env.width > 0u) /* first what the lanes' lookups read, so that their misses overlap */
-        for (uint l = 0u; l < PSF_LANES; ++l)
-          if (LANE_I(escaped, l)) env_prefetch_lookup(env, env_data, normalize(VEC8_GET(ln.dir, l)));
       for (uint l = 0u; l < PSF_LANES; ++l) {
         if (!LANE_I(escaped, l)) continue;
         const uint depth = LANE_U(ln.depth, l);
