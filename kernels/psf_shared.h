@@ -462,7 +462,7 @@ typedef struct {
                               boundary is crossed without counting (a bound the compiler knows is 5 % faster) */
   psf_uint null_media;     /* 1: the scene has a medium behind a null boundary, which shadow rays pass with the
                               transmittance of the media they cross (shade.cl shadow_cast); 0: none */
-  psf_uint pad2;           /* to a multiple of 16 bytes */
+  psf_uint spheres;        /* 1: the BVH holds analytic spheres; 0: trace_lanes casts without their test */
 } FrameParams;
 
 #define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */

@@ -483,9 +483,12 @@ inline Hit hit_none(Ray ray) {
   return hit;
 }
 
-/* The closest hit of `ray` (see the file comment); alpha-tested if `as` is not null. */
-BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
-                                       const AlphaScene* as) {
+/* The closest hit of `ray` (see the file comment); alpha-tested if `as` is not
+ * null. `spheres` false: the BVH holds no sphere packs, and the code for them
+ * (the call to sphere_pack_test, around which a CPU's caller spills its
+ * vectors) is left out. */
+BVH_INLINE Hit intersect_closest_leaves(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                        const AlphaScene* as, bool spheres) {
   Hit hit = hit_none(ray);
   float tmin = ray.org.w;
   if (!(ray.dir.w >= 0.0f)) return hit;
@@ -501,7 +504,7 @@ BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global c
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
-      leaf_closest(packs, first, end, (ref & PSF_LEAF_SPHERES) != 0u, org, dir, dir_len, tmin, &hit, as);
+      leaf_closest(packs, first, end, spheres && (ref & PSF_LEAF_SPHERES) != 0u, org, dir, dir_len, tmin, &hit, as);
     } else {
       __global const float* f = (__global const float*)(nodes + ref);
       bvh_floatw tn;
@@ -587,15 +590,21 @@ BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global c
   }
 }
 
+/* The closest hit of `ray`, alpha-tested if `as` is not null. */
+BVH_INLINE Hit intersect_closest_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                       const AlphaScene* as) {
+  return intersect_closest_leaves(nodes, packs, ray, as, true);
+}
+
 /* The closest hit of `ray` (see the file comment). */
 inline Hit intersect_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray) {
   return intersect_closest_alpha(nodes, packs, ray, 0);
 }
 
 /* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none;
- * alpha-tested if `as` is not null. */
-BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
-                                       const AlphaScene* as) {
+ * alpha-tested if `as` is not null; `spheres` as intersect_closest_leaves'. */
+BVH_INLINE Hit intersect_any_hit_leaves(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                        const AlphaScene* as, bool spheres) {
   Hit hit = hit_none(ray);
   float tmin = ray.org.w;
   if (!(ray.dir.w >= 0.0f)) return hit;
@@ -610,12 +619,12 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
-      const bool spheres = (ref & PSF_LEAF_SPHERES) != 0u;
+      const bool sphere_packs = spheres && (ref & PSF_LEAF_SPHERES) != 0u;
       for (uint k = first; k < end; ++k) {
         __global const float* p = (__global const float*)(packs + k);
         bvh_floatw t, u, v;
         uint mask;
-        if (spheres && pack_is_spheres(p)) {
+        if (sphere_packs && pack_is_spheres(p)) {
           mask = sphere_pack_test(p, org, dir, dir_len, tmin, hit.t, &t);
           u = v = (bvh_floatw)(0.0f);
         } else {
@@ -650,6 +659,12 @@ BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global c
     if (sp == 0) return hit;
     ref = stack_ref[--sp];
   }
+}
+
+/* Some hit of `ray` within (tmin, tmax), alpha-tested if `as` is not null. */
+BVH_INLINE Hit intersect_any_hit_alpha(__global const BvhNode* nodes, __global const BvhTriPack* packs, Ray ray,
+                                       const AlphaScene* as) {
+  return intersect_any_hit_leaves(nodes, packs, ray, as, true);
 }
 
 /* Some hit of `ray` within (tmin, tmax), prim PSF_NO_HIT when there is none. */

@@ -497,24 +497,56 @@ inline void env_lanes_radiance(Environment env, __global const float* data, cons
  * over the lanes, and its vectors stay where they are across the call. The
  * ray and hit go by pointer: by value, the ray's two halves were stored apart
  * and loaded as one, a stall on every call (PoCL, Mitsuba's cbox: the
- * call's argument copy was 8 % of the kernel's samples). */
-__attribute__((noinline)) void lane_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                            const Ray* r, Hit* h) {
-  *h = intersect_closest_alpha(nodes, packs, *r, 0);
+ * call's argument copy was 8 % of the kernel's samples). Alpha-tested apart
+ * (lane_*_masked: a scene with opacity masks), so that the casts of a scene
+ * without masks compile without the tests; and without the sphere test apart
+ * (lane_*_tris: a scene without analytic spheres), where the call to
+ * sphere_pack_test made every cast spill twelve vectors on entry (Mitsuba's
+ * cbox: 2-3 % of a render). */
+#define PSF_LANE_CASTS(SUFFIX, SPHERES)                                                                                \
+  __attribute__((noinline)) void lane_closest##SUFFIX(__global const BvhNode* nodes, __global const BvhTriPack* packs, \
+                                                      const Ray* r, Hit* h) {                                          \
+    *h = intersect_closest_leaves(nodes, packs, *r, 0, SPHERES);                                                       \
+  }                                                                                                                    \
+  __attribute__((noinline)) void lane_any##SUFFIX(__global const BvhNode* nodes, __global const BvhTriPack* packs,     \
+                                                  const Ray* r, Hit* h) {                                              \
+    *h = intersect_any_hit_leaves(nodes, packs, *r, 0, SPHERES);                                                       \
+  }                                                                                                                    \
+  __attribute__((noinline)) void lane_closest_masked##SUFFIX(__global const BvhNode* nodes,                            \
+                                                             __global const BvhTriPack* packs,                         \
+                                                             const AlphaScene* alpha, const Ray* r, Hit* h) {          \
+    *h = intersect_closest_leaves(nodes, packs, *r, alpha, SPHERES);                                                   \
+  }                                                                                                                    \
+  __attribute__((noinline)) void lane_any_masked##SUFFIX(__global const BvhNode* nodes,                                \
+                                                         __global const BvhTriPack* packs, const AlphaScene* alpha,    \
+                                                         const Ray* r, Hit* h) {                                       \
+    *h = intersect_any_hit_leaves(nodes, packs, *r, alpha, SPHERES);                                                   \
+  }
+PSF_LANE_CASTS(, true)
+PSF_LANE_CASTS(_tris, false)
+
+/* Lane casts by the scene's kind: alpha-tested (`masked`), with spheres. */
+inline void lane_cast_closest(bool masked, bool spheres, __global const BvhNode* nodes,
+                              __global const BvhTriPack* packs, const AlphaScene* alpha, const Ray* r, Hit* h) {
+  if (masked && spheres)
+    lane_closest_masked(nodes, packs, alpha, r, h);
+  else if (masked)
+    lane_closest_masked_tris(nodes, packs, alpha, r, h);
+  else if (spheres)
+    lane_closest(nodes, packs, r, h);
+  else
+    lane_closest_tris(nodes, packs, r, h);
 }
-__attribute__((noinline)) void lane_any(__global const BvhNode* nodes, __global const BvhTriPack* packs, const Ray* r,
-                                        Hit* h) {
-  *h = intersect_any_hit_alpha(nodes, packs, *r, 0);
-}
-/* The same, alpha-tested (a scene with opacity masks); apart, so that the
- * casts of a scene without masks compile without the tests. */
-__attribute__((noinline)) void lane_closest_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                                   const AlphaScene* alpha, const Ray* r, Hit* h) {
-  *h = intersect_closest_alpha(nodes, packs, *r, alpha);
-}
-__attribute__((noinline)) void lane_any_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                               const AlphaScene* alpha, const Ray* r, Hit* h) {
-  *h = intersect_any_hit_alpha(nodes, packs, *r, alpha);
+inline void lane_cast_any(bool masked, bool spheres, __global const BvhNode* nodes, __global const BvhTriPack* packs,
+                          const AlphaScene* alpha, const Ray* r, Hit* h) {
+  if (masked && spheres)
+    lane_any_masked(nodes, packs, alpha, r, h);
+  else if (masked)
+    lane_any_masked_tris(nodes, packs, alpha, r, h);
+  else if (spheres)
+    lane_any(nodes, packs, r, h);
+  else
+    lane_any_tris(nodes, packs, r, h);
 }
 
 /* One lane's surface where the vectors do not shade it (a colour texture or a
@@ -722,10 +754,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       r.org = (float4)(VEC8_GET(ln.org, l), LANE_F(ln.tmin, l));
       r.dir = (float4)(VEC8_GET(ln.dir, l), LANE_F(ln.tmax, l));
       Hit h;
-      if (masked)
-        lane_closest_masked(nodes, packs, &alpha, &r, &h);
-      else
-        lane_closest(nodes, packs, &r, &h);
+      lane_cast_closest(masked, params.spheres, nodes, packs, &alpha, &r, &h);
       if (PSF_PREFETCH && h.prim != PSF_NO_HIT) { /* what shading reads of the hit, while the other lanes cast */
         psf_prefetch(tri_pos + 3u * h.prim);
         psf_prefetch(tri_pos + 3u * h.prim + 2u);
@@ -1126,10 +1155,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       r.org = (float4)(VEC8_GET(shadow_org, l), 0.0f);
       r.dir = (float4)(VEC8_GET(shadow_dir, l), LANE_F(shadow_tmax, l));
       Hit h;
-      if (masked)
-        lane_any_masked(nodes, packs, &alpha, &r, &h);
-      else
-        lane_any(nodes, packs, &r, &h);
+      lane_cast_any(masked, params.spheres, nodes, packs, &alpha, &r, &h);
       LANE_I(visible, l) = h.prim != PSF_NO_HIT ? 0 : -1;
     }
     lanes_add_radiance(&ln, pending, visible, false);

@@ -82,6 +82,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, first_sphere)", offsetof(FrameParams, first_sphere)},
       {"offsetof(FrameParams, camera_medium)", offsetof(FrameParams, camera_medium)},
       {"offsetof(FrameParams, max_rounds)", offsetof(FrameParams, max_rounds)},
+      {"offsetof(FrameParams, spheres)", offsetof(FrameParams, spheres)},
       {"sizeof(FilterParams)", sizeof(FilterParams)},
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},
