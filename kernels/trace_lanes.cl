@@ -444,7 +444,7 @@ typedef struct {
   float4 r[PSF_LANES]; /* env_sample_row's, then env_sample_block's record */
   uint y[PSF_LANES];   /* the row */
   uint b[PSF_LANES];   /* the block */
-  float2 uv[PSF_LANES];
+  float2 uv[PSF_LANES]; /* the texels' map coordinates */
   int8 mask;  /* the lanes with a sample */
   Vec8 wi;    /* the direction (world), where pdf > 0 */
   float8 pdf; /* its solid-angle pdf times the environment's selection probability */
