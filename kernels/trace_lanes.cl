@@ -1149,8 +1149,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The shadow rays, lane by lane (trace_paths' intersect_any_hit_alpha
      * without alpha), and what they decide (shade.cl shadow_slot). */
     int8 visible = (int8)(0);
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(contributes, l)) continue;
+    for (uint m = psf_lanes8(contributes); m != 0u; m &= m - 1u) { /* the lanes set, no branch per lane */
+      const uint l = bvh_first_lane(m);
       Ray r;
       r.org = (float4)(VEC8_GET(shadow_org, l), 0.0f);
       r.dir = (float4)(VEC8_GET(shadow_dir, l), LANE_F(shadow_tmax, l));
@@ -1184,8 +1184,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.depth = select(ln.depth, ln.depth + 1u, as_uint8(go));
     const int8 ends = ln.live & ~go;
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(ends, l)) continue;
+    for (uint m = psf_lanes8(ends); m != 0u; m &= m - 1u) {
+      const uint l = bvh_first_lane(m);
       lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, contrib);
       LANE_I(ln.live, l) = 0;
       if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
