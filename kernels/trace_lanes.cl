@@ -441,21 +441,21 @@ inline void env_prefetch_lookup(Environment env, __global const float* data, flo
  * one before waited on its prefetch. A lane whose texel has no probability
  * gets pdf 0, as emitter_sample. */
 typedef struct {
-  float4 r[PSF_LANES]; /* env_sample_row's, then env_sample_block's record */
-  uint y[PSF_LANES];   /* the row */
-  uint b[PSF_LANES];   /* the block */
+  float4 r[PSF_LANES];  /* env_sample_row's, then env_sample_block's record */
+  uint y[PSF_LANES];    /* the row */
+  uint b[PSF_LANES];    /* the block */
   float2 uv[PSF_LANES]; /* the texels' map coordinates */
-  int8 mask;  /* the lanes with a sample */
-  Vec8 wi;    /* the direction (world), where pdf > 0 */
-  float8 pdf; /* its solid-angle pdf times the environment's selection probability */
+  int8 mask;            /* the lanes with a sample */
+  Vec8 wi;              /* the direction (world), where pdf > 0 */
+  float8 pdf;           /* its solid-angle pdf times the environment's selection probability */
 } EnvLanes;
 
 /* Step 1: the rows, from the marginal cdf (small, in cache); prefetches the
  * rows' block guide entries. */
 inline void env_lanes_row(Environment env, __global const float* data, int8 mask, float8 u1, float8 u2, EnvLanes* e) {
   e->mask = mask;
-  for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(mask, l)) continue;
+  for (uint todo = psf_lanes8(mask); todo != 0u; todo &= todo - 1u) {
+    const uint l = bvh_first_lane(todo);
     e->r[l] = env_sample_row(env, data, LANE_F(u1, l), LANE_F(u2, l), &e->y[l]);
     psf_prefetch(data + env_block_guide_at(env, e->y[l], e->r[l].x));
   }
@@ -468,16 +468,16 @@ inline void env_lanes_guide(Environment env, __global const float* data, const E
 }
 /* Step 3: the blocks; prefetches their texel cdfs. */
 inline void env_lanes_block(Environment env, __global const float* data, EnvLanes* e) {
-  for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(e->mask, l)) continue;
+  for (uint todo = psf_lanes8(e->mask); todo != 0u; todo &= todo - 1u) {
+    const uint l = bvh_first_lane(todo);
     e->r[l] = env_sample_block(env, data, e->r[l], e->y[l], &e->b[l]);
     psf_prefetch(data + env_texel_cdf_offset(env, e->y[l], e->b[l]));
   }
 }
 /* Step 4: the texels, the directions and their pdfs (times `choose`); prefetches the texels. */
 inline void env_lanes_cell(Environment env, __global const float* data, float choose, EnvLanes* e) {
-  for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(e->mask, l)) continue;
+  for (uint todo = psf_lanes8(e->mask); todo != 0u; todo &= todo - 1u) {
+    const uint l = bvh_first_lane(todo);
     float p;
     const float3 w = env_sample_cell(env, data, e->r[l], (uint2)(e->y[l], e->b[l]), &p, &e->uv[l]);
     vec8_set(&e->wi, l, p > 0.0f ? w : (float3)(0.0f, 0.0f, 1.0f));
@@ -779,8 +779,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const int8 escaped = ln.live & ~hit;
       Vec8 seen = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
       int8 sees = (int8)(0);
-      for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(escaped, l)) continue;
+      for (uint todo = psf_lanes8(escaped); todo != 0u; todo &= todo - 1u) {
+        const uint l = bvh_first_lane(todo);
         const uint depth = LANE_U(ln.depth, l);
         if (depth == 0u && (params.hide & PSF_HIDE_ENVIRONMENT)) continue;
         const float3 d = normalize(VEC8_GET(ln.dir, l));
@@ -904,8 +904,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
           texture_prefetch(textures, texels, materials[tri_material[pr]].tex_color,
                            surface_uv(tri_attribs + pr, LANE_F(bu, l), LANE_F(bv, l)));
         }
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(own_frame, l)) continue;
+    for (uint todo = psf_lanes8(own_frame); todo != 0u; todo &= todo - 1u) {
+      const uint l = bvh_first_lane(todo);
       const uint pr = LANE_U(prim, l);
       /* lane_surface changes the lane's material in place: a copy of it made
        * after those field stores would wait on them (store forwarding). */
@@ -930,8 +930,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     int8 plastic = (int8)(0);
     Plastic8 pl;
     __global const half* plastic_table[PSF_LANES];
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(own_frame, l) || !LANE_I(general, l) || !lanes_plastic(&mats[l])) continue;
+    for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
+      const uint l = bvh_first_lane(todo);
+      if (!lanes_plastic(&mats[l])) continue;
       const Material* m = &mats[l];
       LANE_I(plastic, l) = -1;
       plastic_table[l] = surface_table(*m, textures, texels);
@@ -1043,8 +1044,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                                                                LANE_F(su, l) * LANE_F(u_lb, l)))
                                            .xyz);
       int8 delta = (int8)(0);
-      for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(other_light, l)) continue;
+      for (uint todo = psf_lanes8(other_light); todo != 0u; todo &= todo - 1u) {
+        const uint l = bvh_first_lane(todo);
         LightSample ls = emitter_sample(emitters, emitter_cdf, params.num_emitters, env, env_data, VEC8_GET(pos, l),
                                         LANE_F(u_light, l), LANE_F(u_la, l), LANE_F(u_lb, l));
         light_sample_textured(&ls, tri_attribs, textures, texels);
@@ -1065,8 +1066,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(evaluate, l) || LANE_I(plastic, l)) continue;
+      for (uint todo = psf_lanes8(evaluate & ~plastic); todo != 0u; todo &= todo - 1u) {
+        const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
         float pdf_l;
         vec8_set(
@@ -1105,8 +1106,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint l = 0u; l < PSF_LANES; ++l) {
-      if (!LANE_I(sample_own, l) || LANE_I(plastic, l)) continue;
+    for (uint todo = psf_lanes8(sample_own & ~plastic); todo != 0u; todo &= todo - 1u) {
+      const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
       lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), LANE_F(u_b1, l),
@@ -1149,8 +1150,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The shadow rays, lane by lane (trace_paths' intersect_any_hit_alpha
      * without alpha), and what they decide (shade.cl shadow_slot). */
     int8 visible = (int8)(0);
-    for (uint m = psf_lanes8(contributes); m != 0u; m &= m - 1u) { /* the lanes set, no branch per lane */
-      const uint l = bvh_first_lane(m);
+    for (uint todo = psf_lanes8(contributes); todo != 0u; todo &= todo - 1u) { /* its set lanes: no branch per lane */
+      const uint l = bvh_first_lane(todo);
       Ray r;
       r.org = (float4)(VEC8_GET(shadow_org, l), 0.0f);
       r.dir = (float4)(VEC8_GET(shadow_dir, l), LANE_F(shadow_tmax, l));
@@ -1184,8 +1185,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.depth = select(ln.depth, ln.depth + 1u, as_uint8(go));
     const int8 ends = ln.live & ~go;
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
-    for (uint m = psf_lanes8(ends); m != 0u; m &= m - 1u) {
-      const uint l = bvh_first_lane(m);
+    for (uint todo = psf_lanes8(ends); todo != 0u; todo &= todo - 1u) {
+      const uint l = bvh_first_lane(todo);
       lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, contrib);
       LANE_I(ln.live, l) = 0;
       if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
