@@ -436,22 +436,26 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
 }
 
 RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
-    : rt_(rt), nodes_(rt.upload(bvh.nodes)), packs_(rt.upload(bvh.packs)), depth_(bvh.depth) {}
+    : rt_(rt),
+      nodes_(rt.upload(bvh.nodes)),
+      packs_(rt.upload(bvh.packs)),
+      depth_(bvh.depth),
+      spheres_(bvh.sphere_count > 0) {}
 
 void RayCaster::closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
   if (masked_)
-    rt_.launch("raycast_closest_masked", count, local_size, nodes_, packs_, rays, hits, count, alpha_.tri_material,
-               alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
+    rt_.launch("raycast_closest_masked", count, local_size, nodes_, packs_, rays, hits, count, cl_uint(spheres_),
+               alpha_.tri_material, alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
   else
-    rt_.launch("raycast_closest", count, local_size, nodes_, packs_, rays, hits, count);
+    rt_.launch("raycast_closest", count, local_size, nodes_, packs_, rays, hits, count, cl_uint(spheres_));
 }
 
 void RayCaster::any(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
   if (masked_)
-    rt_.launch("raycast_any_masked", count, local_size, nodes_, packs_, rays, hits, count, alpha_.tri_material,
-               alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
+    rt_.launch("raycast_any_masked", count, local_size, nodes_, packs_, rays, hits, count, cl_uint(spheres_),
+               alpha_.tri_material, alpha_.materials, alpha_.attribs, alpha_.textures, alpha_.texels);
   else
-    rt_.launch("raycast_any", count, local_size, nodes_, packs_, rays, hits, count);
+    rt_.launch("raycast_any", count, local_size, nodes_, packs_, rays, hits, count, cl_uint(spheres_));
 }
 
 size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked) {

@@ -103,6 +103,7 @@ class RayCaster {
   cl::Buffer nodes_;
   cl::Buffer packs_;
   int depth_ = 0;
+  bool spheres_ = false;  // the BVH holds sphere packs (the kernels' `spheres`)
   bool masked_ = false;   // enable_alpha was called
   AlphaBuffers alpha_;    // its buffers
 };

@@ -677,39 +677,45 @@ inline bool intersect_any(__global const BvhNode* nodes, __global const BvhTriPa
   return intersect_any_hit(nodes, packs, ray).prim != PSF_NO_HIT;
 }
 
+/* The casts of a RayCaster. `spheres` 0: the BVH holds no sphere packs, and
+ * the traversal without their code runs (intersect_closest_leaves). */
 __kernel void raycast_closest(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                              __global const Ray* rays, __global Hit* hits, uint count) {
+                              __global const Ray* rays, __global Hit* hits, uint count, uint spheres) {
   uint i = get_global_id(0);
   if (i >= count) return;
-  hits[i] = intersect_closest(nodes, packs, rays[i]);
+  hits[i] = spheres ? intersect_closest_leaves(nodes, packs, rays[i], 0, true)
+                    : intersect_closest_leaves(nodes, packs, rays[i], 0, false);
 }
 
 __kernel void raycast_any(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                          __global const Ray* rays, __global Hit* hits, uint count) {
+                          __global const Ray* rays, __global Hit* hits, uint count, uint spheres) {
   uint i = get_global_id(0);
   if (i >= count) return;
-  hits[i] = intersect_any_hit(nodes, packs, rays[i]);
+  hits[i] = spheres ? intersect_any_hit_leaves(nodes, packs, rays[i], 0, true)
+                    : intersect_any_hit_leaves(nodes, packs, rays[i], 0, false);
 }
 
 /* raycast_closest and raycast_any with alpha testing of masked triangles. */
 __kernel void raycast_closest_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                     __global const Ray* rays, __global Hit* hits, uint count,
+                                     __global const Ray* rays, __global Hit* hits, uint count, uint spheres,
                                      __global const uint* tri_material, __global const Material* materials,
                                      __global const TriAttrib* attribs, __global const TextureInfo* textures,
                                      __global const half* texels) {
   uint i = get_global_id(0);
   if (i >= count) return;
   AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
-  hits[i] = intersect_closest_alpha(nodes, packs, rays[i], &as);
+  hits[i] = spheres ? intersect_closest_leaves(nodes, packs, rays[i], &as, true)
+                    : intersect_closest_leaves(nodes, packs, rays[i], &as, false);
 }
 
 __kernel void raycast_any_masked(__global const BvhNode* nodes, __global const BvhTriPack* packs,
-                                 __global const Ray* rays, __global Hit* hits, uint count,
+                                 __global const Ray* rays, __global Hit* hits, uint count, uint spheres,
                                  __global const uint* tri_material, __global const Material* materials,
                                  __global const TriAttrib* attribs, __global const TextureInfo* textures,
                                  __global const half* texels) {
   uint i = get_global_id(0);
   if (i >= count) return;
   AlphaScene as = {tri_material, materials, attribs, textures, texels, 0};
-  hits[i] = intersect_any_hit_alpha(nodes, packs, rays[i], &as);
+  hits[i] = spheres ? intersect_any_hit_leaves(nodes, packs, rays[i], &as, true)
+                    : intersect_any_hit_leaves(nodes, packs, rays[i], &as, false);
 }
