@@ -94,6 +94,7 @@ class RayCaster {
   const cl::Buffer& packs() const { return packs_; }
   int depth() const { return depth_; }
   bool masked() const { return masked_; }  // enable_alpha was called
+  bool spheres() const { return spheres_; }  // the BVH holds sphere packs
 
   // Work-group size of the launches.
   size_t local_size = 64;

@@ -692,6 +692,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
   const AlphaScene alpha = {tri_material, materials, tri_attribs, textures, texels, 0};
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
   const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
+  /* With a few lights, the environment map's entry among them (none: num_emitters). */
+  uint env_emitter = params.num_emitters;
+  if (env.width > 0u && params.num_emitters <= PSF_LANES_FEW_LIGHTS)
+    for (uint k = 0u; k < params.num_emitters; ++k)
+      if (emitters[k].type == PSF_EMITTER_ENVIRONMENT) env_emitter = k;
 
   while (any(ln.live)) {
     /* The bounce's samples (shade.cl bounce_samples), across the lanes, and
@@ -732,8 +737,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     int8 env_choice = (int8)(0);
     if (env.width > 0u && params.num_emitters > 0u) {
       if (params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
-        for (uint k = 0u; k < params.num_emitters; ++k)
-          if (emitters[k].type == PSF_EMITTER_ENVIRONMENT) env_choice |= ln.live & as_int8(light == (uint8)(k));
+        env_choice = ln.live & as_int8(light == (uint8)(env_emitter));
       } else {
         for (uint l = 0u; l < PSF_LANES; ++l)
           if (LANE_I(ln.live, l) && emitters[LANE_U(light, l)].type == PSF_EMITTER_ENVIRONMENT)
