@@ -17,8 +17,10 @@
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
  * and no bump map, whose BSDF the vectors evaluate and sample, Plastic8), the
  * environment an escaped ray sees, a light sample
- * on a point, spot, directional or sphere light (emitter.cl emitter_sample),
- * a hit on an analytic sphere. A light sample on an environment map takes its
+ * on a point, spot or directional light or from inside a sphere light
+ * (emitter.cl emitter_sample), a hit on an analytic sphere. Among a few lights
+ * (PSF_LANES_FEW_LIGHTS) the cone of a one-sided sphere light seen from outside
+ * is sampled in vectors. A light sample on an environment map takes its
  * steps over all lanes before the next, between the closest-hit casts
  * (EnvLanes), so that the lanes' cache misses overlap and wait behind casts.
  * A lane whose path ends stores the path's state and takes the next path of
@@ -960,9 +962,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 beta = vec8_select(ln.beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), new_vertex);
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
-     * emitter_sample) in vectors, any other light (a constant environment,
-     * point, spot, directional and sphere lights) by emitter_sample itself,
-     * lane by lane, and an environment map's from EnvLanes; the sample's
+     * emitter_sample) in vectors, and among a few lights a direction in the
+     * cone of a one-sided, untextured sphere light; any other light (a
+     * constant environment, point, spot, directional lights, other sphere
+     * lights) by emitter_sample itself, lane by lane, and an environment map's
+     * from EnvLanes; the sample's
      * MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     Vec8 shadow_org = pending, shadow_dir = pending;
@@ -971,8 +975,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     if (params.num_emitters > 0u) {
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
-      int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0);
+      int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0), sphere_light = (int8)(0);
       uint8 light_tex = (uint8)(PSF_NO_TEXTURE), light_prim = (uint8)(0u);
+      float8 sphere_r = (float8)(0.0f); /* a sphere light's radius (its centre in v0) */
       v0 = e1 = e2 = le = pending;
       if (params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
         /* A few lights: each light's data into the lanes that chose it, by
@@ -985,6 +990,21 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
           if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
             env_light |= pick;
             choose = select(choose, (float8)(em->radiance.w), pick);
+          } else if (em->type == PSF_EMITTER_SPHERE && em->e2.w > 0.0f && !em->two_sided &&
+                     em->tex_emission == PSF_NO_TEXTURE) {
+            /* A one-sided untextured sphere light: its cone sampled in vectors
+             * (below) from outside, by emitter_sample from inside. */
+            const float4 c = em->v0, r = em->radiance;
+            const float rad = em->e1.w;
+            const Vec8 centre = vec8((float8)(c.x), (float8)(c.y), (float8)(c.z));
+            const Vec8 dc = vec8_sub(centre, pos);
+            const int8 cone = pick & (vec8_dot(dc, dc) > rad * rad);
+            other_light |= pick & ~cone;
+            sphere_light |= cone;
+            v0 = vec8_select(v0, centre, cone);
+            le = vec8_select(le, vec8((float8)(r.x), (float8)(r.y), (float8)(r.z)), cone);
+            sphere_r = select(sphere_r, (float8)(rad), cone);
+            choose = select(choose, (float8)(r.w), cone);
           } else if (em->type != PSF_EMITTER_TRIANGLE) {
             other_light |= pick;
           } else {
@@ -1048,6 +1068,31 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                                                                LANE_F(su, l) * (1.0f - LANE_F(u_lb, l)),
                                                                LANE_F(su, l) * LANE_F(u_lb, l)))
                                            .xyz);
+      if (any(sphere_light)) {
+        /* emitter_sample's cone around the direction to the centre, in vectors:
+         * 1 - cos(theta) uniform in [0, 1 - cos(theta_max)], phi = 2 pi u_lb,
+         * then the nearer intersection with the sphere. */
+        const Vec8 dc = vec8_sub(v0, pos);
+        const float8 dc2 = vec8_dot(dc, dc), r2 = sphere_r * sphere_r;
+        const float8 s = fmin(r2 / dc2, 1.0f);
+        const float8 width = s / (1.0f + sqrt(1.0f - s));
+        const float8 omc = u_la * width, cos_t = 1.0f - omc, sin_t = sqrt(fmax(0.0f, omc * (2.0f - omc)));
+        float8 cos_phi;
+        const float8 sin_phi = psf_sincos8(2.0f * PSF_ENV_PI * u_lb, &cos_phi);
+        Vec8 cs, ct;
+        const Vec8 cn = vec8_scale(dc, rsqrt(dc2));
+        frame_from_normal8(cn, &cs, &ct);
+        const Vec8 swi = vec8_normalize(
+            vec8_add(vec8_add(vec8_scale(cs, sin_t * cos_phi), vec8_scale(ct, sin_t * sin_phi)), vec8_scale(cn, cos_t)));
+        const float8 b = vec8_dot(swi, dc);
+        const Vec8 off = vec8_sub(dc, vec8_scale(swi, b));
+        const float8 sdist = b - sqrt(fmax(0.0f, r2 - vec8_dot(off, off)));
+        const float8 spdf = choose / (2.0f * PSF_ENV_PI * width);
+        const int8 ok = (sdist > 0.0f) & (spdf > 0.0f) & isfinite(spdf);
+        wi = vec8_select(wi, swi, sphere_light);
+        ldist = select(ldist, sdist, sphere_light);
+        lpdf = select(lpdf, select((float8)(0.0f), spdf, ok), sphere_light);
+      }
       int8 delta = (int8)(0);
       for (uint todo = psf_lanes8(other_light); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
