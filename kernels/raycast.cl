@@ -286,9 +286,14 @@ BVH_INLINE uint sphere_pack_test_body(__global const float* p, float3 org, float
   sphere_realw r2 = r * r;
   sphere_realw disc = r2 - (lx * lx + ly * ly + lz * lz);
   sphere_realw c = (fx * fx + fy * fy + fz * fz) - r2;
-  sphere_realw q = b + copysign(sqrt(fmax(disc, (sphere_realw)(0))), b);
-  /* q = 0: t0 NaN, which fails below */
-  bvh_floatw t0 = SPHERE_FLOATW(c / q * inv_len), t1 = SPHERE_FLOATW(q * inv_len);
+  /* The root and the division in float: b, disc and c carry what double
+   * buys (their cancellations), q = b + sign(b) sqrt(disc) adds two numbers of
+   * one sign, and a double square root and division of eight lanes were a
+   * fifth of sphere-light's closest-hit casts. q = 0: t0 NaN, which fails below. */
+  const bvh_floatw bf = SPHERE_FLOATW(b), discf = SPHERE_FLOATW(disc);
+  const bvh_floatw q = bf + copysign(sqrt(fmax(discf, 0.0f)), bf);
+  const float inv_lenf = (float)inv_len;
+  bvh_floatw t0 = SPHERE_FLOATW(c) * inv_lenf / q, t1 = q * inv_lenf;
   bvh_intw hit = SPHERE_INTW(disc >= (sphere_realw)(0)) & (rf > 0.0f);
   bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
   bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
