@@ -18,7 +18,8 @@
  * and no bump map, whose BSDF the vectors evaluate and sample, Plastic8), the
  * environment an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
- * (emitter.cl emitter_sample), a hit on an analytic sphere. Among a few lights
+ * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
+ * vectors do not shade or of a texture (its uv and frame). Among a few lights
  * (PSF_LANES_FEW_LIGHTS) the cone of a one-sided sphere light seen from outside
  * is sampled in vectors. A light sample on an environment map takes its
  * steps over all lanes before the next, between the closest-hit casts
@@ -820,7 +821,12 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_U(emission_tex, l) = m->tex_emission;
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
-      LANE_I(general, l) = (m->flags & PSF_MATFLAG_LANES_VECTOR) && pr < params.first_sphere ? 0 : -1;
+      /* A sphere shades in vectors where nothing needs its uv or dp/du. */
+      LANE_I(general, l) = (m->flags & PSF_MATFLAG_LANES_VECTOR) &&
+                                   (pr < params.first_sphere ||
+                                    (m->tex_color == PSF_NO_TEXTURE && m->tex_emission == PSF_NO_TEXTURE))
+                               ? 0
+                               : -1;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
       __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
@@ -840,20 +846,35 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 ng = vec8_cross(vec8_sub(p1, p0), vec8_sub(p2, p0));
     const float8 area2 = vec8_length(ng);
     ng = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(1.0f)), vec8_div(ng, area2), area2 > 0.0f);
-    /* An analytic sphere (its lanes shade with their own frame): its normal, uv
-     * and dp/du, dp/dv as three points (surface.cl surface_sphere), lane by lane. */
+    /* An analytic sphere: its radius and normal sign; its normal in vectors
+     * where its material is shaded in vectors, else its normal, uv and dp/du,
+     * dp/dv as three points (surface.cl surface_sphere), lane by lane for the
+     * lanes' own frame. p0, p1 and p2 hold its tri_pos entries (centre, x and y
+     * axes) until then. */
     const int8 sphere = hit & (prim >= (uint8)(params.first_sphere));
-    if (any(sphere))
-      for (uint l = 0u; l < PSF_LANES; ++l) {
-        if (!LANE_I(sphere, l)) continue;
+    float8 sphere_r = (float8)(0.0f), sphere_sign = (float8)(0.0f);
+    if (any(sphere)) {
+      for (uint todo = psf_lanes8(sphere); todo != 0u; todo &= todo - 1u) {
+        const uint l = bvh_first_lane(todo);
+        __global const float4* sp = tri_pos + 3u * LANE_U(prim, l);
+        LANE_F(sphere_r, l) = sp[0].w;
+        LANE_F(sphere_sign, l) = sp[1].w;
+        if (!LANE_I(general, l)) continue;
         float3 n, a, b, c;
-        surface_sphere(tri_pos + 3u * LANE_U(prim, l), VEC8_GET(pos, l), &n, &LANE_F(bu, l), &LANE_F(bv, l), &a, &b,
-                       &c);
+        surface_sphere(sp, VEC8_GET(pos, l), &n, &LANE_F(bu, l), &LANE_F(bv, l), &a, &b, &c);
         vec8_set(&ng, l, n);
         vec8_set(&p0, l, a);
         vec8_set(&p1, l, b);
         vec8_set(&p2, l, c);
       }
+      const int8 vector_sphere = sphere & ~general;
+      if (any(vector_sphere)) {
+        const Vec8 d = vec8_sub(pos, p0);
+        const float8 len = vec8_length(d);
+        const Vec8 n = vec8_select(vec8_cross(p1, p2), vec8_div(d, len), len > 0.0f);
+        ng = vec8_select(ng, vec8_scale(n, sphere_sign), vector_sphere);
+      }
+    }
     ln.path_length = select(ln.path_length, ln.path_length + dist, hit);
     const float8 ng_wo = vec8_dot(ng, wo);
     const int8 front = ng_wo > 0.0f;
@@ -862,13 +883,22 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const int8 mis = mis_on & (ln.depth > 0u) & ((ln.flags & PSF_PATH_SPECULAR) == 0u);
       const float8 cos_l = fabs(ng_wo);
       float8 pdf_hit = select((float8)(0.0f), light_pdf * dist * dist / cos_l, cos_l > 0.0f);
+      /* A sphere light: emitter_pdf_sphere, in vectors where its centre is in p0. */
       const int8 sphere_light = emits & mis & sphere;
-      if (any(sphere_light))
-        for (uint l = 0u; l < PSF_LANES; ++l)
-          if (LANE_I(sphere_light, l))
-            LANE_F(pdf_hit, l) = emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
-                                                    LANE_I(two_sided, l) ? 1u : 0u, VEC8_GET(ln.prev, l),
-                                                    LANE_F(dist, l), LANE_F(cos_l, l));
+      if (any(sphere_light & ~general)) {
+        const Vec8 dc = vec8_sub(p0, ln.prev);
+        const float8 r2 = sphere_r * sphere_r;
+        const int8 cone = sphere_light & ~general & ~two_sided & (sphere_sign > 0.0f) & (vec8_dot(dc, dc) > r2);
+        const float8 s = fmin(r2 / vec8_dot(dc, dc), 1.0f);
+        const float8 width = s / (1.0f + sqrt(1.0f - s));
+        pdf_hit = select(pdf_hit, light_pdf * (4.0f * PSF_ENV_PI * r2) / (2.0f * PSF_ENV_PI * width), cone);
+      }
+      for (uint todo = psf_lanes8(sphere_light & general); todo != 0u; todo &= todo - 1u) {
+        const uint l = bvh_first_lane(todo);
+        LANE_F(pdf_hit, l) = emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
+                                                LANE_I(two_sided, l) ? 1u : 0u, VEC8_GET(ln.prev, l), LANE_F(dist, l),
+                                                LANE_F(cos_l, l));
+      }
       const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
       /* An emission texture multiplies the emission there (surface.cl surface_emission). */
       const int8 emits_textured = emits & (emission_tex != (uint8)(PSF_NO_TEXTURE));
