@@ -15,7 +15,8 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
- * and no bump map, whose BSDF the vectors evaluate and sample, Plastic8), the
+ * and no bump map and an isotropic rough conductor without one, whose BSDFs
+ * the vectors evaluate and sample, Plastic8 and Conductor8), the
  * environment an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
  * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
@@ -665,6 +666,100 @@ inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8*
   return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
 }
 
+/* --- rough conductors in vectors ---------------------------------------------
+ * bsdf.cl's roughconductor (bsdf_eval_local, bsdf_sample_general) for the
+ * lanes whose material has an isotropic GGX or Beckmann distribution and no
+ * bump map (the metals of Bitterli's scenes, Mitsuba's default roughconductor),
+ * with the same operations in float8. */
+
+/* Whether the lanes shade material m as a Conductor8. */
+inline bool lanes_conductor(const Material* m) {
+  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v && m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' rough conductors: Material's alpha_u, specular, eta and k, and
+ * whether the distribution is Beckmann's. */
+typedef struct {
+  float8 alpha;
+  Vec8 spec, eta, k;
+  int8 beckmann;
+} Conductor8;
+
+/* mf_D, mf_G1 and mf_sample for isotropic Beckmann. */
+inline float8 beckmann_D8(Vec8 m, float8 a) {
+  const float8 ct = m.z, x = m.x / a, y = m.y / a, ct2 = ct * ct;
+  const float8 r = exp(-(x * x + y * y) / ct2) / (PSF_PI * a * a * ct2 * ct2);
+  return select((float8)(0.0f), r, (ct > 0.0f) & (r * ct > 1e-20f));
+}
+inline float8 beckmann_G1_8(Vec8 v, Vec8 m, float8 a) {
+  const float8 xy = a * a * v.x * v.x + a * a * v.y * v.y;
+  const float8 t2 = xy / (v.z * v.z);
+  const float8 r = rsqrt(t2);
+  const float8 g = (3.535f * r + 2.181f * r * r) / (1.0f + 2.276f * r + 2.577f * r * r);
+  return select(select(g, (float8)(1.0f), (xy == 0.0f) | (r >= 1.6f)), (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
+}
+inline Vec8 beckmann_sample8(float8 a, float8 u1, float8 u2) {
+  float8 cp;
+  const float8 sp = psf_sincos8(2.0f * PSF_PI * u2, &cp);
+  const float8 inv_a2 = cp * cp / (a * a) + sp * sp / (a * a);
+  const float8 tan2 = -log(1.0f - u1) / inv_a2;
+  const float8 ct = rsqrt(1.0f + tan2), st = sqrt(fmax(0.0f, 1.0f - ct * ct));
+  return vec8(st * cp, st * sp, ct);
+}
+
+/* fresnel_conductor of one channel. */
+inline float8 fresnel_conductor8(float8 cos_i, float8 eta, float8 k) {
+  const float8 c2 = cos_i * cos_i, s2 = 1.0f - c2, s4 = s2 * s2;
+  const float8 t1 = eta * eta - k * k - s2;
+  const float8 a2b2 = sqrt(t1 * t1 + 4.0f * k * k * eta * eta);
+  const float8 a = sqrt(fmax(0.5f * (a2b2 + t1), 0.0f));
+  const float8 term1 = a2b2 + c2, term2 = 2.0f * cos_i * a;
+  const float8 rs = (term1 - term2) / (term1 + term2);
+  const float8 term3 = a2b2 * c2 + s4, term4 = term2 * s2;
+  const float8 rp = rs * (term3 - term4) / (term3 + term4);
+  return 0.5f * (rs + rp);
+}
+
+/* bsdf_eval_local's roughconductor: f and *pdf for local o and i. */
+inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  const Vec8 h = vec8_normalize(vec8_add(o, i));
+  const float8 oh = vec8_dot(o, h);
+  float8 d = (float8)(0.0f), g_o = d, g_i = d, pm = d;
+  if (!all(c->beckmann)) {
+    d = ggx_D8(h, c->alpha);
+    g_o = ggx_G1_8(o, h, c->alpha);
+    g_i = ggx_G1_8(i, h, c->alpha);
+    pm = d * g_o * fabs(oh) / o.z;
+  }
+  if (any(c->beckmann)) {
+    const float8 db = beckmann_D8(h, c->alpha);
+    d = select(d, db, c->beckmann);
+    g_o = select(g_o, beckmann_G1_8(o, h, c->alpha), c->beckmann);
+    g_i = select(g_i, beckmann_G1_8(i, h, c->alpha), c->beckmann);
+    pm = select(pm, db * h.z, c->beckmann);
+  }
+  const float8 g = g_o * g_i;
+  *pdf = select((float8)(0.0f), pm / (4.0f * oh), on);
+  const Vec8 fr = vec8(fresnel_conductor8(oh, c->eta.x, c->k.x), fresnel_conductor8(oh, c->eta.y, c->k.y),
+                       fresnel_conductor8(oh, c->eta.z, c->k.z));
+  const Vec8 f = vec8_scale(vec8_mul(c->spec, fr), d * g / (4.0f * o.z * i.z));
+  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
+}
+
+/* bsdf_finish for the lanes of `take`: the sampled local direction i (wo where
+ * the sample fails) in the frame (s, t, n), with f and pdf from the BSDF's
+ * evaluation, into *wi, *pdf and *weight. */
+inline void lanes_take_sample(int8 take, int8 fails, const Vec8* s, const Vec8* t, const Vec8* n, const Vec8* wo,
+                              Vec8 i, Vec8 f, float8 pdf_i, Vec8* wi, float8* pdf, Vec8* weight) {
+  const int8 ok = take & ~fails & (pdf_i > 0.0f);
+  const Vec8 world = vec8_add(vec8_add(vec8_scale(*s, i.x), vec8_scale(*t, i.y)), vec8_scale(*n, i.z));
+  *wi = vec8_select(*wi, vec8_select(*wo, world, ~fails), take);
+  *pdf = select(*pdf, select((float8)(0.0f), pdf_i, ok), take);
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  *weight = vec8_select(*weight, vec8_select(zero, vec8_scale(f, fabs(i.z) / pdf_i), ok), take);
+}
+
 __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
                           __global const float4* restrict tri_pos, __global const uint* restrict tri_material,
                           __global const Material* restrict materials, __global const Emitter* restrict emitters,
@@ -822,11 +917,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_I(two_sided, l) = m->two_sided ? -1 : 0;
       LANE_I(textured, l) = m->tex_color != PSF_NO_TEXTURE ? -1 : 0;
       /* A sphere shades in vectors where nothing needs its uv or dp/du. */
-      LANE_I(general, l) = (m->flags & PSF_MATFLAG_LANES_VECTOR) &&
-                                   (pr < params.first_sphere ||
-                                    (m->tex_color == PSF_NO_TEXTURE && m->tex_emission == PSF_NO_TEXTURE))
-                               ? 0
-                               : -1;
+      const bool plain_sphere = m->tex_color == PSF_NO_TEXTURE && m->tex_emission == PSF_NO_TEXTURE;
+      LANE_I(general, l) = (m->flags & PSF_MATFLAG_LANES_VECTOR) && (pr < params.first_sphere || plain_sphere) ? 0 : -1;
       LANE_F(light_pdf, l) = tri_light_pdf[pr];
       __global const TriAttrib* a = tri_attribs + pr;
       LANE_I(mat_normals, l) = (m->flags & PSF_MATFLAG_NORMALS) ? -1 : 0;
@@ -964,11 +1056,23 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const float8 fn_wo = vec8_dot(fn, wo);
     /* The rough plastics that scatter in vectors (Plastic8): their parameters
      * and the coat's transmittance towards wo, its table read lane by lane. */
-    int8 plastic = (int8)(0);
+    int8 plastic = (int8)(0), conductor = (int8)(0);
     Plastic8 pl;
+    Conductor8 co;
+    co.beckmann = (int8)(0);
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (lanes_conductor(&mats[l])) {
+        const Material* m = &mats[l];
+        LANE_I(conductor, l) = -1;
+        LANE_F(co.alpha, l) = m->alpha_u;
+        vec8_set(&co.spec, l, m->specular.xyz);
+        vec8_set(&co.eta, l, m->eta.xyz);
+        vec8_set(&co.k, l, m->k.xyz);
+        LANE_I(co.beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+        continue;
+      }
       if (!lanes_plastic(&mats[l])) continue;
       const Material* m = &mats[l];
       LANE_I(plastic, l) = -1;
@@ -1146,7 +1250,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      for (uint todo = psf_lanes8(evaluate & ~plastic); todo != 0u; todo &= todo - 1u) {
+      for (uint todo = psf_lanes8(evaluate & ~plastic & ~conductor); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
         float pdf_l;
@@ -1155,7 +1259,14 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
             lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), VEC8_GET(wi, l), &pdf_l));
         LANE_F(bpdf, l) = pdf_l;
       }
-      const int8 evaluate_plastic = evaluate & plastic;
+      const int8 evaluate_plastic = evaluate & plastic, evaluate_conductor = evaluate & conductor;
+      if (any(evaluate_conductor)) {
+        const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+        const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
+        float8 pdf_c;
+        f = vec8_select(f, conductor8_eval(&co, o, i, &pdf_c), evaluate_conductor);
+        bpdf = select(bpdf, pdf_c, evaluate_conductor);
+      }
       if (any(evaluate_plastic)) {
         const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
         const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
@@ -1186,7 +1297,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo = psf_lanes8(sample_own & ~plastic); todo != 0u; todo &= todo - 1u) {
+    for (uint todo = psf_lanes8(sample_own & ~plastic & ~conductor); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
@@ -1211,14 +1322,22 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       for (uint l = 0u; l < PSF_LANES; ++l)
         if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
       const Vec8 f = plastic8_eval(&pl, o, i, t_i, &pdf_p);
-      const int8 ok = sample_plastic & ~fails & (pdf_p > 0.0f);
-      const Vec8 world = vec8_add(vec8_add(vec8_scale(fs, i.x), vec8_scale(ft, i.y)), vec8_scale(fn, i.z));
-      wi = vec8_select(wi, vec8_select(wo, world, ~fails), sample_plastic);
-      pdf = select(pdf, select((float8)(0.0f), pdf_p, ok), sample_plastic);
-      weight = vec8_select(
-          weight,
-          vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), vec8_scale(f, fabs(i.z) / pdf_p), ok),
-          sample_plastic);
+      lanes_take_sample(sample_plastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_p, &wi, &pdf, &weight);
+    }
+    /* A rough conductor's sample (bsdf_sample_general): the visible normal's
+     * mirror direction, then bsdf_finish's value and pdf. */
+    const int8 sample_conductor = sample_own & conductor;
+    if (any(sample_conductor)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      Vec8 h = vec8(u_b1, u_b1, u_b1);
+      const int8 beckmann = sample_conductor & co.beckmann;
+      if (any(sample_conductor & ~beckmann)) h = ggx_sample8(o, co.alpha, u_b1, u_b2);
+      if (any(beckmann)) h = vec8_select(h, beckmann_sample8(co.alpha, u_b1, u_b2), beckmann);
+      const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
+      const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
+      float8 pdf_c;
+      const Vec8 f = conductor8_eval(&co, o, i, &pdf_c);
+      lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
     }
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);

@@ -1644,7 +1644,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, three scenes of analytic spheres (one a sphere light), an
+  // other kind, three scenes of analytic spheres (one a sphere light, also with
+  // a GGX conductor sphere), an
   // emission texture, three cameras (thin lens and Gaussian filter, tent filter
   // and crop window, orthographic), whose rays the lanes draw themselves; and a
   // scene outside the class (media), which must fall back to trace_paths bit
@@ -1735,10 +1736,11 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   {
     // Our Cornell box with a BSDF of every other kind, which the lanes shade
     // lane by lane with bsdf.cl's functions, but for the textured roughplastic
-    // floor (GGX, nonlinear), which they shade in vectors (Plastic8): a
-    // bump-mapped ceiling, a smooth plastic back wall, a gold mirror and a rough
-    // Beckmann conductor for the side walls, a glass box, and a blend of diffuse
-    // and rough GGX conductor for the tall box.
+    // floor (GGX, nonlinear) and the rough conductors, which they shade in
+    // vectors (Plastic8, Conductor8): a bump-mapped ceiling, a smooth plastic
+    // back wall, a gold mirror and a rough Beckmann conductor for the side
+    // walls, a glass box, and a blend of diffuse and rough Beckmann conductor
+    // for the tall box.
     std::ifstream in(psf::test::source_path("scenes/cornell-box.xml"));
     std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     for (const char* id : {"floor", "ceiling", "back", "short", "tall"}) {
@@ -1801,6 +1803,19 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // sphere on a sphere ground under a constant sky, principled spheres.
   for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres"})
     cases.push_back({name, psf::load_scene(psf::test::source_path(std::string("scenes/") + name + ".xml")), true});
+  {
+    // The sphere light's scene with a GGX copper sphere (the file's is
+    // Beckmann's, Mitsuba's default): the lanes' Conductor8 takes both.
+    std::ifstream in(psf::test::source_path("scenes/sphere-light.xml"));
+    std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string cu = R"(<string name="material" value="Cu"/>)";
+    const size_t at = xml.find(cu);
+    REQUIRE(at != std::string::npos);
+    xml.insert(at + cu.size(), R"(<string name="distribution" value="ggx"/>)");
+    const std::string path = psf::test::temp_dir("lanes-ggx") + "/sphere-light.xml";
+    std::ofstream(path) << xml;
+    cases.push_back({"sphere-light, GGX copper", psf::load_scene(path), true});
+  }
   cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   {
     // An emission texture, where it is hit and where a light sample lands.
