@@ -1106,7 +1106,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 shadow_org = pending, shadow_dir = pending;
     float8 shadow_tmax = (float8)(1.0f - PSF_RAY_EPS);
     int8 contributes = (int8)(0);
-    if (params.num_emitters > 0u) {
+    if (params.num_emitters > 0u && any(scatter)) {
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0), sphere_light = (int8)(0);
