@@ -243,6 +243,15 @@ BvhTriPack empty_pack() {
   return p;
 }
 
+// Whether raycast.cl tests sphere s in double precision: a ray leaving its
+// surface starts 1e-4 of the point's largest coordinate off it (shade.cl), and
+// float's c = |f|^2 - r^2 keeps that offset's sign only where r <= 4 or
+// r <= |centre| / 2 (raycast.cl, sphere_pack_test): not so for a ground sphere
+// of radius 1e5 below the origin.
+bool sphere_needs_double(const BvhSphere& s) {
+  return !(s.radius <= 4.0f || s.radius <= 0.5f * glm::length(s.center));
+}
+
 // Collapses the binary BVH into wide nodes, depth first (a node before its children).
 class Collapser {
  public:
@@ -417,6 +426,10 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
         p.v0_y[lane] = s.center.y;
         p.v0_z[lane] = s.center.z;
         p.e1_x[lane] = s.radius;
+        if (sphere_needs_double(s)) {
+          p.e1_y[0] = 1.0f;
+          bvh.double_spheres += 1;
+        }
         p.prim[lane] = t | PSF_PRIM_SPHERE;
       }
       const uint32_t count = static_cast<uint32_t>(bvh.packs.size()) - first;
@@ -440,7 +453,10 @@ RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
       nodes_(rt.upload(bvh.nodes)),
       packs_(rt.upload(bvh.packs)),
       depth_(bvh.depth),
-      spheres_(bvh.sphere_count > 0) {}
+      spheres_(bvh.sphere_count > 0),
+      sphere_mode_(bvh.sphere_count == 0    ? PSF_FRAME_SPHERES_NONE
+                   : bvh.double_spheres > 0 ? PSF_FRAME_SPHERES_DOUBLE
+                                            : PSF_FRAME_SPHERES_FLOAT) {}
 
 void RayCaster::closest(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t count) {
   if (masked_)

@@ -33,6 +33,7 @@ struct Bvh {
   std::vector<BvhTriPack> packs;   // leaf triangles, PSF_BVH_WIDTH per pack, in leaf order
   uint32_t triangle_count = 0;     // triangles in the packs (scene triangles less `skipped`)
   uint32_t sphere_count = 0;       // spheres in the packs (less those `skipped`)
+  uint32_t double_spheres = 0;     // of which raycast.cl tests in double (their packs' e1_y[0])
   double build_ms = 0.0;           // wall time of build_bvh
   int depth = 0;                   // levels of wide nodes (1: the root only)
   uint32_t skipped = 0;            // degenerate or non-finite triangles and spheres left out
@@ -95,6 +96,9 @@ class RayCaster {
   int depth() const { return depth_; }
   bool masked() const { return masked_; }  // enable_alpha was called
   bool spheres() const { return spheres_; }  // the BVH holds sphere packs
+  // FrameParams.spheres for trace_lanes' casts: PSF_FRAME_SPHERES_NONE, _DOUBLE
+  // (some sphere needs the test in double) or _FLOAT.
+  uint32_t sphere_mode() const { return sphere_mode_; }
 
   // Work-group size of the launches.
   size_t local_size = 64;
@@ -105,6 +109,7 @@ class RayCaster {
   cl::Buffer packs_;
   int depth_ = 0;
   bool spheres_ = false;  // the BVH holds sphere packs (the kernels' `spheres`)
+  uint32_t sphere_mode_ = PSF_FRAME_SPHERES_NONE;
   bool masked_ = false;   // enable_alpha was called
   AlphaBuffers alpha_;    // its buffers
 };

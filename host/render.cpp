@@ -496,7 +496,7 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   p.dim_bounce0 = s.camera.aperture > 0.0f ? PSF_DIM_BOUNCE0_LENS : PSF_DIM_BOUNCE0;
   p.hide = s.scene.hide;
   p.first_sphere = uint32_t(s.scene.triangles.size());
-  p.spheres = s.caster->spheres() ? 1u : 0u;
+  p.spheres = s.caster->sphere_mode();
   p.camera_medium = s.scene.camera_medium;
   p.max_rounds = p.max_depth;
   for (const Material& m : s.scene.materials)

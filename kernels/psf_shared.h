@@ -63,7 +63,9 @@ typedef cl_uint psf_uint;
 #define PSF_PRIM_MASKED 0x80000000u
 /* Bit of BvhTriPack.prim marking a sphere pack's lanes (every lane of a pack is
  * one kind): v0 holds the centre, e1_x the radius (0 in unused lanes, never hit),
- * the other arrays are unused; hits report the prim without it, and u = v = 0
+ * e1_y[0] 1 where a sphere of the pack needs the test in double precision
+ * (host/bvh.cpp sphere_needs_double, raycast.cl sphere_pack_test), else 0, the
+ * other arrays are unused; hits report the prim without it, and u = v = 0
  * (shade.cl computes the sphere's uv). Scene primitives are the triangles, then
  * the analytic spheres: prim >= FrameParams.first_sphere is sphere
  * prim - first_sphere. */
@@ -462,8 +464,12 @@ typedef struct {
                               boundary is crossed without counting (a bound the compiler knows is 5 % faster) */
   psf_uint null_media;     /* 1: the scene has a medium behind a null boundary, which shadow rays pass with the
                               transmittance of the media they cross (shade.cl shadow_cast); 0: none */
-  psf_uint spheres;        /* 1: the BVH holds analytic spheres; 0: trace_lanes casts without their test */
+  psf_uint spheres;        /* PSF_FRAME_SPHERES_*: how trace_lanes' casts test the BVH's analytic spheres */
 } FrameParams;
+
+#define PSF_FRAME_SPHERES_NONE 0u   /* the BVH holds none: casts without the test */
+#define PSF_FRAME_SPHERES_DOUBLE 1u /* some sphere needs the test in double (host/bvh.cpp sphere_needs_double) */
+#define PSF_FRAME_SPHERES_FLOAT 2u  /* every sphere is tested in float */
 
 #define PSF_HIDE_ENVIRONMENT 1u /* a camera ray that escapes sees black (Mitsuba 3's hide_emitters) */
 #define PSF_HIDE_AREA 2u        /* an emitter a camera ray hits adds nothing (Mitsuba 0.5's hideEmitters) */

@@ -236,10 +236,14 @@ BVH_INLINE uint pack_test(__global const float* p, float3 org, float3 dir, float
  * taken, else the farther (a ray starting inside). Returns the mask of lanes
  * hit; *t_out their ray parameters (infinity elsewhere).
  * In double precision where the device has it (cl_khr_fp64; Mitsuba 3 too
- * intersects its spheres in double on the CPU): a ray leaving a large sphere
- * (a ground of radius 1e5) starts a ray offset of 1e-4 off its surface, which
- * f = org - centre holds in float only to 1/128, and c = |f|^2 - r^2 cancels to
- * noise: such rays hit their own sphere.
+ * intersects its spheres in double on the CPU) for a pack holding a large
+ * sphere: a ray leaving a ground of radius 1e5 starts 1e-4 off its surface
+ * (shade.cl's offset, 1e-4 of the point's largest coordinate), c = |f|^2 - r^2
+ * is then about 2e5 x 1e-4 = 20, and float's rounding of |f|^2 = 1e10 is
+ * larger: such rays hit their own sphere. In float elsewhere: f = org - centre
+ * is one rounding of exact values, so c's error is about 3 eps r^2 against
+ * |c| = 2 r x offset, below 1 % where r <= 4 or r <= |centre| / 2 (then the
+ * offset is at least 1e-4 r / sqrt(3)); the double test cost sphere-light 8 %.
  * Out of line on CPUs: inlined, the compiler hoists the direction's
  * normalisation in double out of the traversal loop, and every ray of a scene
  * without spheres paid for it (PoCL, Mitsuba's cbox: 4-7 % of its tracing
@@ -271,8 +275,38 @@ typedef bvh_floatw sphere_realw;
 #else
 #define SPHERE_TEST_PLACEMENT BVH_INLINE
 #endif
-BVH_INLINE uint sphere_pack_test_body(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
-                                      float tmax, bvh_floatw* t_out) {
+/* The roots t0, t1 of a sphere test (sphere_pack_test) in lanes `hit`: the
+ * nearer in (tmin, tmax), else the farther; returns the mask of lanes hit. */
+BVH_INLINE uint sphere_roots(bvh_floatw t0, bvh_floatw t1, bvh_intw hit, float tmin, float tmax, bvh_floatw* t_out) {
+  bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
+  bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
+  bvh_intw ok_f = hit & (tf > tmin) & (tf < tmax);
+  *t_out = select(select((bvh_floatw)(INFINITY), tf, ok_f), tn, ok_n);
+  return bvh_lane_mask(ok_n | ok_f);
+}
+
+/* The test in float: the spheres of packs that the builder found small
+ * enough (host/bvh.cpp sphere_needs_double). */
+BVH_INLINE uint sphere_pack_test_float(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
+                                       float tmax, bvh_floatw* t_out) {
+  const float inv_len = 1.0f / dir_len;
+  const float dx = dir.x * inv_len, dy = dir.y * inv_len, dz = dir.z * inv_len;
+  const bvh_floatw fx = (bvh_floatw)(org.x) - BVH_VLOAD(0, p + PACK_V0);
+  const bvh_floatw fy = (bvh_floatw)(org.y) - BVH_VLOAD(0, p + PACK_V0 + PSF_BVH_WIDTH);
+  const bvh_floatw fz = (bvh_floatw)(org.z) - BVH_VLOAD(0, p + PACK_V0 + 2 * PSF_BVH_WIDTH);
+  const bvh_floatw r = BVH_VLOAD(0, p + PACK_E1);
+  const bvh_floatw b = -(fx * dx + fy * dy + fz * dz);
+  const bvh_floatw lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
+  const bvh_floatw r2 = r * r;
+  const bvh_floatw disc = r2 - (lx * lx + ly * ly + lz * lz);
+  const bvh_floatw c = (fx * fx + fy * fy + fz * fz) - r2;
+  const bvh_floatw q = b + copysign(sqrt(fmax(disc, 0.0f)), b);
+  return sphere_roots(c * inv_len / q, q * inv_len, (disc >= 0.0f) & (r > 0.0f), tmin, tmax, t_out);
+}
+
+/* The test with f, b, disc and c in double where the device has it. */
+BVH_INLINE uint sphere_pack_test_double(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
+                                        float tmax, bvh_floatw* t_out) {
   SPHERE_SCALAR len = sqrt((SPHERE_SCALAR)dir.x * dir.x + (SPHERE_SCALAR)dir.y * dir.y + (SPHERE_SCALAR)dir.z * dir.z);
   SPHERE_SCALAR inv_len = (SPHERE_SCALAR)1 / len;
   SPHERE_SCALAR dx = dir.x * inv_len, dy = dir.y * inv_len, dz = dir.z * inv_len;
@@ -293,13 +327,15 @@ BVH_INLINE uint sphere_pack_test_body(__global const float* p, float3 org, float
   const bvh_floatw bf = SPHERE_FLOATW(b), discf = SPHERE_FLOATW(disc);
   const bvh_floatw q = bf + copysign(sqrt(fmax(discf, 0.0f)), bf);
   const float inv_lenf = (float)inv_len;
-  bvh_floatw t0 = SPHERE_FLOATW(c) * inv_lenf / q, t1 = q * inv_lenf;
   bvh_intw hit = SPHERE_INTW(disc >= (sphere_realw)(0)) & (rf > 0.0f);
-  bvh_floatw tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
-  bvh_intw ok_n = hit & (tn > tmin) & (tn < tmax);
-  bvh_intw ok_f = hit & (tf > tmin) & (tf < tmax);
-  *t_out = select(select((bvh_floatw)(INFINITY), tf, ok_f), tn, ok_n);
-  return bvh_lane_mask(ok_n | ok_f);
+  return sphere_roots(SPHERE_FLOATW(c) * inv_lenf / q, q * inv_lenf, hit, tmin, tmax, t_out);
+}
+
+/* The pack's test: in double where its e1_y[0] says a sphere needs it. */
+BVH_INLINE uint sphere_pack_test_body(__global const float* p, float3 org, float3 dir, float dir_len, float tmin,
+                                      float tmax, bvh_floatw* t_out) {
+  if (p[PACK_E1 + PSF_BVH_WIDTH] != 0.0f) return sphere_pack_test_double(p, org, dir, dir_len, tmin, tmax, t_out);
+  return sphere_pack_test_float(p, org, dir, dir_len, tmin, tmax, t_out);
 }
 SPHERE_TEST_PLACEMENT uint sphere_pack_test(__global const float* p, float3 org, float3 dir, float dir_len,
                                             float tmin, float tmax, bvh_floatw* t_out) {
@@ -309,12 +345,16 @@ SPHERE_TEST_PLACEMENT uint sphere_pack_test(__global const float* p, float3 org,
 /* How a traversal tests sphere packs (intersect_closest_leaves' `spheres`):
  * not at all (the BVH holds none, and the code is left out), by
  * sphere_pack_test (out of line on CPUs, so that a traversal that meets no
- * sphere leaf does not pay for its hoisted normalisation), or inlined (the
- * lanes' casts of a scene with spheres: no call, around which a CPU's caller
- * spills its vectors; sphere-light 6 % faster). */
+ * sphere leaf does not pay for its hoisted normalisation; double or float by
+ * the pack), or inlined (the lanes' casts of a scene with spheres: no call,
+ * around which a CPU's caller spills its vectors; sphere-light 6 % faster),
+ * in double, or in float where no sphere of the BVH needs double: one test
+ * inlined (both, with the pack's branch between them, made sphere-light's
+ * renders 4 % slower than the float test alone). */
 #define PSF_SPHERES_NONE 0u
 #define PSF_SPHERES_CALL 1u
 #define PSF_SPHERES_INLINE 2u
+#define PSF_SPHERES_INLINE_FLOAT 3u /* inlined, in float: the BVH's spheres need no double */
 
 /* Whether pack `p` holds spheres (its first lane, always used, says). */
 inline bool pack_is_spheres(__global const float* p) {
@@ -467,17 +507,18 @@ BVH_INLINE uint alpha_filter(__global const float* p, uint mask, bvh_floatw* t, 
 }
 
 /* The closest hit among a leaf's packs [first, end), updating *hit; `spheres`:
- * PSF_SPHERES_NONE where none of them holds spheres (PSF_LEAF_SPHERES), else
- * how to test those that do. */
-BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, uint spheres, float3 org,
-                             float3 dir, float dir_len, float tmin, Hit* hit, const AlphaScene* as) {
+ * how to test those that hold spheres (the traversal's constant, so that only
+ * its test is compiled), `leaf_spheres`: whether any does (PSF_LEAF_SPHERES). */
+BVH_INLINE void leaf_closest(__global const BvhTriPack* packs, uint first, uint end, uint spheres, bool leaf_spheres,
+                             float3 org, float3 dir, float dir_len, float tmin, Hit* hit, const AlphaScene* as) {
   for (uint k = first; k < end; ++k) {
     __global const float* p = (__global const float*)(packs + k);
     bvh_floatw t, u, v;
     uint mask;
-    if (spheres != PSF_SPHERES_NONE && pack_is_spheres(p)) {
-      mask = spheres == PSF_SPHERES_INLINE ? sphere_pack_test_body(p, org, dir, dir_len, tmin, hit->t, &t)
-                                           : sphere_pack_test(p, org, dir, dir_len, tmin, hit->t, &t);
+    if (spheres != PSF_SPHERES_NONE && leaf_spheres && pack_is_spheres(p)) {
+      mask = spheres == PSF_SPHERES_INLINE         ? sphere_pack_test_double(p, org, dir, dir_len, tmin, hit->t, &t)
+             : spheres == PSF_SPHERES_INLINE_FLOAT ? sphere_pack_test_float(p, org, dir, dir_len, tmin, hit->t, &t)
+                                                   : sphere_pack_test(p, org, dir, dir_len, tmin, hit->t, &t);
       u = v = (bvh_floatw)(0.0f);
     } else {
       mask = pack_test(p, org, dir, dir_len, tmin, hit->t, &t, &u, &v);
@@ -525,8 +566,7 @@ BVH_INLINE Hit intersect_closest_leaves(__global const BvhNode* nodes, __global 
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
-      leaf_closest(packs, first, end, (ref & PSF_LEAF_SPHERES) ? spheres : PSF_SPHERES_NONE, org, dir, dir_len, tmin,
-                   &hit, as);
+      leaf_closest(packs, first, end, spheres, (ref & PSF_LEAF_SPHERES) != 0u, org, dir, dir_len, tmin, &hit, as);
     } else {
       __global const float* f = (__global const float*)(nodes + ref);
       bvh_floatw tn;
@@ -641,14 +681,16 @@ BVH_INLINE Hit intersect_any_hit_leaves(__global const BvhNode* nodes, __global 
     if (ref & PSF_LEAF_BIT) {
       uint first = ref & PSF_LEAF_FIRST_MASK;
       uint end = first + ((ref >> PSF_LEAF_COUNT_SHIFT) & PSF_LEAF_COUNT_MASK) + 1u;
-      const uint sphere_packs = (ref & PSF_LEAF_SPHERES) ? spheres : PSF_SPHERES_NONE;
+      const bool leaf_spheres = (ref & PSF_LEAF_SPHERES) != 0u;
       for (uint k = first; k < end; ++k) {
         __global const float* p = (__global const float*)(packs + k);
         bvh_floatw t, u, v;
         uint mask;
-        if (sphere_packs != PSF_SPHERES_NONE && pack_is_spheres(p)) {
-          mask = sphere_packs == PSF_SPHERES_INLINE ? sphere_pack_test_body(p, org, dir, dir_len, tmin, hit.t, &t)
-                                                    : sphere_pack_test(p, org, dir, dir_len, tmin, hit.t, &t);
+        if (spheres != PSF_SPHERES_NONE && leaf_spheres && pack_is_spheres(p)) {
+          mask = spheres == PSF_SPHERES_INLINE ? sphere_pack_test_double(p, org, dir, dir_len, tmin, hit.t, &t)
+                 : spheres == PSF_SPHERES_INLINE_FLOAT
+                     ? sphere_pack_test_float(p, org, dir, dir_len, tmin, hit.t, &t)
+                     : sphere_pack_test(p, org, dir, dir_len, tmin, hit.t, &t);
           u = v = (bvh_floatw)(0.0f);
         } else {
           mask = pack_test(p, org, dir, dir_len, tmin, hit.t, &t, &u, &v);

@@ -528,28 +528,38 @@ inline void env_lanes_radiance(Environment env, __global const float* data, cons
     *h = intersect_any_hit_leaves(nodes, packs, *r, alpha, SPHERES);                                                   \
   }
 PSF_LANE_CASTS(, PSF_SPHERES_INLINE)
+PSF_LANE_CASTS(_float_spheres, PSF_SPHERES_INLINE_FLOAT)
 PSF_LANE_CASTS(_tris, PSF_SPHERES_NONE)
 
-/* Lane casts by the scene's kind: alpha-tested (`masked`), with spheres. */
-inline void lane_cast_closest(bool masked, bool spheres, __global const BvhNode* nodes,
+/* Lane casts by the scene's kind: alpha-tested (`masked`), with spheres
+ * (FrameParams.spheres: PSF_FRAME_SPHERES_*). */
+inline void lane_cast_closest(bool masked, uint spheres, __global const BvhNode* nodes,
                               __global const BvhTriPack* packs, const AlphaScene* alpha, const Ray* r, Hit* h) {
-  if (masked && spheres)
+  if (masked && spheres == PSF_FRAME_SPHERES_DOUBLE)
     lane_closest_masked(nodes, packs, alpha, r, h);
+  else if (masked && spheres == PSF_FRAME_SPHERES_FLOAT)
+    lane_closest_masked_float_spheres(nodes, packs, alpha, r, h);
   else if (masked)
     lane_closest_masked_tris(nodes, packs, alpha, r, h);
-  else if (spheres)
+  else if (spheres == PSF_FRAME_SPHERES_DOUBLE)
     lane_closest(nodes, packs, r, h);
+  else if (spheres == PSF_FRAME_SPHERES_FLOAT)
+    lane_closest_float_spheres(nodes, packs, r, h);
   else
     lane_closest_tris(nodes, packs, r, h);
 }
-inline void lane_cast_any(bool masked, bool spheres, __global const BvhNode* nodes, __global const BvhTriPack* packs,
+inline void lane_cast_any(bool masked, uint spheres, __global const BvhNode* nodes, __global const BvhTriPack* packs,
                           const AlphaScene* alpha, const Ray* r, Hit* h) {
-  if (masked && spheres)
+  if (masked && spheres == PSF_FRAME_SPHERES_DOUBLE)
     lane_any_masked(nodes, packs, alpha, r, h);
+  else if (masked && spheres == PSF_FRAME_SPHERES_FLOAT)
+    lane_any_masked_float_spheres(nodes, packs, alpha, r, h);
   else if (masked)
     lane_any_masked_tris(nodes, packs, alpha, r, h);
-  else if (spheres)
+  else if (spheres == PSF_FRAME_SPHERES_DOUBLE)
     lane_any(nodes, packs, r, h);
+  else if (spheres == PSF_FRAME_SPHERES_FLOAT)
+    lane_any_float_spheres(nodes, packs, r, h);
   else
     lane_any_tris(nodes, packs, r, h);
 }
