@@ -17,12 +17,13 @@
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
  * and no bump map and an isotropic rough conductor without one, whose BSDFs
  * the vectors evaluate and sample, Plastic8 and Conductor8), the
- * environment an escaped ray sees, a light sample
+ * environment map an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
  * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
  * vectors do not shade or of a texture (its uv and frame). Among a few lights
  * (PSF_LANES_FEW_LIGHTS) the cone of a one-sided sphere light seen from outside
- * is sampled in vectors. A light sample on an environment map takes its
+ * and the directions of a constant environment are sampled in vectors, and a
+ * constant environment is seen in vectors. A light sample on an environment map takes its
  * steps over all lanes before the next, between the closest-hit casts
  * (EnvLanes), so that the lanes' cache misses overlap and wait behind casts.
  * A lane whose path ends stores the path's state and takes the next path of
@@ -888,7 +889,15 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
 
     /* Escaped rays see the environment, MIS-weighted against its light samples
      * unless they left the camera (shade.cl), lane by lane. */
-    if (env.present) {
+    if (env.present && env.width == 0u) { /* a constant environment, in vectors */
+      int8 sees = ln.live & ~hit;
+      if (params.hide & PSF_HIDE_ENVIRONMENT) sees &= ln.depth > 0u;
+      const int8 mis = (ln.depth > 0u) & ((ln.flags & PSF_PATH_SPECULAR) == 0u);
+      const float8 w = select((float8)(1.0f),
+                              power_heuristic8(ln.bsdf_pdf, (float8)(env.scale.w * (1.0f / (4.0f * PSF_ENV_PI)))), mis);
+      const Vec8 le = vec8((float8)(env.scale.x), (float8)(env.scale.y), (float8)(env.scale.z));
+      lanes_add_radiance(&ln, vec8_scale(vec8_mul(ln.beta, le), w), sees, true);
+    } else if (env.present) {
       const int8 escaped = ln.live & ~hit;
       Vec8 seen = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
       int8 sees = (int8)(0);
@@ -997,9 +1006,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       }
       for (uint todo = psf_lanes8(sphere_light & general); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
-        LANE_F(pdf_hit, l) = emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
-                                                LANE_I(two_sided, l) ? 1u : 0u, VEC8_GET(ln.prev, l), LANE_F(dist, l),
-                                                LANE_F(cos_l, l));
+        LANE_F(pdf_hit, l) =
+            emitter_pdf_sphere(tri_light_pdf, LANE_U(prim, l), tri_pos + 3u * LANE_U(prim, l),
+                               LANE_I(two_sided, l) ? 1u : 0u, VEC8_GET(ln.prev, l), LANE_F(dist, l), LANE_F(cos_l, l));
       }
       const float8 w = select((float8)(1.0f), power_heuristic8(ln.bsdf_pdf, pdf_hit), mis);
       /* An emission texture multiplies the emission there (surface.cl surface_emission). */
@@ -1107,9 +1116,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
 
     /* Next-event estimation: a point on the chosen triangle (emitter.cl
      * emitter_sample) in vectors, and among a few lights a direction in the
-     * cone of a one-sided, untextured sphere light; any other light (a
-     * constant environment, point, spot, directional lights, other sphere
-     * lights) by emitter_sample itself, lane by lane, and an environment map's
+     * cone of a one-sided, untextured sphere light or from a constant
+     * environment; any other light (point, spot, directional lights, other
+     * sphere lights, a constant environment among many lights) by
+     * emitter_sample itself, lane by lane, and an environment map's
      * from EnvLanes; the sample's
      * MIS weight against the BSDF's pdf (none for a delta light). */
     Vec8 pending = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
@@ -1120,6 +1130,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0), sphere_light = (int8)(0);
+      int8 constant_light = (int8)(0); /* a constant environment */
       uint8 light_tex = (uint8)(PSF_NO_TEXTURE), light_prim = (uint8)(0u);
       float8 sphere_r = (float8)(0.0f); /* a sphere light's radius (its centre in v0) */
       v0 = e1 = e2 = le = pending;
@@ -1133,6 +1144,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
           __global const Emitter* em = emitters + k;
           if (em->type == PSF_EMITTER_ENVIRONMENT && env.width > 0u) {
             env_light |= pick;
+            choose = select(choose, (float8)(em->radiance.w), pick);
+          } else if (em->type == PSF_EMITTER_ENVIRONMENT) {
+            constant_light |= pick;
             choose = select(choose, (float8)(em->radiance.w), pick);
           } else if (em->type == PSF_EMITTER_SPHERE && em->e2.w > 0.0f && !em->two_sided &&
                      em->tex_emission == PSF_NO_TEXTURE) {
@@ -1226,8 +1240,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         Vec8 cs, ct;
         const Vec8 cn = vec8_scale(dc, rsqrt(dc2));
         frame_from_normal8(cn, &cs, &ct);
-        const Vec8 swi = vec8_normalize(
-            vec8_add(vec8_add(vec8_scale(cs, sin_t * cos_phi), vec8_scale(ct, sin_t * sin_phi)), vec8_scale(cn, cos_t)));
+        const Vec8 swi = vec8_normalize(vec8_add(
+            vec8_add(vec8_scale(cs, sin_t * cos_phi), vec8_scale(ct, sin_t * sin_phi)), vec8_scale(cn, cos_t)));
         const float8 b = vec8_dot(swi, dc);
         const Vec8 off = vec8_sub(dc, vec8_scale(swi, b));
         const float8 sdist = b - sqrt(fmax(0.0f, r2 - vec8_dot(off, off)));
@@ -1236,6 +1250,16 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         wi = vec8_select(wi, swi, sphere_light);
         ldist = select(ldist, sdist, sphere_light);
         lpdf = select(lpdf, select((float8)(0.0f), spdf, ok), sphere_light);
+      }
+      if (any(constant_light)) {
+        /* emitter.cl env_sample's uniform direction over the sphere. */
+        const float8 z = 1.0f - 2.0f * u_la, r = sqrt(fmax(0.0f, 1.0f - z * z));
+        float8 c;
+        const float8 sn = psf_sincos8(2.0f * PSF_ENV_PI * u_lb, &c);
+        wi = vec8_select(wi, vec8(r * c, r * sn, z), constant_light);
+        lpdf = select(lpdf, choose * (1.0f / (4.0f * PSF_ENV_PI)), constant_light);
+        le = vec8_select(le, vec8((float8)(env.scale.x), (float8)(env.scale.y), (float8)(env.scale.z)), constant_light);
+        ldist = select(ldist, (float8)(INFINITY), constant_light);
       }
       int8 delta = (int8)(0);
       for (uint todo = psf_lanes8(other_light); todo != 0u; todo &= todo - 1u) {
