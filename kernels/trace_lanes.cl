@@ -15,8 +15,9 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
- * and no bump map and an isotropic rough conductor without one, whose BSDFs
- * the vectors evaluate and sample, Plastic8 and Conductor8), the
+ * and no bump map, an isotropic rough conductor and a principled material that
+ * transmits nothing, without one, whose BSDFs the vectors evaluate and sample,
+ * Plastic8, Conductor8 and Principled8), the
  * environment map an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
  * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
@@ -620,23 +621,23 @@ inline float8 fresnel_dielectric8(float8 ci, float8 n) {
   return select(0.5f * (rs * rs + rp * rp), (float8)(1.0f), ct2 <= 0.0f);
 }
 
-/* mf_D, mf_G1 and mf_pdf for isotropic GGX. */
-inline float8 ggx_D8(Vec8 m, float8 a) {
-  const float8 ct = m.z, x = m.x / a, y = m.y / a, ct2 = ct * ct;
+/* mf_D and mf_G1 for GGX of roughness au, av (the same operations for au = av). */
+inline float8 ggx_D8(Vec8 m, float8 au, float8 av) {
+  const float8 ct = m.z, x = m.x / au, y = m.y / av, ct2 = ct * ct;
   const float8 d = x * x + y * y + ct2;
-  const float8 r = 1.0f / (PSF_PI * a * a * d * d);
+  const float8 r = 1.0f / (PSF_PI * au * av * d * d);
   return select((float8)(0.0f), r, (ct > 0.0f) & (r * ct > 1e-20f));
 }
-inline float8 ggx_G1_8(Vec8 v, Vec8 m, float8 a) {
-  const float8 xy = a * a * v.x * v.x + a * a * v.y * v.y;
+inline float8 ggx_G1_8(Vec8 v, Vec8 m, float8 au, float8 av) {
+  const float8 xy = au * au * v.x * v.x + av * av * v.y * v.y;
   const float8 t2 = xy / (v.z * v.z);
   const float8 g = select(2.0f / (1.0f + sqrt(1.0f + t2)), (float8)(1.0f), xy == 0.0f);
   return select(g, (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
 }
 
-/* mf_sample for isotropic GGX: a visible normal for v (v.z > 0). */
-inline Vec8 ggx_sample8(Vec8 v, float8 a, float8 u1, float8 u2) {
-  const Vec8 vh = vec8_normalize(vec8(a * v.x, a * v.y, v.z));
+/* mf_sample for GGX: a visible normal for v (v.z > 0). */
+inline Vec8 ggx_sample8(Vec8 v, float8 au, float8 av, float8 u1, float8 u2) {
+  const Vec8 vh = vec8_normalize(vec8(au * v.x, av * v.y, v.z));
   const float8 lensq = vh.x * vh.x + vh.y * vh.y;
   const float8 inv = rsqrt(lensq);
   const int8 tilted = lensq > 0.0f;
@@ -650,7 +651,7 @@ inline Vec8 ggx_sample8(Vec8 v, float8 a, float8 u1, float8 u2) {
   const float8 p2 = (1.0f - s) * sqrt(fmax(0.0f, 1.0f - p1 * p1)) + s * (r * sin_phi);
   const float8 pz = sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2));
   const Vec8 nh = vec8_add(vec8_add(vec8_scale(t1, p1), vec8_scale(t2, p2)), vec8_scale(vh, pz));
-  return vec8_normalize(vec8(a * nh.x, a * nh.y, fmax(1e-6f, nh.z)));
+  return vec8_normalize(vec8(au * nh.x, av * nh.y, fmax(1e-6f, nh.z)));
 }
 
 /* plastic_prob_specular for the coat's reflectance 1 - T(cos_o). */
@@ -668,8 +669,8 @@ inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8*
   const Vec8 h = vec8_normalize(vec8_add(o, i));
   const float8 oh = vec8_dot(o, h);
   const float8 fr = fresnel_dielectric8(oh, p->eta);
-  const float8 d = ggx_D8(h, p->alpha), g_o = ggx_G1_8(o, h, p->alpha);
-  const float8 g = g_o * ggx_G1_8(i, h, p->alpha);
+  const float8 d = ggx_D8(h, p->alpha, p->alpha), g_o = ggx_G1_8(o, h, p->alpha, p->alpha);
+  const float8 g = g_o * ggx_G1_8(i, h, p->alpha, p->alpha);
   const float8 pm = d * g_o * fabs(oh) / o.z;
   *pdf = select((float8)(0.0f), ps * pm / (4.0f * oh) + (1.0f - ps) * i.z * PSF_INV_PI, on);
   const Vec8 f = vec8_add(vec8_scale(p->spec, fr * d * g / (4.0f * o.z * i.z)),
@@ -738,9 +739,9 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
   const float8 oh = vec8_dot(o, h);
   float8 d = (float8)(0.0f), g_o = d, g_i = d, pm = d;
   if (!all(c->beckmann)) {
-    d = ggx_D8(h, c->alpha);
-    g_o = ggx_G1_8(o, h, c->alpha);
-    g_i = ggx_G1_8(i, h, c->alpha);
+    d = ggx_D8(h, c->alpha, c->alpha);
+    g_o = ggx_G1_8(o, h, c->alpha, c->alpha);
+    g_i = ggx_G1_8(i, h, c->alpha, c->alpha);
     pm = d * g_o * fabs(oh) / o.z;
   }
   if (any(c->beckmann)) {
@@ -756,6 +757,169 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
                        fresnel_conductor8(oh, c->eta.z, c->k.z));
   const Vec8 f = vec8_scale(vec8_mul(c->spec, fr), d * g / (4.0f * o.z * i.z));
   return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
+}
+
+/* --- principled in vectors ---------------------------------------------------
+ * bsdf.cl's principled (principled_eval, principled_sample) for the lanes
+ * whose material transmits nothing (spec_trans 0) and has no bump map, from
+ * the front: Burley's diffuse with retro-reflection, flatness and sheen, the
+ * anisotropic GGX reflection with its tints and metallic part, the clearcoat;
+ * the same operations in float8. Materials that transmit stay lane by lane. */
+
+/* Whether the lanes shade material m as a Principled8. */
+inline bool lanes_principled(const Material* m) {
+  return m->type == PSF_MATERIAL_PRINCIPLED && m->specular.y == 0.0f && m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' principled materials (Material's fields as host/scene/mitsuba.cpp
+ * fills them). */
+typedef struct {
+  float8 au, av, eta, roughness;           /* alpha_u, alpha_v, eta.x, eta.z */
+  float8 metallic, spec_tint, sheen;       /* specular.x, .z, .w */
+  float8 sheen_tint, flatness, clearcoat;  /* transmittance.x, .y, .z */
+  float8 cc_alpha;                         /* principled_clearcoat_alpha */
+  float8 p_diffuse, p_clearcoat, p_spec;   /* principled_lobes from the front */
+  Vec8 base;                               /* albedo */
+} Principled8;
+
+inline float8 principled_schlick_weight8(float8 c) {
+  const float8 m = clamp(1.0f - c, 0.0f, 1.0f), m2 = m * m;
+  return m2 * m2 * m;
+}
+/* principled_schlick for cos_i >= 0. */
+inline float8 principled_schlick8(float8 cos_i, float8 eta) {
+  const float8 ct2 = 1.0f - (1.0f - cos_i * cos_i) / (eta * eta);
+  return principled_schlick_weight8(select(sqrt(fmax(ct2, 0.0f)), fabs(cos_i), eta > 1.0f));
+}
+/* principled_fresnel for cos_i >= 0: F, and the refracted cosine and eta_ti. */
+inline float8 principled_fresnel8(float8 cos_i, float8 eta, float8* cos_t, float8* eta_ti) {
+  const int8 matched = eta == 1.0f;
+  const float8 ci = fabs(cos_i), ct2 = 1.0f - (1.0f - ci * ci) / (eta * eta);
+  const float8 ct = sqrt(fmax(ct2, 0.0f));
+  const float8 rs = (ci - eta * ct) / (ci + eta * ct), rp = (eta * ci - ct) / (eta * ci + ct);
+  *eta_ti = select(1.0f / eta, (float8)(1.0f), matched);
+  *cos_t = select(select(-ct, (float8)(0.0f), ct2 <= 0.0f), -cos_i, matched);
+  return select(select(0.5f * (rs * rs + rp * rp), (float8)(1.0f), ct2 <= 0.0f), (float8)(0.0f), matched);
+}
+inline Vec8 principled_tint8(Vec8 base) {
+  const float8 lum = 0.212671f * base.x + 0.715160f * base.y + 0.072169f * base.z;
+  return vec8_select(vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), vec8_div(base, lum), lum > 0.0f);
+}
+inline float8 principled_gtr1_8(float8 cos_m, float8 a) {
+  const float8 a2 = a * a;
+  const float8 r = (a2 - 1.0f) / (PSF_PI * log(a2) * (1.0f + (a2 - 1.0f) * cos_m * cos_m));
+  return select((float8)(0.0f), r, r * cos_m > 1e-20f);
+}
+inline float8 principled_ggx_g1_8(Vec8 v, Vec8 m, float8 a) {
+  const float8 c2 = v.z * v.z, t2 = (1.0f - c2) / c2;
+  const float8 g = select(2.0f / (1.0f + sqrt(1.0f + a * a * t2)), (float8)(1.0f), v.z == 1.0f);
+  return select(g, (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
+}
+
+/* principled_eval for local o and i (o from the front: the lanes' own
+ * condition; a lane whose o lies behind gets 0): f and *pdf. */
+inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) {
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  const float8 co = o.z, ci = i.z;
+  const int8 reflect = co * ci > 0.0f, front = co > 0.0f;
+  Vec8 h = vec8_normalize(vec8_add(o, i));
+  h = vec8_select(h, vec8_neg(h), h.z < 0.0f);
+  const float8 oh = vec8_dot(o, h), ih = vec8_dot(i, h);
+  const int8 micro_r = front & reflect & (oh > 0.0f) & (ih > 0.0f);
+  float8 cos_t, eta_ti;
+  const float8 fd = principled_fresnel8(oh, p->eta, &cos_t, &eta_ti);
+  const float8 d = ggx_D8(h, p->au, p->av);
+  const float8 g_o = ggx_G1_8(o, h, p->au, p->av), g = g_o * ggx_G1_8(i, h, p->au, p->av);
+  const float8 pm = d * g_o * fabs(oh) / o.z;
+  const float8 w = select((float8)(0.0f), principled_schlick8(oh, p->eta), micro_r);
+  float8 pdf_r = select((float8)(0.0f), p->p_spec * pm / (4.0f * fabs(ih)), micro_r);
+  Vec8 f = zero;
+  {
+    const float8 r = (p->eta - 1.0f) / (p->eta + 1.0f);
+    const Vec8 r0 = vec8_scale(principled_tint8(p->base), r * r);
+    const float8 one_m = 1.0f - p->metallic;
+    const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
+    const Vec8 metal = vec8_scale(vec8_add(p->base, vec8_scale(vec8_sub(one, p->base), w)), p->metallic);
+    const Vec8 tinted = vec8_scale(vec8_add(r0, vec8_scale(vec8_sub(one, r0), w)), one_m * p->spec_tint);
+    const float8 plain = one_m * (1.0f - p->spec_tint) * fd;
+    const Vec8 F = vec8_add(vec8_add(vec8((float8)(plain), plain, plain), metal), tinted);
+    f = vec8_select(f, vec8_scale(F, d * g / (4.0f * fabs(co * ci))), micro_r & (fd > 0.0f));
+  }
+  const int8 coat = micro_r & (p->clearcoat > 0.0f);
+  if (any(coat)) {
+    const float8 dcc = principled_gtr1_8(h.z, p->cc_alpha);
+    const float8 fcc = 0.04f + 0.96f * w;
+    const float8 gcc = principled_ggx_g1_8(o, h, (float8)(0.25f)) * principled_ggx_g1_8(i, h, (float8)(0.25f));
+    const float8 c = 0.25f * p->clearcoat * fcc * dcc * gcc;
+    f = vec8_select(f, vec8_add(f, vec8(c, c, c)), coat);
+    pdf_r = select(pdf_r, pdf_r + p->p_clearcoat * dcc * h.z / (4.0f * fabs(ih)), coat);
+  }
+  const float8 brdf = 1.0f - p->metallic; /* (1 - metallic)(1 - spec_trans), spec_trans 0 */
+  const int8 diffuse = front & reflect & (brdf > 0.0f);
+  {
+    const float8 cos_d = vec8_dot(h, i);
+    const float8 fo = principled_schlick_weight8(ci), fi = principled_schlick_weight8(co);
+    const float8 rr = 2.0f * p->roughness * cos_d * cos_d;
+    float8 dif = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
+    const int8 flat = p->flatness > 0.0f;
+    if (any(flat & diffuse)) {
+      const float8 fss = mix((float8)(1.0f), 0.5f * rr, fo) * mix((float8)(1.0f), 0.5f * rr, fi);
+      const float8 ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
+      dif = select(dif, mix(dif, ss, p->flatness), flat);
+    }
+    Vec8 fd_ = vec8_add(f, vec8_scale(p->base, brdf * PSF_INV_PI * dif));
+    const int8 sheen = diffuse & (p->sheen > 0.0f);
+    if (any(sheen)) {
+      const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
+      const Vec8 t = principled_tint8(p->base);
+      const Vec8 tint = vec8(mix(one.x, t.x, p->sheen_tint), mix(one.y, t.y, p->sheen_tint),
+                             mix(one.z, t.z, p->sheen_tint));
+      fd_ = vec8_select(fd_, vec8_add(fd_, vec8_scale(tint, p->sheen * (1.0f - p->metallic) *
+                                                                 principled_schlick_weight8(cos_d))),
+                        sheen);
+    }
+    f = vec8_select(f, fd_, diffuse);
+    pdf_r = select(pdf_r, pdf_r + p->p_diffuse * ci * PSF_INV_PI, diffuse);
+  }
+  const int8 none = (co == 0.0f) | (ci == 0.0f);
+  *pdf = select(pdf_r, (float8)(0.0f), none);
+  return vec8_select(f, zero, none);
+}
+
+/* principled_sample's local direction for o (the lobe by uc: the cosine
+ * direction wl, a clearcoat normal's mirror direction, or the GGX visible
+ * normal's reflection or refraction); *fails where it returns bsdf_fail. */
+inline Vec8 principled8_sample(const Principled8* p, Vec8 o, Vec8 wl, float8 u1, float8 u2, float8 uc, int8* fails) {
+  const float8 lxy = p->p_diffuse + p->p_clearcoat;
+  const int8 diffuse = uc < p->p_diffuse, coat = ~diffuse & (uc < lxy), spec = ~diffuse & ~coat;
+  Vec8 i = wl;
+  int8 bad = o.z <= 0.0f; /* from behind, principled_lobes gives nothing without transmission */
+  if (any(coat)) {         /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
+    const float8 a2 = p->cc_alpha * p->cc_alpha;
+    const float8 c2 = (1.0f - pow(a2, 1.0f - u2)) / (1.0f - a2);
+    const float8 st = sqrt(fmax(0.0f, 1.0f - c2));
+    float8 cp;
+    const float8 sp = psf_sincos8(2.0f * PSF_PI * u1, &cp);
+    const Vec8 h = vec8(st * cp, st * sp, sqrt(fmax(0.0f, c2)));
+    const Vec8 ic = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
+    i = vec8_select(i, ic, coat);
+    bad |= coat & (ic.z <= 0.0f);
+  }
+  if (any(spec)) {
+    const Vec8 h = ggx_sample8(o, p->au, p->av, u1, u2);
+    const float8 oh = vec8_dot(o, h);
+    float8 cos_t, eta_ti;
+    const float8 fd = principled_fresnel8(oh, p->eta, &cos_t, &eta_ti);
+    /* prefl = 1 - btdf (1 - fd) with btdf 0 */
+    const int8 reflect = uc < lxy + p->p_spec * (1.0f - 0.0f * (1.0f - fd));
+    const Vec8 ir = vec8_sub(vec8_scale(h, 2.0f * oh), o);
+    const Vec8 it = vec8_sub(vec8_scale(h, oh * eta_ti + cos_t), vec8_scale(o, eta_ti));
+    const Vec8 is = vec8_select(it, ir, reflect);
+    i = vec8_select(i, is, spec);
+    bad |= spec & (~(p->p_spec > 0.0f) | select(is.z * o.z >= 0.0f, is.z * o.z <= 0.0f, reflect));
+  }
+  *fails = bad;
+  return i;
 }
 
 /* bsdf_finish for the lanes of `take`: the sampled local direction i (wo where
@@ -1075,13 +1239,35 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const float8 fn_wo = vec8_dot(fn, wo);
     /* The rough plastics that scatter in vectors (Plastic8): their parameters
      * and the coat's transmittance towards wo, its table read lane by lane. */
-    int8 plastic = (int8)(0), conductor = (int8)(0);
+    int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0);
     Plastic8 pl;
     Conductor8 co;
+    Principled8 pr8;
     co.beckmann = (int8)(0);
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (lanes_principled(&mats[l])) {
+        const Material* m = &mats[l];
+        LANE_I(principled, l) = -1;
+        LANE_F(pr8.au, l) = m->alpha_u;
+        LANE_F(pr8.av, l) = m->alpha_v;
+        LANE_F(pr8.eta, l) = m->eta.x;
+        LANE_F(pr8.roughness, l) = m->eta.z;
+        LANE_F(pr8.metallic, l) = m->specular.x;
+        LANE_F(pr8.spec_tint, l) = m->specular.z;
+        LANE_F(pr8.sheen, l) = m->specular.w;
+        LANE_F(pr8.sheen_tint, l) = m->transmittance.x;
+        LANE_F(pr8.flatness, l) = m->transmittance.y;
+        LANE_F(pr8.clearcoat, l) = m->transmittance.z;
+        LANE_F(pr8.cc_alpha, l) = principled_clearcoat_alpha(*m);
+        const float3 lobes = principled_lobes(*m, true);
+        LANE_F(pr8.p_diffuse, l) = lobes.x;
+        LANE_F(pr8.p_clearcoat, l) = lobes.y;
+        LANE_F(pr8.p_spec, l) = lobes.z;
+        vec8_set(&pr8.base, l, m->albedo.xyz);
+        continue;
+      }
       if (lanes_conductor(&mats[l])) {
         const Material* m = &mats[l];
         LANE_I(conductor, l) = -1;
@@ -1284,7 +1470,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      for (uint todo = psf_lanes8(evaluate & ~plastic & ~conductor); todo != 0u; todo &= todo - 1u) {
+      for (uint todo = psf_lanes8(evaluate & ~plastic & ~conductor & ~principled); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
         float pdf_l;
@@ -1293,23 +1479,29 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
             lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), VEC8_GET(wi, l), &pdf_l));
         LANE_F(bpdf, l) = pdf_l;
       }
-      const int8 evaluate_plastic = evaluate & plastic, evaluate_conductor = evaluate & conductor;
-      if (any(evaluate_conductor)) {
+      /* The BSDFs in vectors, in the local frame. */
+      if (any(evaluate & (plastic | conductor | principled))) {
         const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
         const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
-        float8 pdf_c;
-        f = vec8_select(f, conductor8_eval(&co, o, i, &pdf_c), evaluate_conductor);
-        bpdf = select(bpdf, pdf_c, evaluate_conductor);
-      }
-      if (any(evaluate_plastic)) {
-        const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-        const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
-        float8 t_i = (float8)(0.0f), pdf_p;
-        for (uint l = 0u; l < PSF_LANES; ++l)
-          if (LANE_I(evaluate_plastic, l))
-            LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
-        f = vec8_select(f, plastic8_eval(&pl, o, i, t_i, &pdf_p), evaluate_plastic);
-        bpdf = select(bpdf, pdf_p, evaluate_plastic);
+        const int8 evaluate_plastic = evaluate & plastic, evaluate_conductor = evaluate & conductor;
+        const int8 evaluate_principled = evaluate & principled;
+        float8 pdf_v;
+        if (any(evaluate_principled)) {
+          f = vec8_select(f, principled8_eval(&pr8, o, i, &pdf_v), evaluate_principled);
+          bpdf = select(bpdf, pdf_v, evaluate_principled);
+        }
+        if (any(evaluate_conductor)) {
+          f = vec8_select(f, conductor8_eval(&co, o, i, &pdf_v), evaluate_conductor);
+          bpdf = select(bpdf, pdf_v, evaluate_conductor);
+        }
+        if (any(evaluate_plastic)) {
+          float8 t_i = (float8)(0.0f);
+          for (uint l = 0u; l < PSF_LANES; ++l)
+            if (LANE_I(evaluate_plastic, l))
+              LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
+          f = vec8_select(f, plastic8_eval(&pl, o, i, t_i, &pdf_v), evaluate_plastic);
+          bpdf = select(bpdf, pdf_v, evaluate_plastic);
+        }
       }
       const float8 cos_s = fabs(cos_i);
       contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
@@ -1331,7 +1523,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo = psf_lanes8(sample_own & ~plastic & ~conductor); todo != 0u; todo &= todo - 1u) {
+    for (uint todo = psf_lanes8(sample_own & ~plastic & ~conductor & ~principled); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
@@ -1349,7 +1541,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     if (any(sample_plastic)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       const int8 coat = u_lobe < plastic8_prob_specular(&pl);
-      const Vec8 h = ggx_sample8(o, pl.alpha, u_b1, u_b2);
+      const Vec8 h = ggx_sample8(o, pl.alpha, pl.alpha, u_b1, u_b2);
       const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
       const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
       float8 t_i = (float8)(0.0f), pdf_p;
@@ -1365,13 +1557,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       Vec8 h = vec8(u_b1, u_b1, u_b1);
       const int8 beckmann = sample_conductor & co.beckmann;
-      if (any(sample_conductor & ~beckmann)) h = ggx_sample8(o, co.alpha, u_b1, u_b2);
+      if (any(sample_conductor & ~beckmann)) h = ggx_sample8(o, co.alpha, co.alpha, u_b1, u_b2);
       if (any(beckmann)) h = vec8_select(h, beckmann_sample8(co.alpha, u_b1, u_b2), beckmann);
       const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
       const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
       float8 pdf_c;
       const Vec8 f = conductor8_eval(&co, o, i, &pdf_c);
       lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
+    }
+    /* A principled material's sample (principled_sample), then bsdf_finish's. */
+    const int8 sample_principled = sample_own & principled;
+    if (any(sample_principled)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      int8 fails;
+      const Vec8 i = principled8_sample(&pr8, o, wl, u_b1, u_b2, u_lobe, &fails);
+      fails |= o.z == 0.0f;
+      float8 pdf_e;
+      const Vec8 f = principled8_eval(&pr8, o, i, &pdf_e);
+      lanes_take_sample(sample_principled, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
     }
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);
