@@ -15,9 +15,9 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
- * and no bump map, an isotropic rough conductor and a principled material that
- * transmits nothing, without one, whose BSDFs the vectors evaluate and sample,
- * Plastic8, Conductor8 and Principled8), the
+ * and no bump map, an isotropic rough conductor, a pplastic and a principled
+ * material that transmits nothing, without one, whose BSDFs the vectors
+ * evaluate and sample, Plastic8, Conductor8, PPlastic8 and Principled8), the
  * environment map an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
  * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
@@ -697,26 +697,70 @@ typedef struct {
   int8 beckmann;
 } Conductor8;
 
-/* mf_D, mf_G1 and mf_sample for isotropic Beckmann. */
-inline float8 beckmann_D8(Vec8 m, float8 a) {
-  const float8 ct = m.z, x = m.x / a, y = m.y / a, ct2 = ct * ct;
-  const float8 r = exp(-(x * x + y * y) / ct2) / (PSF_PI * a * a * ct2 * ct2);
+inline void conductor8_set(Conductor8* c, uint l, const Material* m) {
+  LANE_F(c->alpha, l) = m->alpha_u;
+  vec8_set(&c->spec, l, m->specular.xyz);
+  vec8_set(&c->eta, l, m->eta.xyz);
+  vec8_set(&c->k, l, m->k.xyz);
+  LANE_I(c->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+}
+
+/* mf_D, mf_G1 and mf_sample for Beckmann of roughness au, av. */
+inline float8 beckmann_D8(Vec8 m, float8 au, float8 av) {
+  const float8 ct = m.z, x = m.x / au, y = m.y / av, ct2 = ct * ct;
+  const float8 r = exp(-(x * x + y * y) / ct2) / (PSF_PI * au * av * ct2 * ct2);
   return select((float8)(0.0f), r, (ct > 0.0f) & (r * ct > 1e-20f));
 }
-inline float8 beckmann_G1_8(Vec8 v, Vec8 m, float8 a) {
-  const float8 xy = a * a * v.x * v.x + a * a * v.y * v.y;
+inline float8 beckmann_G1_8(Vec8 v, Vec8 m, float8 au, float8 av) {
+  const float8 xy = au * au * v.x * v.x + av * av * v.y * v.y;
   const float8 t2 = xy / (v.z * v.z);
   const float8 r = rsqrt(t2);
   const float8 g = (3.535f * r + 2.181f * r * r) / (1.0f + 2.276f * r + 2.577f * r * r);
   return select(select(g, (float8)(1.0f), (xy == 0.0f) | (r >= 1.6f)), (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
 }
-inline Vec8 beckmann_sample8(float8 a, float8 u1, float8 u2) {
+inline Vec8 beckmann_sample8(float8 au, float8 av, float8 u1, float8 u2) {
   float8 cp;
-  const float8 sp = psf_sincos8(2.0f * PSF_PI * u2, &cp);
-  const float8 inv_a2 = cp * cp / (a * a) + sp * sp / (a * a);
+  float8 sp = psf_sincos8(2.0f * PSF_PI * u2, &cp);
+  const int8 aniso = au != av;
+  if (any(aniso)) {
+    float8 cq;
+    const float8 sq = psf_sincos8(atan2(av * sp, au * cp), &cq);
+    sp = select(sp, sq, aniso);
+    cp = select(cp, cq, aniso);
+  }
+  const float8 inv_a2 = cp * cp / (au * au) + sp * sp / (av * av);
   const float8 tan2 = -log(1.0f - u1) / inv_a2;
   const float8 ct = rsqrt(1.0f + tan2), st = sqrt(fmax(0.0f, 1.0f - ct * ct));
   return vec8(st * cp, st * sp, ct);
+}
+
+/* The microfacet terms at the half-vector h of o and i (mf_D, mf_G1 of each,
+ * mf_pdf of o), GGX's or, in the lanes of `beckmann`, Beckmann's. */
+inline void mf8_terms(Vec8 h, Vec8 o, Vec8 i, float8 au, float8 av, int8 beckmann, float8* d, float8* g_o,
+                      float8* g_i, float8* pm) {
+  *d = *g_o = *g_i = *pm = (float8)(0.0f);
+  if (!all(beckmann)) {
+    *d = ggx_D8(h, au, av);
+    *g_o = ggx_G1_8(o, h, au, av);
+    *g_i = ggx_G1_8(i, h, au, av);
+    *pm = *d * *g_o * fabs(vec8_dot(o, h)) / o.z;
+  }
+  if (any(beckmann)) {
+    const float8 db = beckmann_D8(h, au, av);
+    *d = select(*d, db, beckmann);
+    *g_o = select(*g_o, beckmann_G1_8(o, h, au, av), beckmann);
+    *g_i = select(*g_i, beckmann_G1_8(i, h, au, av), beckmann);
+    *pm = select(*pm, db * h.z, beckmann);
+  }
+}
+
+/* mf_sample for o (o.z > 0): GGX's visible normal or, in the lanes of
+ * `beckmann`, Beckmann's. */
+inline Vec8 mf8_sample(Vec8 o, float8 au, float8 av, int8 beckmann, int8 lanes, float8 u1, float8 u2) {
+  Vec8 h = vec8(u1, u1, u1);
+  if (any(lanes & ~beckmann)) h = ggx_sample8(o, au, av, u1, u2);
+  if (any(lanes & beckmann)) h = vec8_select(h, beckmann_sample8(au, av, u1, u2), beckmann);
+  return h;
 }
 
 /* fresnel_conductor of one channel. */
@@ -737,25 +781,56 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
   const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
   const Vec8 h = vec8_normalize(vec8_add(o, i));
   const float8 oh = vec8_dot(o, h);
-  float8 d = (float8)(0.0f), g_o = d, g_i = d, pm = d;
-  if (!all(c->beckmann)) {
-    d = ggx_D8(h, c->alpha, c->alpha);
-    g_o = ggx_G1_8(o, h, c->alpha, c->alpha);
-    g_i = ggx_G1_8(i, h, c->alpha, c->alpha);
-    pm = d * g_o * fabs(oh) / o.z;
-  }
-  if (any(c->beckmann)) {
-    const float8 db = beckmann_D8(h, c->alpha);
-    d = select(d, db, c->beckmann);
-    g_o = select(g_o, beckmann_G1_8(o, h, c->alpha), c->beckmann);
-    g_i = select(g_i, beckmann_G1_8(i, h, c->alpha), c->beckmann);
-    pm = select(pm, db * h.z, c->beckmann);
-  }
+  float8 d, g_o, g_i, pm;
+  mf8_terms(h, o, i, c->alpha, c->alpha, c->beckmann, &d, &g_o, &g_i, &pm);
   const float8 g = g_o * g_i;
   *pdf = select((float8)(0.0f), pm / (4.0f * oh), on);
   const Vec8 fr = vec8(fresnel_conductor8(oh, c->eta.x, c->k.x), fresnel_conductor8(oh, c->eta.y, c->k.y),
                        fresnel_conductor8(oh, c->eta.z, c->k.z));
   const Vec8 f = vec8_scale(vec8_mul(c->spec, fr), d * g / (4.0f * o.z * i.z));
+  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
+}
+
+/* --- pplastic in vectors -----------------------------------------------------
+ * bsdf.cl's pplastic (Mitsuba 3's, rendered unpolarized) for the lanes whose
+ * material has no bump map: GGX or Beckmann, isotropic or not. */
+
+inline bool lanes_pplastic(const Material* m) {
+  return m->type == PSF_MATERIAL_PPLASTIC && m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' pplastics: alpha_u, alpha_v, eta.x, albedo.w (the specular
+ * sampling weight), specular, albedo, Beckmann's or GGX. */
+typedef struct {
+  float8 au, av, eta, ps;
+  Vec8 spec, base;
+  int8 beckmann;
+} PPlastic8;
+
+inline void pplastic8_set(PPlastic8* p, uint l, const Material* m) {
+  LANE_F(p->au, l) = m->alpha_u;
+  LANE_F(p->av, l) = m->alpha_v;
+  LANE_F(p->eta, l) = m->eta.x;
+  LANE_F(p->ps, l) = m->albedo.w;
+  vec8_set(&p->spec, l, m->specular.xyz);
+  vec8_set(&p->base, l, m->albedo.xyz);
+  LANE_I(p->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+}
+
+/* bsdf_eval_local's pplastic: f and *pdf for local o and i. */
+inline Vec8 pplastic8_eval(const PPlastic8* p, Vec8 o, Vec8 i, float8* pdf) {
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  const Vec8 h = vec8_normalize(vec8_add(o, i));
+  const float8 oh = vec8_dot(o, h);
+  const float8 fr = fresnel_dielectric8(oh, p->eta);
+  const float8 fo = fresnel_dielectric8(o.z, p->eta), fi = fresnel_dielectric8(i.z, p->eta);
+  float8 d, g_o, g_i, pm;
+  mf8_terms(h, o, i, p->au, p->av, p->beckmann, &d, &g_o, &g_i, &pm);
+  const float8 g = g_o * g_i;
+  pm = select((float8)(0.0f), pm / (4.0f * oh), (oh > 0.0f) & (vec8_dot(i, h) > 0.0f));
+  *pdf = select((float8)(0.0f), p->ps * pm + (1.0f - p->ps) * i.z * PSF_INV_PI, on);
+  const Vec8 f = vec8_add(vec8_scale(p->spec, fr * d * g / (4.0f * o.z * i.z)),
+                          vec8_scale(p->base, (1.0f - fo) * (1.0f - fi) * PSF_INV_PI));
   return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
 }
 
@@ -781,6 +856,25 @@ typedef struct {
   float8 p_diffuse, p_clearcoat, p_spec;   /* principled_lobes from the front */
   Vec8 base;                               /* albedo */
 } Principled8;
+
+inline void principled8_set(Principled8* p, uint l, const Material* m) {
+  LANE_F(p->au, l) = m->alpha_u;
+  LANE_F(p->av, l) = m->alpha_v;
+  LANE_F(p->eta, l) = m->eta.x;
+  LANE_F(p->roughness, l) = m->eta.z;
+  LANE_F(p->metallic, l) = m->specular.x;
+  LANE_F(p->spec_tint, l) = m->specular.z;
+  LANE_F(p->sheen, l) = m->specular.w;
+  LANE_F(p->sheen_tint, l) = m->transmittance.x;
+  LANE_F(p->flatness, l) = m->transmittance.y;
+  LANE_F(p->clearcoat, l) = m->transmittance.z;
+  LANE_F(p->cc_alpha, l) = principled_clearcoat_alpha(*m);
+  const float3 lobes = principled_lobes(*m, true);
+  LANE_F(p->p_diffuse, l) = lobes.x;
+  LANE_F(p->p_clearcoat, l) = lobes.y;
+  LANE_F(p->p_spec, l) = lobes.z;
+  vec8_set(&p->base, l, m->albedo.xyz);
+}
 
 inline float8 principled_schlick_weight8(float8 c) {
   const float8 m = clamp(1.0f - c, 0.0f, 1.0f), m2 = m * m;
@@ -1239,43 +1333,29 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const float8 fn_wo = vec8_dot(fn, wo);
     /* The rough plastics that scatter in vectors (Plastic8): their parameters
      * and the coat's transmittance towards wo, its table read lane by lane. */
-    int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0);
+    int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
     Plastic8 pl;
-    Conductor8 co;
-    Principled8 pr8;
-    co.beckmann = (int8)(0);
+    /* Zero where no lane fills them: their functions branch on any() of lanes
+     * they leave unused. */
+    Conductor8 co = {0};
+    Principled8 pr8 = {0};
+    PPlastic8 pp = {0};
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (lanes_pplastic(&mats[l])) {
+        LANE_I(pplastic, l) = -1;
+        pplastic8_set(&pp, l, &mats[l]);
+        continue;
+      }
       if (lanes_principled(&mats[l])) {
-        const Material* m = &mats[l];
         LANE_I(principled, l) = -1;
-        LANE_F(pr8.au, l) = m->alpha_u;
-        LANE_F(pr8.av, l) = m->alpha_v;
-        LANE_F(pr8.eta, l) = m->eta.x;
-        LANE_F(pr8.roughness, l) = m->eta.z;
-        LANE_F(pr8.metallic, l) = m->specular.x;
-        LANE_F(pr8.spec_tint, l) = m->specular.z;
-        LANE_F(pr8.sheen, l) = m->specular.w;
-        LANE_F(pr8.sheen_tint, l) = m->transmittance.x;
-        LANE_F(pr8.flatness, l) = m->transmittance.y;
-        LANE_F(pr8.clearcoat, l) = m->transmittance.z;
-        LANE_F(pr8.cc_alpha, l) = principled_clearcoat_alpha(*m);
-        const float3 lobes = principled_lobes(*m, true);
-        LANE_F(pr8.p_diffuse, l) = lobes.x;
-        LANE_F(pr8.p_clearcoat, l) = lobes.y;
-        LANE_F(pr8.p_spec, l) = lobes.z;
-        vec8_set(&pr8.base, l, m->albedo.xyz);
+        principled8_set(&pr8, l, &mats[l]);
         continue;
       }
       if (lanes_conductor(&mats[l])) {
-        const Material* m = &mats[l];
         LANE_I(conductor, l) = -1;
-        LANE_F(co.alpha, l) = m->alpha_u;
-        vec8_set(&co.spec, l, m->specular.xyz);
-        vec8_set(&co.eta, l, m->eta.xyz);
-        vec8_set(&co.k, l, m->k.xyz);
-        LANE_I(co.beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+        conductor8_set(&co, l, &mats[l]);
         continue;
       }
       if (!lanes_plastic(&mats[l])) continue;
@@ -1470,7 +1550,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      for (uint todo = psf_lanes8(evaluate & ~plastic & ~conductor & ~principled); todo != 0u; todo &= todo - 1u) {
+      const int8 vector_bsdf = plastic | conductor | principled | pplastic;
+      for (uint todo = psf_lanes8(evaluate & ~vector_bsdf); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
         float pdf_l;
@@ -1480,12 +1561,16 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         LANE_F(bpdf, l) = pdf_l;
       }
       /* The BSDFs in vectors, in the local frame. */
-      if (any(evaluate & (plastic | conductor | principled))) {
+      if (any(evaluate & vector_bsdf)) {
         const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
         const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
         const int8 evaluate_plastic = evaluate & plastic, evaluate_conductor = evaluate & conductor;
-        const int8 evaluate_principled = evaluate & principled;
+        const int8 evaluate_principled = evaluate & principled, evaluate_pplastic = evaluate & pplastic;
         float8 pdf_v;
+        if (any(evaluate_pplastic)) {
+          f = vec8_select(f, pplastic8_eval(&pp, o, i, &pdf_v), evaluate_pplastic);
+          bpdf = select(bpdf, pdf_v, evaluate_pplastic);
+        }
         if (any(evaluate_principled)) {
           f = vec8_select(f, principled8_eval(&pr8, o, i, &pdf_v), evaluate_principled);
           bpdf = select(bpdf, pdf_v, evaluate_principled);
@@ -1523,7 +1608,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo = psf_lanes8(sample_own & ~plastic & ~conductor & ~principled); todo != 0u; todo &= todo - 1u) {
+    for (uint todo = psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic)); todo != 0u;
+         todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
@@ -1555,15 +1641,25 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const int8 sample_conductor = sample_own & conductor;
     if (any(sample_conductor)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      Vec8 h = vec8(u_b1, u_b1, u_b1);
-      const int8 beckmann = sample_conductor & co.beckmann;
-      if (any(sample_conductor & ~beckmann)) h = ggx_sample8(o, co.alpha, co.alpha, u_b1, u_b2);
-      if (any(beckmann)) h = vec8_select(h, beckmann_sample8(co.alpha, u_b1, u_b2), beckmann);
+      const Vec8 h = mf8_sample(o, co.alpha, co.alpha, co.beckmann, sample_conductor, u_b1, u_b2);
       const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
       const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
       float8 pdf_c;
       const Vec8 f = conductor8_eval(&co, o, i, &pdf_c);
       lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
+    }
+    /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
+     * mirror direction with probability albedo.w, else the cosine direction. */
+    const int8 sample_pplastic = sample_own & pplastic;
+    if (any(sample_pplastic)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      const int8 spec = u_lobe < pp.ps;
+      const Vec8 h = mf8_sample(o, pp.au, pp.av, pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
+      const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), spec);
+      const int8 fails = (o.z <= 0.0f) | (spec & (i.z <= 0.0f));
+      float8 pdf_e;
+      const Vec8 f = pplastic8_eval(&pp, o, i, &pdf_e);
+      lanes_take_sample(sample_pplastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
     }
     /* A principled material's sample (principled_sample), then bsdf_finish's. */
     const int8 sample_principled = sample_own & principled;

@@ -1644,7 +1644,7 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, three scenes of analytic spheres (one a sphere light, also with
+  // other kind, four scenes of analytic spheres (one a sphere light, also with
   // a GGX conductor sphere), an
   // emission texture, three cameras (thin lens and Gaussian filter, tent filter
   // and crop window, orthographic), whose rays the lanes draw themselves; and a
@@ -1800,8 +1800,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true});
   }
   // Analytic spheres: a sphere light over a rough conductor sphere, a glass
-  // sphere on a sphere ground under a constant sky, principled spheres.
-  for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres"})
+  // sphere on a sphere ground under a constant sky, principled spheres,
+  // pplastic spheres (GGX, Beckmann, anisotropic, textured).
+  for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres", "pplastic-spheres"})
     cases.push_back({name, psf::load_scene(psf::test::source_path(std::string("scenes/") + name + ".xml")), true});
   {
     // The sphere light's scene with a GGX copper sphere (the file's is
