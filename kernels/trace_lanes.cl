@@ -15,9 +15,10 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
- * and no bump map, an isotropic rough conductor, a pplastic and a principled
- * material that transmits nothing, without one, whose BSDFs the vectors
- * evaluate and sample, Plastic8, Conductor8, PPlastic8 and Principled8), the
+ * and no bump map, an isotropic rough conductor, a pplastic, a principled
+ * material that transmits nothing, a smooth dielectric or conductor, without
+ * one, whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
+ * PPlastic8, Principled8 and Delta8), the
  * environment map an escaped ray sees, a light sample
  * on a point, spot or directional light or from inside a sphere light
  * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
@@ -791,6 +792,59 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
   return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
 }
 
+/* --- smooth dielectrics and conductors in vectors ---------------------------------
+ * bsdf.cl's dielectric and conductor (bsdf_sample_general: a mirror or
+ * refracted direction, its weight; delta lobes, which bsdf_eval_local gives
+ * nothing) for the lanes whose material has no bump map. */
+
+inline bool lanes_delta(const Material* m) {
+  return (m->type == PSF_MATERIAL_DIELECTRIC || m->type == PSF_MATERIAL_CONDUCTOR) && m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' smooth dielectrics and conductors: Material's specular,
+ * transmittance, eta and k, and which are conductors. */
+typedef struct {
+  Vec8 spec, trans, eta, k;
+  int8 conductor;
+} Delta8;
+
+inline void delta8_set(Delta8* d, uint l, const Material* m) {
+  vec8_set(&d->spec, l, m->specular.xyz);
+  vec8_set(&d->trans, l, m->transmittance.xyz);
+  vec8_set(&d->eta, l, m->eta.xyz);
+  vec8_set(&d->k, l, m->k.xyz);
+  LANE_I(d->conductor, l) = m->type == PSF_MATERIAL_CONDUCTOR ? -1 : 0;
+}
+
+/* fresnel_dielectric for either side: F, the refracted cosine and eta_ti. */
+inline float8 fresnel_dielectric_t8(float8 cos_i, float8 eta, float8* cos_t, float8* eta_ti) {
+  const int8 outside = cos_i >= 0.0f;
+  const float8 n = select(1.0f / eta, eta, outside), ci = fabs(cos_i);
+  const float8 ct2 = 1.0f - (1.0f - ci * ci) / (n * n);
+  *eta_ti = 1.0f / n;
+  const float8 ct = sqrt(fmax(ct2, 0.0f));
+  *cos_t = select(select(ct, -ct, outside), (float8)(0.0f), ct2 <= 0.0f);
+  const float8 rs = (ci - n * ct) / (ci + n * ct), rp = (n * ci - ct) / (n * ci + ct);
+  return select(0.5f * (rs * rs + rp * rp), (float8)(1.0f), ct2 <= 0.0f);
+}
+
+/* bsdf_sample_general's dielectric and conductor for local o and the lobe
+ * choice uc: the local direction, *weight, and *fails where a conductor is
+ * seen from behind (bsdf_fail). */
+inline Vec8 delta8_sample(const Delta8* d, Vec8 o, float8 uc, Vec8* weight, int8* fails) {
+  float8 cos_t, eta_ti;
+  const float8 fr = fresnel_dielectric_t8(o.z, d->eta.x, &cos_t, &eta_ti);
+  const int8 reflect = d->conductor | (uc < fr);
+  const Vec8 mirror = vec8(-o.x, -o.y, o.z);
+  const Vec8 refracted = vec8(-eta_ti * o.x, -eta_ti * o.y, cos_t);
+  const Vec8 fc = vec8(fresnel_conductor8(o.z, d->eta.x, d->k.x), fresnel_conductor8(o.z, d->eta.y, d->k.y),
+                       fresnel_conductor8(o.z, d->eta.z, d->k.z));
+  *weight = vec8_select(vec8_select(vec8_scale(d->trans, eta_ti * eta_ti), d->spec, reflect), vec8_mul(d->spec, fc),
+                        d->conductor);
+  *fails = d->conductor & (o.z <= 0.0f);
+  return vec8_select(refracted, mirror, reflect);
+}
+
 /* --- pplastic in vectors -----------------------------------------------------
  * bsdf.cl's pplastic (Mitsuba 3's, rendered unpolarized) for the lanes whose
  * material has no bump map: GGX or Beckmann, isotropic or not. */
@@ -1334,15 +1388,22 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The rough plastics that scatter in vectors (Plastic8): their parameters
      * and the coat's transmittance towards wo, its table read lane by lane. */
     int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
+    int8 delta_bsdf = (int8)(0);
     Plastic8 pl;
     /* Zero where no lane fills them: their functions branch on any() of lanes
      * they leave unused. */
     Conductor8 co = {0};
     Principled8 pr8 = {0};
     PPlastic8 pp = {0};
+    Delta8 dl = {0};
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (lanes_delta(&mats[l])) {
+        LANE_I(delta_bsdf, l) = -1;
+        delta8_set(&dl, l, &mats[l]);
+        continue;
+      }
       if (lanes_pplastic(&mats[l])) {
         LANE_I(pplastic, l) = -1;
         pplastic8_set(&pp, l, &mats[l]);
@@ -1550,7 +1611,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      const int8 vector_bsdf = plastic | conductor | principled | pplastic;
+      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf;
       for (uint todo = psf_lanes8(evaluate & ~vector_bsdf); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -1571,6 +1632,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
           f = vec8_select(f, pplastic8_eval(&pp, o, i, &pdf_v), evaluate_pplastic);
           bpdf = select(bpdf, pdf_v, evaluate_pplastic);
         }
+        /* Delta lobes: nothing towards a light sample. */
+        f = vec8_select(f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), evaluate & delta_bsdf);
+        bpdf = select(bpdf, (float8)(0.0f), evaluate & delta_bsdf);
         if (any(evaluate_principled)) {
           f = vec8_select(f, principled8_eval(&pr8, o, i, &pdf_v), evaluate_principled);
           bpdf = select(bpdf, pdf_v, evaluate_principled);
@@ -1608,7 +1672,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo = psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic)); todo != 0u;
+    for (uint todo = psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic | delta_bsdf)); todo != 0u;
          todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -1647,6 +1711,20 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       float8 pdf_c;
       const Vec8 f = conductor8_eval(&co, o, i, &pdf_c);
       lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
+    }
+    /* A smooth dielectric's or conductor's sample (bsdf_delta, bsdf_fail). */
+    const int8 sample_delta = sample_own & delta_bsdf;
+    if (any(sample_delta)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      Vec8 w;
+      int8 fails;
+      const Vec8 i = delta8_sample(&dl, o, u_lobe, &w, &fails);
+      const Vec8 world = vec8_add(vec8_add(vec8_scale(fs, i.x), vec8_scale(ft, i.y)), vec8_scale(fn, i.z));
+      wi = vec8_select(wi, vec8_select(world, wo, fails), sample_delta);
+      pdf = select(pdf, (float8)(0.0f), sample_delta);
+      weight = vec8_select(weight, vec8_select(w, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), fails),
+                           sample_delta);
+      delta_lobe = select(delta_lobe, ~fails, sample_delta);
     }
     /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
      * mirror direction with probability albedo.w, else the cosine direction. */
