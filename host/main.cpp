@@ -483,8 +483,8 @@ int main(int argc, char** argv) {
   render->add_option("--path-kernels", ra.path_kernels,
                      "wavefront: a kernel per stage over the live paths; per-path: each path in one work-item; "
                      "lanes: eight paths per work-item in vector lanes, for scenes without media (others: "
-                     "per-path); auto: on CPU devices lanes where the scene allows and has no thin principled "
-                     "material, else per-path for scenes without an environment map, else wavefront "
+                     "per-path); auto: on CPU devices lanes where the scene allows, else per-path for scenes "
+                     "without an environment map, else wavefront "
                      "(lanes: the same image up to float rounding)")
       ->check(CLI::IsMember({"auto", "wavefront", "per-path", "lanes"}));
   render->add_option("--resume", ra.resume, "Continue the render saved in this EXR (same scene and options) to --spp")

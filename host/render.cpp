@@ -51,16 +51,6 @@ bool lanes_vector_material(const Material& m) {
          (m.flags & ~(PSF_MATFLAG_NORMALS | PSF_MATFLAG_MASKED)) == 0 && m.tex_bump == PSF_NO_TEXTURE &&
          m.tex_alpha == PSF_NO_TEXTURE && m.tex_table == PSF_NO_TEXTURE && m.alpha_u == m.alpha_v;
 }
-// Whether the lanes render a scene with device material m slower than the
-// other path kernels: the thin principled BSDF, a large scalar function that
-// the lanes call out of line for one lane at a time (PoCL, medians of 10
-// alternating renders at 32 spp, lanes / per path: thin principled sheets 0.899 /
-// 0.876 s). The principled BSDF and pplastic were slower too (principled spheres
-// 502 / 438 ms, pplastic spheres 454 / 405) until the lanes read their frames
-// and vectors lane by lane where they lie (101a8a1): then principled spheres
-// 1.084 / 1.137 s (8 each), pplastic spheres 0.788 / 0.891 (6), the glTF
-// material spheres 11.0 / 13.4 (6).
-bool lanes_slow_material(const Material& m) { return m.type == PSF_MATERIAL_PRINCIPLED_THIN; }
 
 }  // namespace
 
@@ -72,7 +62,6 @@ struct Renderer::Impl {
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
   bool lanes = false;  // no camera medium, and lanes_materials_supported
-  bool lanes_default = false;  // and no material lanes_slow_material: the lanes by default on CPUs
   float auto_visibility_ray = 0.0f;  // visibility_ray(kVisibilityRayAuto)
   Environment env{};    // the environment (env.present 0: none), a kernel argument by value
   cl::Buffer env_data;  // its texels and cdfs (psf_shared.h Environment)
@@ -104,14 +93,10 @@ struct Renderer::Impl {
     std::vector<TriAttrib> attributes = triangle_attributes(scene);
     tri_attribs = rt.upload(attributes);
     std::vector<Material> device = device_materials(scene, attributes);  // with PSF_MATFLAG_NORMALS
-    bool slow = false;
-    for (Material& m : device) {
+    for (Material& m : device)
       if (lanes_vector_material(m)) m.flags |= PSF_MATFLAG_LANES_VECTOR;
-      slow = slow || lanes_slow_material(m);
-    }
     materials = rt.upload(device);
     lanes = scene.camera_medium == 0 && lanes_materials_supported(device);
-    lanes_default = lanes && !slow;
     if (!scene.textures.empty()) {
       textures = rt.upload(scene.textures);
       texels = rt.upload(scene.texels);
@@ -521,17 +506,19 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   const bool per_path = o.per_path > 0 || (o.per_path < 0 && rt.device().type == "CPU" && !env_presampled);
   // Eight paths per work-item in the lanes of vectors (kernels/trace_lanes.cl),
   // each work-item over a run of kLanesRun paths, for scenes of the lanes' class
-  // (Impl::lanes); by default on CPUs unless a material is one the lanes shade
-  // slower than the other kernels (lanes_slow_material). Medians of alternating
+  // (Impl::lanes); by default on CPUs. Medians of alternating
   // renders in one process (PoCL, 2 cores), lanes / per path: staircase 1988 /
   // 2104 ms and 2011 / 2232 (1 spp), sphere light 222 / 234, glass sphere on a
   // ground 163 / 160, McGuire's glossy Cornell box 778 / 895, water 775 / 772
   // (256x256, 16 spp); with an environment map the lanes draw its light samples
   // with their cache misses overlapped as the wavefront does (living room 1400
   // against 1408 ms for the wavefront, Sponza 214 against 246, before the lanes
-  // shaded rough plastics in vectors).
+  // shaded rough plastics in vectors). Scenes of thin principled materials went
+  // per path before (the lanes were 3 % slower: thin principled sheets 0.899 /
+  // 0.876 s at 32 spp); at fc7bcc4, whose lanes sample the sheets' sphere light
+  // and constant sky in vectors, 0.49 / 0.64 s (0.50 / 0.65 without the sky).
   const bool lanes = s.lanes && o.per_path != 0 &&
-                     (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU" && s.lanes_default));
+                     (o.lanes > 0 || (o.lanes < 0 && rt.device().type == "CPU"));
   // The lanes write each path's contribution themselves where nothing after the
   // trace reads the states and vertices: no filter, tuple store, AOVs or
   // emission rays (kernels/trace_lanes.cl `direct`). The same image up to the

@@ -1999,13 +1999,12 @@ TEST_CASE("Render: the program as GPUs build it renders on PoCL as the CPU build
   }
 }
 
-TEST_CASE("Render: on CPUs the lanes are the default but for thin principled; GPUs keep the wavefront",
-          "[emitter]") {
+TEST_CASE("Render: on CPUs the lanes are the default; GPUs keep the wavefront", "[emitter]") {
   // host/render.cpp: with RenderOptions' defaults a CPU device renders the
-  // lanes' class with trace_lanes unless a material is thin principled
-  // (lanes_slow_material); those scenes go per path (trace_paths) without an
-  // environment map and to the wavefront (shade) with one. Other devices
-  // (GPUs) render every scene with the wavefront.
+  // lanes' class with trace_lanes (thin principled materials too, since the
+  // lanes sample their scene's lights in vectors) and a scene with media per
+  // path without an environment map; other devices (GPUs) render every scene
+  // with the wavefront.
   auto& rt = psf::test::runtime();
   const bool cpu = rt.device().type == "CPU";
   psf::Scene glossy_under_map = envmap_floor();
@@ -2032,8 +2031,9 @@ TEST_CASE("Render: on CPUs the lanes are the default but for thin principled; GP
       {"pplastic spheres", psf::load_scene(psf::test::source_path("scenes/pplastic-spheres.xml")), "trace_lanes"},
       {"principled, map", principled_under_map, "trace_lanes"},
       {"thin principled sheets, sphere light",
-       psf::load_scene(psf::test::source_path("scenes/principledthin-sheets.xml")), "trace_paths"},
-      {"thin principled, map", thin_under_map, "shade"},
+       psf::load_scene(psf::test::source_path("scenes/principledthin-sheets.xml")), "trace_lanes"},
+      {"thin principled, map", thin_under_map, "trace_lanes"},
+      {"media, no map", psf::load_scene(psf::test::source_path("scenes/fog-box.xml")), "trace_paths"},
   };
   for (auto& c : cases) {
     INFO(c.name);
