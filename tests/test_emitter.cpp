@@ -1644,7 +1644,7 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, four scenes of analytic spheres (one a sphere light, also with
+  // other kind, five scenes of analytic spheres (a sphere light, also with
   // a GGX conductor sphere), an
   // emission texture, three cameras (thin lens and Gaussian filter, tent filter
   // and crop window, orthographic), whose rays the lanes draw themselves; and a
