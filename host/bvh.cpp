@@ -245,7 +245,7 @@ BvhTriPack empty_pack() {
 
 // Whether raycast.cl tests sphere s in double precision: a ray leaving its
 // surface starts 1e-4 of the point's largest coordinate off it (shade.cl), and
-// float's c = |f|^2 - r^2 keeps that offset's sign only where r <= 4 or
+// float's c = |f|^2 - r^2 keeps that offset's sign at least where r <= 4 or
 // r <= |centre| / 2 (raycast.cl, sphere_pack_test): not so for a ground sphere
 // of radius 1e5 below the origin.
 bool sphere_needs_double(const BvhSphere& s) {

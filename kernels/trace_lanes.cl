@@ -19,12 +19,13 @@
  * material that transmits nothing, a smooth dielectric or conductor, without
  * one, whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
  * PPlastic8, Principled8 and Delta8), the
- * environment map an escaped ray sees, a light sample
- * on a point, spot or directional light or from inside a sphere light
- * (emitter.cl emitter_sample), a hit on an analytic sphere of a material the
- * vectors do not shade or of a texture (its uv and frame). Among a few lights
- * (PSF_LANES_FEW_LIGHTS) the cone of a one-sided sphere light seen from outside
- * and the directions of a constant environment are sampled in vectors, and a
+ * environment map an escaped ray sees, a light sample on a point, spot or
+ * directional light, on a sphere light other than below, or on any light but
+ * a triangle among many lights (emitter.cl emitter_sample), a hit on an
+ * analytic sphere of a material the vectors do not shade or of a texture (its
+ * uv and frame). Among a few lights (PSF_LANES_FEW_LIGHTS) the cone of a
+ * one-sided, outward-emitting, untextured sphere light seen from outside and
+ * the directions of a constant environment are sampled in vectors, and a
  * constant environment is seen in vectors. A light sample on an environment map takes its
  * steps over all lanes before the next, between the closest-hit casts
  * (EnvLanes), so that the lanes' cache misses overlap and wait behind casts.
@@ -40,8 +41,9 @@
  * vertex: 16 bytes a path where there were 160, and no accumulate pass.
  *
  * The scene class (host/render.cpp lanes_materials_supported): no medium, null
- * boundary or camera medium (an analytic sphere's lanes take their frame from
- * surface.cl surface_sphere, an emission texture multiplies the emission where
+ * boundary or camera medium (an analytic sphere's lanes that shade lane by lane
+ * take their frame from surface.cl surface_sphere, the others their normal
+ * from its centre; an emission texture multiplies the emission where
  * it is hit or sampled lane by lane). The arithmetic is shade_path_inline's for
  * that class, written the same way, and the samples are drawn by the same
  * functions, so a path's result is the same as trace_paths' up to the rounding
@@ -510,7 +512,9 @@ inline void env_lanes_radiance(Environment env, __global const float* data, cons
  * (lane_*_tris: a scene without analytic spheres), where the call to
  * sphere_pack_test made every cast spill twelve vectors on entry (Mitsuba's
  * cbox: 2-3 % of a render). With spheres the test is inlined for the same
- * reason (PSF_SPHERES_INLINE: sphere-light 6 % faster). */
+ * reason (PSF_SPHERES_INLINE: sphere-light 6 % faster), in double, or in
+ * float where no sphere of the BVH needs double (lane_*_float_spheres,
+ * PSF_SPHERES_INLINE_FLOAT). */
 #define PSF_LANE_CASTS(SUFFIX, SPHERES)                                                                                \
   __attribute__((noinline)) void lane_closest##SUFFIX(__global const BvhNode* nodes, __global const BvhTriPack* packs, \
                                                       const Ray* r, Hit* h) {                                          \
@@ -1034,15 +1038,17 @@ inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) 
   return vec8_select(f, zero, none);
 }
 
-/* principled_sample's local direction for o (the lobe by uc: the cosine
- * direction wl, a clearcoat normal's mirror direction, or the GGX visible
- * normal's reflection or refraction); *fails where it returns bsdf_fail. */
-inline Vec8 principled8_sample(const Principled8* p, Vec8 o, Vec8 wl, float8 u1, float8 u2, float8 uc, int8* fails) {
+/* principled_sample's local direction for o in the lanes of `lanes` (the
+ * lobe by uc: the cosine direction wl, a clearcoat normal's mirror direction,
+ * or the GGX visible normal's reflection or refraction); *fails where it
+ * returns bsdf_fail. */
+inline Vec8 principled8_sample(const Principled8* p, int8 lanes, Vec8 o, Vec8 wl, float8 u1, float8 u2, float8 uc,
+                               int8* fails) {
   const float8 lxy = p->p_diffuse + p->p_clearcoat;
-  const int8 diffuse = uc < p->p_diffuse, coat = ~diffuse & (uc < lxy), spec = ~diffuse & ~coat;
+  const int8 diffuse = uc < p->p_diffuse, coat = lanes & ~diffuse & (uc < lxy), spec = lanes & ~diffuse & ~coat;
   Vec8 i = wl;
   int8 bad = o.z <= 0.0f; /* from behind, principled_lobes gives nothing without transmission */
-  if (any(coat)) {         /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
+  if (any(coat)) {        /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
     const float8 a2 = p->cc_alpha * p->cc_alpha;
     const float8 c2 = (1.0f - pow(a2, 1.0f - u2)) / (1.0f - a2);
     const float8 st = sqrt(fmax(0.0f, 1.0f - c2));
@@ -1233,7 +1239,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     uint8 emission_tex = (uint8)(PSF_NO_TEXTURE);
     float8 light_pdf = (float8)(0.0f);
     int8 two_sided = (int8)(0), mat_normals = (int8)(0), normals = (int8)(0), textured = (int8)(0);
-    int8 general = (int8)(0); /* a sphere, or a material the vectors do not shade (PSF_MATFLAG_LANES_VECTOR) */
+    /* A material the vectors do not shade as diffuse (PSF_MATFLAG_LANES_VECTOR), or a sphere's textured one. */
+    int8 general = (int8)(0);
     p0 = p1 = p2 = albedo = emission = n0 = n1 = n2 = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint l = 0u; l < PSF_LANES; ++l) {
       if (!LANE_I(hit, l)) continue;
@@ -1385,8 +1392,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_I(diffuse, l) = bsdf_is_diffuse(*m) ? -1 : 0;
     }
     const float8 fn_wo = vec8_dot(fn, wo);
-    /* The rough plastics that scatter in vectors (Plastic8): their parameters
-     * and the coat's transmittance towards wo, its table read lane by lane. */
+    /* The lanes whose BSDF the vectors evaluate and sample (Delta8, PPlastic8,
+     * Principled8, Conductor8, Plastic8): their parameters, and a rough
+     * plastic's coat transmittance towards wo, its table read lane by lane. */
     int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
     int8 delta_bsdf = (int8)(0);
     Plastic8 pl;
@@ -1459,7 +1467,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0), sphere_light = (int8)(0);
       int8 constant_light = (int8)(0); /* a constant environment */
       uint8 light_tex = (uint8)(PSF_NO_TEXTURE), light_prim = (uint8)(0u);
-      float8 sphere_r = (float8)(0.0f); /* a sphere light's radius (its centre in v0) */
+      float8 light_r = (float8)(0.0f); /* a sphere light's radius (its centre in v0) */
       v0 = e1 = e2 = le = pending;
       if (params.num_emitters <= PSF_LANES_FEW_LIGHTS) {
         /* A few lights: each light's data into the lanes that chose it, by
@@ -1488,7 +1496,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
             sphere_light |= cone;
             v0 = vec8_select(v0, centre, cone);
             le = vec8_select(le, vec8((float8)(r.x), (float8)(r.y), (float8)(r.z)), cone);
-            sphere_r = select(sphere_r, (float8)(rad), cone);
+            light_r = select(light_r, (float8)(rad), cone);
             choose = select(choose, (float8)(r.w), cone);
           } else if (em->type != PSF_EMITTER_TRIANGLE) {
             other_light |= pick;
@@ -1558,7 +1566,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
          * 1 - cos(theta) uniform in [0, 1 - cos(theta_max)], phi = 2 pi u_lb,
          * then the nearer intersection with the sphere. */
         const Vec8 dc = vec8_sub(v0, pos);
-        const float8 dc2 = vec8_dot(dc, dc), r2 = sphere_r * sphere_r;
+        const float8 dc2 = vec8_dot(dc, dc), r2 = light_r * light_r;
         const float8 s = fmin(r2 / dc2, 1.0f);
         const float8 width = s / (1.0f + sqrt(1.0f - s));
         const float8 omc = u_la * width, cos_t = 1.0f - omc, sin_t = sqrt(fmax(0.0f, omc * (2.0f - omc)));
@@ -1744,7 +1752,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     if (any(sample_principled)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       int8 fails;
-      const Vec8 i = principled8_sample(&pr8, o, wl, u_b1, u_b2, u_lobe, &fails);
+      const Vec8 i = principled8_sample(&pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
       fails |= o.z == 0.0f;
       float8 pdf_e;
       const Vec8 f = principled8_eval(&pr8, o, i, &pdf_e);
