@@ -16,9 +16,9 @@
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
  * and no bump map, an isotropic rough conductor, a pplastic, a principled
- * material that transmits nothing, a smooth dielectric or conductor, without
- * one, whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
- * PPlastic8, Principled8 and Delta8), the
+ * material that transmits nothing, a smooth plastic, dielectric or conductor,
+ * without one, whose BSDFs the vectors evaluate and sample, Plastic8,
+ * Conductor8, PPlastic8, Principled8, SmoothPlastic8 and Delta8), the
  * environment map an escaped ray sees, a light sample on a point, spot or
  * directional light, on a sphere light other than below, or on any light but
  * a triangle among many lights (emitter.cl emitter_sample), a hit on an
@@ -849,6 +849,45 @@ inline Vec8 delta8_sample(const Delta8* d, Vec8 o, float8 uc, Vec8* weight, int8
   return vec8_select(refracted, mirror, reflect);
 }
 
+/* --- smooth plastic in vectors ------------------------------------------------
+ * bsdf.cl's plastic (bsdf_eval_local, bsdf_sample_general): the coat's mirror
+ * direction (a delta lobe) with plastic_prob_specular's probability, else the
+ * cosine direction for the base seen through the coat, for the lanes whose
+ * material has no bump map. */
+
+inline bool lanes_smooth_plastic(const Material* m) {
+  return m->type == PSF_MATERIAL_PLASTIC && m->tex_bump == PSF_NO_TEXTURE;
+}
+
+/* The lanes' smooth plastics: eta.x, eta.y, albedo.w, specular, plastic_base. */
+typedef struct {
+  float8 eta, scale, weight;
+  Vec8 spec, base;
+} SmoothPlastic8;
+
+inline void smooth_plastic8_set(SmoothPlastic8* p, uint l, const Material* m) {
+  LANE_F(p->eta, l) = m->eta.x;
+  LANE_F(p->scale, l) = m->eta.y;
+  LANE_F(p->weight, l) = m->albedo.w;
+  vec8_set(&p->spec, l, m->specular.xyz);
+  vec8_set(&p->base, l, plastic_base(*m));
+}
+
+/* plastic_prob_specular for the coat's reflectance r. */
+inline float8 smooth_plastic8_prob_specular(const SmoothPlastic8* p, float8 r) {
+  const float8 ps = r * p->weight, pd = (1.0f - r) * (1.0f - p->weight);
+  return select((float8)(0.0f), ps / (ps + pd), ps + pd > 0.0f);
+}
+
+/* bsdf_eval_local's plastic: the base's f and *pdf for local o and i. */
+inline Vec8 smooth_plastic8_eval(const SmoothPlastic8* p, Vec8 o, Vec8 i, float8* pdf) {
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  const float8 fo = fresnel_dielectric8(o.z, p->eta), fi = fresnel_dielectric8(i.z, p->eta);
+  *pdf = select((float8)(0.0f), (1.0f - smooth_plastic8_prob_specular(p, fo)) * i.z * PSF_INV_PI, on);
+  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)),
+                     vec8_scale(p->base, p->scale * (1.0f - fo) * (1.0f - fi) * PSF_INV_PI), on);
+}
+
 /* --- pplastic in vectors -----------------------------------------------------
  * bsdf.cl's pplastic (Mitsuba 3's, rendered unpolarized) for the lanes whose
  * material has no bump map: GGX or Beckmann, isotropic or not. */
@@ -907,12 +946,12 @@ inline bool lanes_principled(const Material* m) {
 /* The lanes' principled materials (Material's fields as host/scene/mitsuba.cpp
  * fills them). */
 typedef struct {
-  float8 au, av, eta, roughness;           /* alpha_u, alpha_v, eta.x, eta.z */
-  float8 metallic, spec_tint, sheen;       /* specular.x, .z, .w */
-  float8 sheen_tint, flatness, clearcoat;  /* transmittance.x, .y, .z */
-  float8 cc_alpha;                         /* principled_clearcoat_alpha */
-  float8 p_diffuse, p_clearcoat, p_spec;   /* principled_lobes from the front */
-  Vec8 base;                               /* albedo */
+  float8 au, av, eta, roughness;          /* alpha_u, alpha_v, eta.x, eta.z */
+  float8 metallic, spec_tint, sheen;      /* specular.x, .z, .w */
+  float8 sheen_tint, flatness, clearcoat; /* transmittance.x, .y, .z */
+  float8 cc_alpha;                        /* principled_clearcoat_alpha */
+  float8 p_diffuse, p_clearcoat, p_spec;  /* principled_lobes from the front */
+  Vec8 base;                              /* albedo */
 } Principled8;
 
 inline void principled8_set(Principled8* p, uint l, const Material* m) {
@@ -1024,11 +1063,11 @@ inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) 
     if (any(sheen)) {
       const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
       const Vec8 t = principled_tint8(p->base);
-      const Vec8 tint = vec8(mix(one.x, t.x, p->sheen_tint), mix(one.y, t.y, p->sheen_tint),
-                             mix(one.z, t.z, p->sheen_tint));
-      fd_ = vec8_select(fd_, vec8_add(fd_, vec8_scale(tint, p->sheen * (1.0f - p->metallic) *
-                                                                 principled_schlick_weight8(cos_d))),
-                        sheen);
+      const Vec8 tint =
+          vec8(mix(one.x, t.x, p->sheen_tint), mix(one.y, t.y, p->sheen_tint), mix(one.z, t.z, p->sheen_tint));
+      fd_ = vec8_select(
+          fd_, vec8_add(fd_, vec8_scale(tint, p->sheen * (1.0f - p->metallic) * principled_schlick_weight8(cos_d))),
+          sheen);
     }
     f = vec8_select(f, fd_, diffuse);
     pdf_r = select(pdf_r, pdf_r + p->p_diffuse * ci * PSF_INV_PI, diffuse);
@@ -1097,8 +1136,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                           Camera camera, __global PathState* restrict states, __global PathVertex* restrict vertices,
                           __global const TriAttrib* restrict tri_attribs, __global const TextureInfo* restrict textures,
                           __global const half* restrict texels, Environment env,
-                          __global const float* restrict env_data, uint masked, uint count, uint per_item,
-                          uint direct, __global float4* restrict contrib_unfiltered) {
+                          __global const float* restrict env_data, uint masked, uint count, uint per_item, uint direct,
+                          __global float4* restrict contrib_unfiltered) {
   const uint first = get_global_id(0) * per_item;
   __global float4* contrib = direct ? contrib_unfiltered : 0;
   if (first >= count) return;
@@ -1392,11 +1431,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       LANE_I(diffuse, l) = bsdf_is_diffuse(*m) ? -1 : 0;
     }
     const float8 fn_wo = vec8_dot(fn, wo);
-    /* The lanes whose BSDF the vectors evaluate and sample (Delta8, PPlastic8,
-     * Principled8, Conductor8, Plastic8): their parameters, and a rough
+    /* The lanes whose BSDF the vectors evaluate and sample (SmoothPlastic8,
+     * Delta8, PPlastic8, Principled8, Conductor8, Plastic8): their parameters, and a rough
      * plastic's coat transmittance towards wo, its table read lane by lane. */
     int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
-    int8 delta_bsdf = (int8)(0);
+    int8 delta_bsdf = (int8)(0), smooth_plastic = (int8)(0);
     Plastic8 pl;
     /* Zero where no lane fills them: their functions branch on any() of lanes
      * they leave unused. */
@@ -1404,9 +1443,15 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Principled8 pr8 = {0};
     PPlastic8 pp = {0};
     Delta8 dl = {0};
+    SmoothPlastic8 spl = {0};
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (lanes_smooth_plastic(&mats[l])) {
+        LANE_I(smooth_plastic, l) = -1;
+        smooth_plastic8_set(&spl, l, &mats[l]);
+        continue;
+      }
       if (lanes_delta(&mats[l])) {
         LANE_I(delta_bsdf, l) = -1;
         delta8_set(&dl, l, &mats[l]);
@@ -1619,7 +1664,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf;
+      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic;
       for (uint todo = psf_lanes8(evaluate & ~vector_bsdf); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -1639,6 +1684,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         if (any(evaluate_pplastic)) {
           f = vec8_select(f, pplastic8_eval(&pp, o, i, &pdf_v), evaluate_pplastic);
           bpdf = select(bpdf, pdf_v, evaluate_pplastic);
+        }
+        const int8 evaluate_smooth_plastic = evaluate & smooth_plastic;
+        if (any(evaluate_smooth_plastic)) {
+          f = vec8_select(f, smooth_plastic8_eval(&spl, o, i, &pdf_v), evaluate_smooth_plastic);
+          bpdf = select(bpdf, pdf_v, evaluate_smooth_plastic);
         }
         /* Delta lobes: nothing towards a light sample. */
         f = vec8_select(f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), evaluate & delta_bsdf);
@@ -1680,8 +1730,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo = psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic | delta_bsdf)); todo != 0u;
-         todo &= todo - 1u) {
+    for (uint todo =
+             psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic));
+         todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
@@ -1733,6 +1784,24 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       weight = vec8_select(weight, vec8_select(w, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), fails),
                            sample_delta);
       delta_lobe = select(delta_lobe, ~fails, sample_delta);
+    }
+    /* A smooth plastic's sample (bsdf_sample_general): the coat's mirror
+     * direction, a delta lobe, else the cosine direction and bsdf_finish's. */
+    const int8 sample_smooth_plastic = sample_own & smooth_plastic;
+    if (any(sample_smooth_plastic)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      const int8 fails = o.z <= 0.0f;
+      const float8 fo = fresnel_dielectric8(o.z, spl.eta), ps = smooth_plastic8_prob_specular(&spl, fo);
+      const int8 coat = sample_smooth_plastic & (u_lobe < ps);
+      float8 pdf_e;
+      const Vec8 f = smooth_plastic8_eval(&spl, o, wl, &pdf_e);
+      lanes_take_sample(sample_smooth_plastic & ~coat, fails, &fs, &ft, &fn, &wo, wl, f, pdf_e, &wi, &pdf, &weight);
+      const Vec8 mirror = vec8_add(vec8_add(vec8_scale(fs, -o.x), vec8_scale(ft, -o.y)), vec8_scale(fn, o.z));
+      const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+      wi = vec8_select(wi, vec8_select(mirror, wo, fails), coat);
+      pdf = select(pdf, (float8)(0.0f), coat);
+      weight = vec8_select(weight, vec8_select(vec8_scale(spl.spec, fo / ps), zero, fails), coat);
+      delta_lobe = select(delta_lobe, ~fails, coat);
     }
     /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
      * mirror direction with probability albedo.w, else the cosine direction. */
