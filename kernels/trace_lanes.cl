@@ -14,11 +14,12 @@
  * of the hit's triangle, material and light, and what is rarer or branchier: a
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
- * bsdf.cl's own functions, but for a rough plastic with an isotropic GGX coat
- * and no bump map, an isotropic rough conductor, a pplastic, a principled
+ * bsdf.cl's own functions, but for diffuse materials, a rough plastic with an
+ * isotropic GGX coat, an isotropic rough conductor, a pplastic, a principled
  * material that transmits nothing, a smooth plastic, dielectric or conductor,
- * without one, whose BSDFs the vectors evaluate and sample, Plastic8,
- * Conductor8, PPlastic8, Principled8, SmoothPlastic8 and Delta8), the
+ * whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
+ * PPlastic8, Principled8, SmoothPlastic8 and Delta8, with a bump map's side
+ * rule), the
  * environment map an escaped ray sees, a light sample on a point, spot or
  * directional light, on a sphere light other than below, or on any light but
  * a triangle among many lights (emitter.cl emitter_sample), a hit on an
@@ -600,14 +601,13 @@ __attribute__((noinline)) void lane_bsdf_sample(const Material* m, __global cons
 
 /* --- rough plastic in vectors ------------------------------------------------
  * bsdf.cl's roughplastic (bsdf_eval_local, bsdf_sample_general) for the lanes
- * whose material is one with an isotropic GGX coat and no bump or normal map
- * (the floors and walls of Bitterli's scenes), written with the same
+ * whose material is one with an isotropic GGX coat (the floors and walls of
+ * Bitterli's scenes), written with the same
  * operations in float8 arithmetic; its transmittance table read lane by lane. */
 
 /* Whether the lanes shade material m as a Plastic8. */
 inline bool lanes_plastic(const Material* m) {
-  return m->type == PSF_MATERIAL_ROUGH_PLASTIC && !(m->flags & PSF_MATFLAG_BECKMANN) && m->alpha_u == m->alpha_v &&
-         m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_ROUGH_PLASTIC && !(m->flags & PSF_MATFLAG_BECKMANN) && m->alpha_u == m->alpha_v;
 }
 
 /* The lanes' rough plastics: their parameters (Material's, as bsdf.cl reads
@@ -685,13 +685,13 @@ inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8*
 
 /* --- rough conductors in vectors ---------------------------------------------
  * bsdf.cl's roughconductor (bsdf_eval_local, bsdf_sample_general) for the
- * lanes whose material has an isotropic GGX or Beckmann distribution and no
- * bump map (the metals of Bitterli's scenes, Mitsuba's default roughconductor),
+ * lanes whose material has an isotropic GGX or Beckmann distribution (the
+ * metals of Bitterli's scenes, Mitsuba's default roughconductor),
  * with the same operations in float8. */
 
 /* Whether the lanes shade material m as a Conductor8. */
 inline bool lanes_conductor(const Material* m) {
-  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v && m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v;
 }
 
 /* The lanes' rough conductors: Material's alpha_u, specular, eta and k, and
@@ -799,10 +799,10 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
 /* --- smooth dielectrics and conductors in vectors ---------------------------------
  * bsdf.cl's dielectric and conductor (bsdf_sample_general: a mirror or
  * refracted direction, its weight; delta lobes, which bsdf_eval_local gives
- * nothing) for the lanes whose material has no bump map. */
+ * nothing). */
 
 inline bool lanes_delta(const Material* m) {
-  return (m->type == PSF_MATERIAL_DIELECTRIC || m->type == PSF_MATERIAL_CONDUCTOR) && m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_DIELECTRIC || m->type == PSF_MATERIAL_CONDUCTOR;
 }
 
 /* The lanes' smooth dielectrics and conductors: Material's specular,
@@ -852,11 +852,10 @@ inline Vec8 delta8_sample(const Delta8* d, Vec8 o, float8 uc, Vec8* weight, int8
 /* --- smooth plastic in vectors ------------------------------------------------
  * bsdf.cl's plastic (bsdf_eval_local, bsdf_sample_general): the coat's mirror
  * direction (a delta lobe) with plastic_prob_specular's probability, else the
- * cosine direction for the base seen through the coat, for the lanes whose
- * material has no bump map. */
+ * cosine direction for the base seen through the coat. */
 
 inline bool lanes_smooth_plastic(const Material* m) {
-  return m->type == PSF_MATERIAL_PLASTIC && m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_PLASTIC;
 }
 
 /* The lanes' smooth plastics: eta.x, eta.y, albedo.w, specular, plastic_base. */
@@ -889,11 +888,11 @@ inline Vec8 smooth_plastic8_eval(const SmoothPlastic8* p, Vec8 o, Vec8 i, float8
 }
 
 /* --- pplastic in vectors -----------------------------------------------------
- * bsdf.cl's pplastic (Mitsuba 3's, rendered unpolarized) for the lanes whose
- * material has no bump map: GGX or Beckmann, isotropic or not. */
+ * bsdf.cl's pplastic (Mitsuba 3's, rendered unpolarized): GGX or Beckmann,
+ * isotropic or not. */
 
 inline bool lanes_pplastic(const Material* m) {
-  return m->type == PSF_MATERIAL_PPLASTIC && m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_PPLASTIC;
 }
 
 /* The lanes' pplastics: alpha_u, alpha_v, eta.x, albedo.w (the specular
@@ -933,14 +932,14 @@ inline Vec8 pplastic8_eval(const PPlastic8* p, Vec8 o, Vec8 i, float8* pdf) {
 
 /* --- principled in vectors ---------------------------------------------------
  * bsdf.cl's principled (principled_eval, principled_sample) for the lanes
- * whose material transmits nothing (spec_trans 0) and has no bump map, from
+ * whose material transmits nothing (spec_trans 0), from
  * the front: Burley's diffuse with retro-reflection, flatness and sheen, the
  * anisotropic GGX reflection with its tints and metallic part, the clearcoat;
  * the same operations in float8. Materials that transmit stay lane by lane. */
 
 /* Whether the lanes shade material m as a Principled8. */
 inline bool lanes_principled(const Material* m) {
-  return m->type == PSF_MATERIAL_PRINCIPLED && m->specular.y == 0.0f && m->tex_bump == PSF_NO_TEXTURE;
+  return m->type == PSF_MATERIAL_PRINCIPLED && m->specular.y == 0.0f;
 }
 
 /* The lanes' principled materials (Material's fields as host/scene/mitsuba.cpp
@@ -1444,9 +1443,21 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     PPlastic8 pp = {0};
     Delta8 dl = {0};
     SmoothPlastic8 spl = {0};
+    /* A bump or normal map's lanes: the normal before it (surface_side_agrees,
+     * applied to every BSDF the vectors shade, below). */
+    int8 bump = (int8)(0), diffuse_bsdf = (int8)(0);
+    Vec8 unp = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
+      if (mats[l].tex_bump != PSF_NO_TEXTURE) {
+        LANE_I(bump, l) = -1;
+        vec8_set(&unp, l, unperturbed[l]);
+      }
+      if (mats[l].type == PSF_MATERIAL_DIFFUSE) { /* a blend's, a bump map's, vertex colours': the vectors' BSDF */
+        LANE_I(diffuse_bsdf, l) = -1;
+        continue;
+      }
       if (lanes_smooth_plastic(&mats[l])) {
         LANE_I(smooth_plastic, l) = -1;
         smooth_plastic8_set(&spl, l, &mats[l]);
@@ -1664,7 +1675,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic;
+      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic | diffuse_bsdf;
       for (uint todo = psf_lanes8(evaluate & ~vector_bsdf); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -1690,9 +1701,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
           f = vec8_select(f, smooth_plastic8_eval(&spl, o, i, &pdf_v), evaluate_smooth_plastic);
           bpdf = select(bpdf, pdf_v, evaluate_smooth_plastic);
         }
-        /* Delta lobes: nothing towards a light sample. */
-        f = vec8_select(f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), evaluate & delta_bsdf);
-        bpdf = select(bpdf, (float8)(0.0f), evaluate & delta_bsdf);
+        /* Delta lobes: nothing towards a light sample; nor a direction whose
+         * sides a bump map turned (surface_side_agrees). */
+        const int8 off = evaluate & (delta_bsdf | (bump & ~(vec8_dot(wi, unp) * cos_i > 0.0f)));
+        f = vec8_select(f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), off);
+        bpdf = select(bpdf, (float8)(0.0f), off);
         if (any(evaluate_principled)) {
           f = vec8_select(f, principled8_eval(&pr8, o, i, &pdf_v), evaluate_principled);
           bpdf = select(bpdf, pdf_v, evaluate_principled);
@@ -1730,9 +1743,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    for (uint todo =
-             psf_lanes8(sample_own & ~(plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic));
-         todo != 0u; todo &= todo - 1u) {
+    const int8 sample_vector = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic | diffuse_bsdf;
+    for (uint todo = psf_lanes8(sample_own & ~sample_vector); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
       BsdfSample bs;
@@ -1827,6 +1839,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const Vec8 f = principled8_eval(&pr8, o, i, &pdf_e);
       lanes_take_sample(sample_principled, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
     }
+    /* A sampled direction whose sides a bump map turned carries nothing
+     * (lane_bsdf_sample's surface_side_agrees). */
+    const int8 side_off = sample_own & sample_vector & bump & ~(vec8_dot(wi, unp) * vec8_dot(wi, fn) > 0.0f);
+    weight = vec8_select(weight, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), side_off);
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);
     const float8 q = fmin(vec8_max3(beta), 0.95f);
