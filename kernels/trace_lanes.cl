@@ -14,8 +14,8 @@
  * of the hit's triangle, material and light, and what is rarer or branchier: a
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
- * bsdf.cl's own functions, but for diffuse materials, a rough plastic with an
- * isotropic GGX coat, an isotropic rough conductor, a pplastic, a principled
+ * bsdf.cl's own functions, but for diffuse materials, a rough plastic, an
+ * isotropic rough conductor, a pplastic, a principled
  * material that transmits nothing, a smooth plastic, dielectric or conductor,
  * whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
  * PPlastic8, Principled8, SmoothPlastic8 and Delta8, with a bump map's side
@@ -600,21 +600,20 @@ __attribute__((noinline)) void lane_bsdf_sample(const Material* m, __global cons
 }
 
 /* --- rough plastic in vectors ------------------------------------------------
- * bsdf.cl's roughplastic (bsdf_eval_local, bsdf_sample_general) for the lanes
- * whose material is one with an isotropic GGX coat (the floors and walls of
- * Bitterli's scenes), written with the same
- * operations in float8 arithmetic; its transmittance table read lane by lane. */
+ * bsdf.cl's roughplastic (bsdf_eval_local, bsdf_sample_general), GGX or
+ * Beckmann, isotropic or not (the floors and walls of Bitterli's scenes,
+ * Mitsuba's default roughplastic), written with the same operations in float8
+ * arithmetic; its transmittance table read lane by lane. */
 
 /* Whether the lanes shade material m as a Plastic8. */
-inline bool lanes_plastic(const Material* m) {
-  return m->type == PSF_MATERIAL_ROUGH_PLASTIC && !(m->flags & PSF_MATFLAG_BECKMANN) && m->alpha_u == m->alpha_v;
-}
+inline bool lanes_plastic(const Material* m) { return m->type == PSF_MATERIAL_ROUGH_PLASTIC; }
 
 /* The lanes' rough plastics: their parameters (Material's, as bsdf.cl reads
  * them) and the coat's transmittance towards wo. */
 typedef struct {
-  float8 alpha, eta, scale, weight, t_o; /* alpha_u, eta.x, eta.y, albedo.w, T(cos_o) */
-  Vec8 spec, base;                       /* specular, plastic_base */
+  float8 au, av, eta, scale, weight, t_o; /* alpha_u, alpha_v, eta.x, eta.y, albedo.w, T(cos_o) */
+  Vec8 spec, base;                        /* specular, plastic_base */
+  int8 beckmann;                          /* Beckmann's distribution, else GGX */
 } Plastic8;
 
 /* fresnel_dielectric for 0 <= cos_i (a microfacet's cosine towards o). */
@@ -657,57 +656,6 @@ inline Vec8 ggx_sample8(Vec8 v, float8 au, float8 av, float8 u1, float8 u2) {
   const float8 pz = sqrt(fmax(0.0f, 1.0f - p1 * p1 - p2 * p2));
   const Vec8 nh = vec8_add(vec8_add(vec8_scale(t1, p1), vec8_scale(t2, p2)), vec8_scale(vh, pz));
   return vec8_normalize(vec8(au * nh.x, av * nh.y, fmax(1e-6f, nh.z)));
-}
-
-/* plastic_prob_specular for the coat's reflectance 1 - T(cos_o). */
-inline float8 plastic8_prob_specular(const Plastic8* p) {
-  const float8 r = 1.0f - p->t_o;
-  const float8 ps = r * p->weight, pd = (1.0f - r) * (1.0f - p->weight);
-  return select((float8)(0.0f), ps / (ps + pd), ps + pd > 0.0f);
-}
-
-/* bsdf_eval_local's roughplastic: f and *pdf for local o and i, t_i the coat's
- * transmittance towards i. */
-inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8* pdf) {
-  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
-  const float8 ps = plastic8_prob_specular(p);
-  const Vec8 h = vec8_normalize(vec8_add(o, i));
-  const float8 oh = vec8_dot(o, h);
-  const float8 fr = fresnel_dielectric8(oh, p->eta);
-  const float8 d = ggx_D8(h, p->alpha, p->alpha), g_o = ggx_G1_8(o, h, p->alpha, p->alpha);
-  const float8 g = g_o * ggx_G1_8(i, h, p->alpha, p->alpha);
-  const float8 pm = d * g_o * fabs(oh) / o.z;
-  *pdf = select((float8)(0.0f), ps * pm / (4.0f * oh) + (1.0f - ps) * i.z * PSF_INV_PI, on);
-  const Vec8 f = vec8_add(vec8_scale(p->spec, fr * d * g / (4.0f * o.z * i.z)),
-                          vec8_scale(p->base, p->scale * p->t_o * t_i * PSF_INV_PI));
-  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
-}
-
-/* --- rough conductors in vectors ---------------------------------------------
- * bsdf.cl's roughconductor (bsdf_eval_local, bsdf_sample_general) for the
- * lanes whose material has an isotropic GGX or Beckmann distribution (the
- * metals of Bitterli's scenes, Mitsuba's default roughconductor),
- * with the same operations in float8. */
-
-/* Whether the lanes shade material m as a Conductor8. */
-inline bool lanes_conductor(const Material* m) {
-  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v;
-}
-
-/* The lanes' rough conductors: Material's alpha_u, specular, eta and k, and
- * whether the distribution is Beckmann's. */
-typedef struct {
-  float8 alpha;
-  Vec8 spec, eta, k;
-  int8 beckmann;
-} Conductor8;
-
-inline void conductor8_set(Conductor8* c, uint l, const Material* m) {
-  LANE_F(c->alpha, l) = m->alpha_u;
-  vec8_set(&c->spec, l, m->specular.xyz);
-  vec8_set(&c->eta, l, m->eta.xyz);
-  vec8_set(&c->k, l, m->k.xyz);
-  LANE_I(c->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
 }
 
 /* mf_D, mf_G1 and mf_sample for Beckmann of roughness au, av. */
@@ -766,6 +714,57 @@ inline Vec8 mf8_sample(Vec8 o, float8 au, float8 av, int8 beckmann, int8 lanes, 
   if (any(lanes & ~beckmann)) h = ggx_sample8(o, au, av, u1, u2);
   if (any(lanes & beckmann)) h = vec8_select(h, beckmann_sample8(au, av, u1, u2), beckmann);
   return h;
+}
+
+/* plastic_prob_specular for the coat's reflectance 1 - T(cos_o). */
+inline float8 plastic8_prob_specular(const Plastic8* p) {
+  const float8 r = 1.0f - p->t_o;
+  const float8 ps = r * p->weight, pd = (1.0f - r) * (1.0f - p->weight);
+  return select((float8)(0.0f), ps / (ps + pd), ps + pd > 0.0f);
+}
+
+/* bsdf_eval_local's roughplastic: f and *pdf for local o and i, t_i the coat's
+ * transmittance towards i. */
+inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8* pdf) {
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  const float8 ps = plastic8_prob_specular(p);
+  const Vec8 h = vec8_normalize(vec8_add(o, i));
+  const float8 oh = vec8_dot(o, h);
+  const float8 fr = fresnel_dielectric8(oh, p->eta);
+  float8 d, g_o, g_i, pm;
+  mf8_terms(h, o, i, p->au, p->av, p->beckmann, &d, &g_o, &g_i, &pm);
+  const float8 g = g_o * g_i;
+  *pdf = select((float8)(0.0f), ps * pm / (4.0f * oh) + (1.0f - ps) * i.z * PSF_INV_PI, on);
+  const Vec8 f = vec8_add(vec8_scale(p->spec, fr * d * g / (4.0f * o.z * i.z)),
+                          vec8_scale(p->base, p->scale * p->t_o * t_i * PSF_INV_PI));
+  return vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), f, on);
+}
+
+/* --- rough conductors in vectors ---------------------------------------------
+ * bsdf.cl's roughconductor (bsdf_eval_local, bsdf_sample_general) for the
+ * lanes whose material has an isotropic GGX or Beckmann distribution (the
+ * metals of Bitterli's scenes, Mitsuba's default roughconductor),
+ * with the same operations in float8. */
+
+/* Whether the lanes shade material m as a Conductor8. */
+inline bool lanes_conductor(const Material* m) {
+  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v;
+}
+
+/* The lanes' rough conductors: Material's alpha_u, specular, eta and k, and
+ * whether the distribution is Beckmann's. */
+typedef struct {
+  float8 alpha;
+  Vec8 spec, eta, k;
+  int8 beckmann;
+} Conductor8;
+
+inline void conductor8_set(Conductor8* c, uint l, const Material* m) {
+  LANE_F(c->alpha, l) = m->alpha_u;
+  vec8_set(&c->spec, l, m->specular.xyz);
+  vec8_set(&c->eta, l, m->eta.xyz);
+  vec8_set(&c->k, l, m->k.xyz);
+  LANE_I(c->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
 }
 
 /* fresnel_conductor of one channel. */
@@ -1435,7 +1434,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
      * plastic's coat transmittance towards wo, its table read lane by lane. */
     int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
     int8 delta_bsdf = (int8)(0), smooth_plastic = (int8)(0);
-    Plastic8 pl;
+    Plastic8 pl = {0};
     /* Zero where no lane fills them: their functions branch on any() of lanes
      * they leave unused. */
     Conductor8 co = {0};
@@ -1487,7 +1486,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       const Material* m = &mats[l];
       LANE_I(plastic, l) = -1;
       plastic_table[l] = surface_table(*m, textures, texels);
-      LANE_F(pl.alpha, l) = m->alpha_u;
+      LANE_F(pl.au, l) = m->alpha_u;
+      LANE_F(pl.av, l) = m->alpha_v;
+      LANE_I(pl.beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
       LANE_F(pl.eta, l) = m->eta.x;
       LANE_F(pl.scale, l) = m->eta.y;
       LANE_F(pl.weight, l) = m->albedo.w;
@@ -1762,7 +1763,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     if (any(sample_plastic)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       const int8 coat = u_lobe < plastic8_prob_specular(&pl);
-      const Vec8 h = ggx_sample8(o, pl.alpha, pl.alpha, u_b1, u_b2);
+      const Vec8 h = mf8_sample(o, pl.au, pl.av, pl.beckmann, sample_plastic & coat, u_b1, u_b2);
       const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
       const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
       float8 t_i = (float8)(0.0f), pdf_p;

@@ -1805,6 +1805,19 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres", "pplastic-spheres"})
     cases.push_back({name, psf::load_scene(psf::test::source_path(std::string("scenes/") + name + ".xml")), true});
   {
+    // Our Cornell box in Mitsuba's default roughplastic (Beckmann, alpha 0.1).
+    std::ifstream in(psf::test::source_path("scenes/cornell-box.xml"));
+    std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto replace_all = [&xml](const std::string& from, const std::string& to) {
+      for (size_t at = 0; (at = xml.find(from, at)) != std::string::npos; at += to.size()) xml.replace(at, from.size(), to);
+    };
+    replace_all("bsdf type=\"diffuse\"", "bsdf type=\"roughplastic\"");
+    replace_all("name=\"reflectance\"", "name=\"diffuse_reflectance\"");
+    const std::string path = psf::test::temp_dir("lanes-beckmann-plastic") + "/box.xml";
+    std::ofstream(path) << xml;
+    cases.push_back({"cornell-box, Beckmann rough plastics", psf::load_scene(path), true});
+  }
+  {
     // The sphere light's scene with a GGX copper sphere (the file's is
     // Beckmann's, Mitsuba's default): the lanes' Conductor8 takes both.
     std::ifstream in(psf::test::source_path("scenes/sphere-light.xml"));
