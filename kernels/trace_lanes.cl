@@ -15,11 +15,10 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for diffuse materials, a rough plastic, an
- * isotropic rough conductor, a pplastic, a principled
- * material that transmits nothing, a smooth plastic, dielectric or conductor,
- * whose BSDFs the vectors evaluate and sample, Plastic8, Conductor8,
- * PPlastic8, Principled8, SmoothPlastic8 and Delta8, with a bump map's side
- * rule), the
+ * isotropic rough conductor, a pplastic, a principled material that transmits
+ * nothing, a rough dielectric, a smooth plastic, dielectric or conductor,
+ * whose BSDFs the vectors evaluate and sample (LanesBsdfs), with a bump map's
+ * side rule), the
  * environment map an escaped ray sees, a light sample on a point, spot or
  * directional light, on a sphere light other than below, or on any light but
  * a triangle among many lights (emitter.cl emitter_sample), a hit on an
@@ -848,6 +847,55 @@ inline Vec8 delta8_sample(const Delta8* d, Vec8 o, float8 uc, Vec8* weight, int8
   return vec8_select(refracted, mirror, reflect);
 }
 
+/* --- rough dielectrics in vectors ---------------------------------------------
+ * bsdf.cl's roughdielectric (bsdf_eval_local, bsdf_sample_general): a GGX or
+ * Beckmann microfacet normal, reflected or refracted by its Fresnel term,
+ * from either side. */
+
+inline bool lanes_rough_dielectric(const Material* m) { return m->type == PSF_MATERIAL_ROUGH_DIELECTRIC; }
+
+/* The lanes' rough dielectrics: alpha_u, alpha_v, eta.x, specular,
+ * transmittance, Beckmann's or GGX. */
+typedef struct {
+  float8 au, av, eta;
+  Vec8 spec, trans;
+  int8 beckmann;
+} RoughDielectric8;
+
+inline void rough_dielectric8_set(RoughDielectric8* p, uint l, const Material* m) {
+  LANE_F(p->au, l) = m->alpha_u;
+  LANE_F(p->av, l) = m->alpha_v;
+  LANE_F(p->eta, l) = m->eta.x;
+  vec8_set(&p->spec, l, m->specular.xyz);
+  vec8_set(&p->trans, l, m->transmittance.xyz);
+  LANE_I(p->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+}
+
+/* bsdf_eval_local's roughdielectric: f and *pdf for local o and i. */
+inline Vec8 rough_dielectric8_eval(const RoughDielectric8* p, Vec8 o, Vec8 i, float8* pdf) {
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  const float8 co = o.z, ci = i.z;
+  const int8 reflect = co * ci > 0.0f;
+  const float8 eta = select(1.0f / p->eta, p->eta, co > 0.0f); /* IOR of i's side over o's side */
+  Vec8 h = vec8_normalize(vec8_add(o, vec8_scale(i, select(eta, (float8)(1.0f), reflect))));
+  h = vec8_select(h, vec8_neg(h), h.z < 0.0f);
+  const float8 oh = vec8_dot(o, h), ih = vec8_dot(i, h);
+  const int8 none = (co == 0.0f) | (ci == 0.0f) | (oh * co <= 0.0f) | (ih * ci <= 0.0f);
+  float8 cos_t, eta_ti;
+  const float8 fr = fresnel_dielectric_t8(oh, p->eta, &cos_t, &eta_ti);
+  const Vec8 of = vec8_select(vec8_neg(o), o, co > 0.0f); /* o on the side of the sampled normals */
+  float8 d, g_o, g_i, pm;
+  mf8_terms(h, of, i, p->au, p->av, p->beckmann, &d, &g_o, &g_i, &pm);
+  const float8 g = g_o * g_i;
+  const float8 denom = oh + eta * ih;
+  const float8 jac = eta * eta * fabs(ih) / (denom * denom); /* |d h / d i| (Walter et al. Eq. 17) */
+  const float8 pdf_r = pm * fr / (4.0f * fabs(ih)), pdf_t = pm * (1.0f - fr) * jac;
+  *pdf = select(select(pdf_t, pdf_r, reflect), (float8)(0.0f), none);
+  const Vec8 f_r = vec8_scale(p->spec, fr * d * g / (4.0f * fabs(co * ci)));
+  const Vec8 f_t = vec8_scale(p->trans, fabs((1.0f - fr) * d * g * oh * ih / (co * ci * denom * denom)));
+  return vec8_select(vec8_select(f_t, f_r, reflect), zero, none);
+}
+
 /* --- smooth plastic in vectors ------------------------------------------------
  * bsdf.cl's plastic (bsdf_eval_local, bsdf_sample_general): the coat's mirror
  * direction (a delta lobe) with plastic_prob_specular's probability, else the
@@ -1111,6 +1159,110 @@ inline Vec8 principled8_sample(const Principled8* p, int8 lanes, Vec8 o, Vec8 wl
   }
   *fails = bad;
   return i;
+}
+
+/* --- the lanes' vector BSDFs together -------------------------------------------- */
+
+/* Which kind of vector BSDF each lane's material is (none: bsdf.cl's scalar
+ * functions, lane by lane), and each kind's parameters. Zero where no lane
+ * fills them: their functions branch on any() of lanes they leave unused. */
+typedef struct {
+  int8 diffuse, plastic, conductor, principled, pplastic, delta, smooth_plastic, rough_dielectric;
+  Plastic8 pl;
+  Conductor8 co;
+  Principled8 pr8;
+  PPlastic8 pp;
+  Delta8 dl;
+  SmoothPlastic8 spl;
+  RoughDielectric8 rd;
+  __global const half* plastic_table[PSF_LANES]; /* a rough plastic's coat transmittance */
+} LanesBsdfs;
+
+inline int8 lanes_bsdfs_mask(const LanesBsdfs* b) {
+  return b->diffuse | b->plastic | b->conductor | b->principled | b->pplastic | b->delta | b->smooth_plastic |
+         b->rough_dielectric;
+}
+
+/* Lane l's kind and parameters for its material m (as lane_surface left it);
+ * cos_o: wo's cosine to the shading normal (a rough plastic's coat
+ * transmittance towards wo). */
+inline void lanes_bsdfs_set(LanesBsdfs* b, uint l, const Material* m, __global const TextureInfo* textures,
+                            __global const half* texels, float cos_o) {
+  if (m->type == PSF_MATERIAL_DIFFUSE) { /* a blend's, a bump map's, vertex colours': the vectors' diffuse BSDF */
+    LANE_I(b->diffuse, l) = -1;
+  } else if (lanes_rough_dielectric(m)) {
+    LANE_I(b->rough_dielectric, l) = -1;
+    rough_dielectric8_set(&b->rd, l, m);
+  } else if (lanes_smooth_plastic(m)) {
+    LANE_I(b->smooth_plastic, l) = -1;
+    smooth_plastic8_set(&b->spl, l, m);
+  } else if (lanes_delta(m)) {
+    LANE_I(b->delta, l) = -1;
+    delta8_set(&b->dl, l, m);
+  } else if (lanes_pplastic(m)) {
+    LANE_I(b->pplastic, l) = -1;
+    pplastic8_set(&b->pp, l, m);
+  } else if (lanes_principled(m)) {
+    LANE_I(b->principled, l) = -1;
+    principled8_set(&b->pr8, l, m);
+  } else if (lanes_conductor(m)) {
+    LANE_I(b->conductor, l) = -1;
+    conductor8_set(&b->co, l, m);
+  } else if (lanes_plastic(m)) {
+    Plastic8* pl = &b->pl;
+    LANE_I(b->plastic, l) = -1;
+    b->plastic_table[l] = surface_table(*m, textures, texels);
+    LANE_F(pl->au, l) = m->alpha_u;
+    LANE_F(pl->av, l) = m->alpha_v;
+    LANE_I(pl->beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
+    LANE_F(pl->eta, l) = m->eta.x;
+    LANE_F(pl->scale, l) = m->eta.y;
+    LANE_F(pl->weight, l) = m->albedo.w;
+    LANE_F(pl->t_o, l) = rough_transmittance(*m, b->plastic_table[l], cos_o);
+    vec8_set(&pl->spec, l, m->specular.xyz);
+    vec8_set(&pl->base, l, plastic_base(*m));
+  }
+}
+
+/* bsdf_eval_local of the lanes of `evaluate` for local o and i into *f and
+ * *pdf: each kind's own, 0 for the delta lobes; the diffuse kind's lanes keep
+ * what *f and *pdf hold (the caller's diffuse BSDF). mats: the lanes'
+ * materials (a rough plastic's table lookup towards i). */
+inline void lanes_bsdfs_eval(const LanesBsdfs* b, const Material* mats, Vec8 o, Vec8 i, int8 evaluate, Vec8* f,
+                             float8* pdf) {
+  float8 pdf_v;
+  const int8 e_pplastic = evaluate & b->pplastic, e_rough_dielectric = evaluate & b->rough_dielectric;
+  const int8 e_smooth_plastic = evaluate & b->smooth_plastic, e_principled = evaluate & b->principled;
+  const int8 e_conductor = evaluate & b->conductor, e_plastic = evaluate & b->plastic, e_delta = evaluate & b->delta;
+  if (any(e_pplastic)) {
+    *f = vec8_select(*f, pplastic8_eval(&b->pp, o, i, &pdf_v), e_pplastic);
+    *pdf = select(*pdf, pdf_v, e_pplastic);
+  }
+  if (any(e_rough_dielectric)) {
+    *f = vec8_select(*f, rough_dielectric8_eval(&b->rd, o, i, &pdf_v), e_rough_dielectric);
+    *pdf = select(*pdf, pdf_v, e_rough_dielectric);
+  }
+  if (any(e_smooth_plastic)) {
+    *f = vec8_select(*f, smooth_plastic8_eval(&b->spl, o, i, &pdf_v), e_smooth_plastic);
+    *pdf = select(*pdf, pdf_v, e_smooth_plastic);
+  }
+  if (any(e_principled)) {
+    *f = vec8_select(*f, principled8_eval(&b->pr8, o, i, &pdf_v), e_principled);
+    *pdf = select(*pdf, pdf_v, e_principled);
+  }
+  if (any(e_conductor)) {
+    *f = vec8_select(*f, conductor8_eval(&b->co, o, i, &pdf_v), e_conductor);
+    *pdf = select(*pdf, pdf_v, e_conductor);
+  }
+  if (any(e_plastic)) {
+    float8 t_i = (float8)(0.0f);
+    for (uint l = 0u; l < PSF_LANES; ++l)
+      if (LANE_I(e_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], b->plastic_table[l], LANE_F(i.z, l));
+    *f = vec8_select(*f, plastic8_eval(&b->pl, o, i, t_i, &pdf_v), e_plastic);
+    *pdf = select(*pdf, pdf_v, e_plastic);
+  }
+  *f = vec8_select(*f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), e_delta);
+  *pdf = select(*pdf, (float8)(0.0f), e_delta);
 }
 
 /* bsdf_finish for the lanes of `take`: the sampled local direction i (wo where
@@ -1432,69 +1584,19 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The lanes whose BSDF the vectors evaluate and sample (SmoothPlastic8,
      * Delta8, PPlastic8, Principled8, Conductor8, Plastic8): their parameters, and a rough
      * plastic's coat transmittance towards wo, its table read lane by lane. */
-    int8 plastic = (int8)(0), conductor = (int8)(0), principled = (int8)(0), pplastic = (int8)(0);
-    int8 delta_bsdf = (int8)(0), smooth_plastic = (int8)(0);
-    Plastic8 pl = {0};
-    /* Zero where no lane fills them: their functions branch on any() of lanes
-     * they leave unused. */
-    Conductor8 co = {0};
-    Principled8 pr8 = {0};
-    PPlastic8 pp = {0};
-    Delta8 dl = {0};
-    SmoothPlastic8 spl = {0};
-    /* A bump or normal map's lanes: the normal before it (surface_side_agrees,
+    /* The lanes whose BSDF the vectors evaluate and sample (LanesBsdfs), and a
+     * bump or normal map's lanes: the normal before it (surface_side_agrees,
      * applied to every BSDF the vectors shade, below). */
-    int8 bump = (int8)(0), diffuse_bsdf = (int8)(0);
+    LanesBsdfs bs = {0};
+    int8 bump = (int8)(0);
     Vec8 unp = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
-    __global const half* plastic_table[PSF_LANES];
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       if (mats[l].tex_bump != PSF_NO_TEXTURE) {
         LANE_I(bump, l) = -1;
         vec8_set(&unp, l, unperturbed[l]);
       }
-      if (mats[l].type == PSF_MATERIAL_DIFFUSE) { /* a blend's, a bump map's, vertex colours': the vectors' BSDF */
-        LANE_I(diffuse_bsdf, l) = -1;
-        continue;
-      }
-      if (lanes_smooth_plastic(&mats[l])) {
-        LANE_I(smooth_plastic, l) = -1;
-        smooth_plastic8_set(&spl, l, &mats[l]);
-        continue;
-      }
-      if (lanes_delta(&mats[l])) {
-        LANE_I(delta_bsdf, l) = -1;
-        delta8_set(&dl, l, &mats[l]);
-        continue;
-      }
-      if (lanes_pplastic(&mats[l])) {
-        LANE_I(pplastic, l) = -1;
-        pplastic8_set(&pp, l, &mats[l]);
-        continue;
-      }
-      if (lanes_principled(&mats[l])) {
-        LANE_I(principled, l) = -1;
-        principled8_set(&pr8, l, &mats[l]);
-        continue;
-      }
-      if (lanes_conductor(&mats[l])) {
-        LANE_I(conductor, l) = -1;
-        conductor8_set(&co, l, &mats[l]);
-        continue;
-      }
-      if (!lanes_plastic(&mats[l])) continue;
-      const Material* m = &mats[l];
-      LANE_I(plastic, l) = -1;
-      plastic_table[l] = surface_table(*m, textures, texels);
-      LANE_F(pl.au, l) = m->alpha_u;
-      LANE_F(pl.av, l) = m->alpha_v;
-      LANE_I(pl.beckmann, l) = (m->flags & PSF_MATFLAG_BECKMANN) ? -1 : 0;
-      LANE_F(pl.eta, l) = m->eta.x;
-      LANE_F(pl.scale, l) = m->eta.y;
-      LANE_F(pl.weight, l) = m->albedo.w;
-      LANE_F(pl.t_o, l) = rough_transmittance(*m, plastic_table[l], LANE_F(fn_wo, l));
-      vec8_set(&pl.spec, l, m->specular.xyz);
-      vec8_set(&pl.base, l, plastic_base(*m));
+      lanes_bsdfs_set(&bs, l, &mats[l], textures, texels, LANE_F(fn_wo, l));
     }
     const Vec8 n_camera = vec8_select(vec8_neg(fn), fn, fn_wo >= 0.0f);
     const uint8 segments = ln.depth + 1u;
@@ -1676,7 +1778,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       Vec8 f = vec8_select(pending, vec8_scale(albedo, PSF_INV_PI), f_on);
       float8 bpdf = select((float8)(0.0f), cos_i * PSF_INV_PI, f_on);
       const int8 evaluate = general & scatter & (lpdf > 0.0f);
-      const int8 vector_bsdf = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic | diffuse_bsdf;
+      const int8 vector_bsdf = lanes_bsdfs_mask(&bs);
       for (uint todo = psf_lanes8(evaluate & ~vector_bsdf); todo != 0u; todo &= todo - 1u) {
         const uint l = bvh_first_lane(todo);
         const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -1686,43 +1788,15 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
             lane_bsdf_eval(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), VEC8_GET(wi, l), &pdf_l));
         LANE_F(bpdf, l) = pdf_l;
       }
-      /* The BSDFs in vectors, in the local frame. */
+      /* The BSDFs in vectors, in the local frame; then nothing towards a
+       * direction whose sides a bump map turned (surface_side_agrees). */
       if (any(evaluate & vector_bsdf)) {
         const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
         const Vec8 i = vec8(vec8_dot(wi, fs), vec8_dot(wi, ft), cos_i);
-        const int8 evaluate_plastic = evaluate & plastic, evaluate_conductor = evaluate & conductor;
-        const int8 evaluate_principled = evaluate & principled, evaluate_pplastic = evaluate & pplastic;
-        float8 pdf_v;
-        if (any(evaluate_pplastic)) {
-          f = vec8_select(f, pplastic8_eval(&pp, o, i, &pdf_v), evaluate_pplastic);
-          bpdf = select(bpdf, pdf_v, evaluate_pplastic);
-        }
-        const int8 evaluate_smooth_plastic = evaluate & smooth_plastic;
-        if (any(evaluate_smooth_plastic)) {
-          f = vec8_select(f, smooth_plastic8_eval(&spl, o, i, &pdf_v), evaluate_smooth_plastic);
-          bpdf = select(bpdf, pdf_v, evaluate_smooth_plastic);
-        }
-        /* Delta lobes: nothing towards a light sample; nor a direction whose
-         * sides a bump map turned (surface_side_agrees). */
-        const int8 off = evaluate & (delta_bsdf | (bump & ~(vec8_dot(wi, unp) * cos_i > 0.0f)));
+        lanes_bsdfs_eval(&bs, mats, o, i, evaluate, &f, &bpdf);
+        const int8 off = evaluate & vector_bsdf & bump & ~(vec8_dot(wi, unp) * cos_i > 0.0f);
         f = vec8_select(f, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), off);
         bpdf = select(bpdf, (float8)(0.0f), off);
-        if (any(evaluate_principled)) {
-          f = vec8_select(f, principled8_eval(&pr8, o, i, &pdf_v), evaluate_principled);
-          bpdf = select(bpdf, pdf_v, evaluate_principled);
-        }
-        if (any(evaluate_conductor)) {
-          f = vec8_select(f, conductor8_eval(&co, o, i, &pdf_v), evaluate_conductor);
-          bpdf = select(bpdf, pdf_v, evaluate_conductor);
-        }
-        if (any(evaluate_plastic)) {
-          float8 t_i = (float8)(0.0f);
-          for (uint l = 0u; l < PSF_LANES; ++l)
-            if (LANE_I(evaluate_plastic, l))
-              LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
-          f = vec8_select(f, plastic8_eval(&pl, o, i, t_i, &pdf_v), evaluate_plastic);
-          bpdf = select(bpdf, pdf_v, evaluate_plastic);
-        }
       }
       const float8 cos_s = fabs(cos_i);
       contributes = (lpdf > 0.0f) & (cos_s > 0.0f) & (vec8_max3(f) > 0.0f);
@@ -1744,53 +1818,53 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     Vec8 weight = vec8_select(vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), albedo, pdf > 0.0f);
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
-    const int8 sample_vector = plastic | conductor | principled | pplastic | delta_bsdf | smooth_plastic | diffuse_bsdf;
+    const int8 sample_vector = lanes_bsdfs_mask(&bs);
     for (uint todo = psf_lanes8(sample_own & ~sample_vector); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
-      BsdfSample bs;
+      BsdfSample sm;
       lane_bsdf_sample(&mats[l], textures, texels, &fr, &unperturbed[l], VEC8_GET(wo, l), LANE_F(u_b1, l),
-                       LANE_F(u_b2, l), LANE_F(u_lobe, l), &bs);
-      vec8_set(&wi, l, bs.wi);
-      LANE_F(pdf, l) = bs.pdf;
-      vec8_set(&weight, l, bs.weight);
-      LANE_I(delta_lobe, l) = (bs.flags & BSDF_DELTA) ? -1 : 0;
+                       LANE_F(u_b2, l), LANE_F(u_lobe, l), &sm);
+      vec8_set(&wi, l, sm.wi);
+      LANE_F(pdf, l) = sm.pdf;
+      vec8_set(&weight, l, sm.weight);
+      LANE_I(delta_lobe, l) = (sm.flags & BSDF_DELTA) ? -1 : 0;
     }
     /* A rough plastic's sample (bsdf_sample_general): the coat's visible
      * normal with its probability, else the cosine-weighted direction (wl),
      * then bsdf_finish's value and pdf. */
-    const int8 sample_plastic = sample_own & plastic;
+    const int8 sample_plastic = sample_own & bs.plastic;
     if (any(sample_plastic)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const int8 coat = u_lobe < plastic8_prob_specular(&pl);
-      const Vec8 h = mf8_sample(o, pl.au, pl.av, pl.beckmann, sample_plastic & coat, u_b1, u_b2);
+      const int8 coat = u_lobe < plastic8_prob_specular(&bs.pl);
+      const Vec8 h = mf8_sample(o, bs.pl.au, bs.pl.av, bs.pl.beckmann, sample_plastic & coat, u_b1, u_b2);
       const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
       const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
       float8 t_i = (float8)(0.0f), pdf_p;
       for (uint l = 0u; l < PSF_LANES; ++l)
-        if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], plastic_table[l], LANE_F(i.z, l));
-      const Vec8 f = plastic8_eval(&pl, o, i, t_i, &pdf_p);
+        if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], bs.plastic_table[l], LANE_F(i.z, l));
+      const Vec8 f = plastic8_eval(&bs.pl, o, i, t_i, &pdf_p);
       lanes_take_sample(sample_plastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_p, &wi, &pdf, &weight);
     }
     /* A rough conductor's sample (bsdf_sample_general): the visible normal's
      * mirror direction, then bsdf_finish's value and pdf. */
-    const int8 sample_conductor = sample_own & conductor;
+    const int8 sample_conductor = sample_own & bs.conductor;
     if (any(sample_conductor)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const Vec8 h = mf8_sample(o, co.alpha, co.alpha, co.beckmann, sample_conductor, u_b1, u_b2);
+      const Vec8 h = mf8_sample(o, bs.co.alpha, bs.co.alpha, bs.co.beckmann, sample_conductor, u_b1, u_b2);
       const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
       const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
       float8 pdf_c;
-      const Vec8 f = conductor8_eval(&co, o, i, &pdf_c);
+      const Vec8 f = conductor8_eval(&bs.co, o, i, &pdf_c);
       lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
     }
     /* A smooth dielectric's or conductor's sample (bsdf_delta, bsdf_fail). */
-    const int8 sample_delta = sample_own & delta_bsdf;
+    const int8 sample_delta = sample_own & bs.delta;
     if (any(sample_delta)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       Vec8 w;
       int8 fails;
-      const Vec8 i = delta8_sample(&dl, o, u_lobe, &w, &fails);
+      const Vec8 i = delta8_sample(&bs.dl, o, u_lobe, &w, &fails);
       const Vec8 world = vec8_add(vec8_add(vec8_scale(fs, i.x), vec8_scale(ft, i.y)), vec8_scale(fn, i.z));
       wi = vec8_select(wi, vec8_select(world, wo, fails), sample_delta);
       pdf = select(pdf, (float8)(0.0f), sample_delta);
@@ -1798,46 +1872,66 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                            sample_delta);
       delta_lobe = select(delta_lobe, ~fails, sample_delta);
     }
+    /* A rough dielectric's sample (bsdf_sample_general): the microfacet
+     * normal for o turned to the normals' side, reflected or refracted by
+     * its Fresnel term (microfacet_scatter), then bsdf_finish's. */
+    const int8 sample_rough_dielectric = sample_own & bs.rough_dielectric;
+    if (any(sample_rough_dielectric)) {
+      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
+      const Vec8 of = vec8_select(vec8_neg(o), o, o.z > 0.0f);
+      const Vec8 h = mf8_sample(of, bs.rd.au, bs.rd.av, bs.rd.beckmann, sample_rough_dielectric, u_b1, u_b2);
+      const float8 oh = vec8_dot(o, h);
+      float8 cos_t, eta_ti;
+      const float8 fr = fresnel_dielectric_t8(oh, bs.rd.eta, &cos_t, &eta_ti);
+      const int8 reflect = u_lobe < fr;
+      const Vec8 ir = vec8_sub(vec8_scale(h, 2.0f * oh), o);
+      const Vec8 it = vec8_sub(vec8_scale(h, oh * eta_ti + cos_t), vec8_scale(o, eta_ti));
+      const Vec8 i = vec8_select(it, ir, reflect);
+      const int8 fails = (o.z == 0.0f) | select(i.z * o.z >= 0.0f, i.z * o.z <= 0.0f, reflect);
+      float8 pdf_e;
+      const Vec8 f = rough_dielectric8_eval(&bs.rd, o, i, &pdf_e);
+      lanes_take_sample(sample_rough_dielectric, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
+    }
     /* A smooth plastic's sample (bsdf_sample_general): the coat's mirror
      * direction, a delta lobe, else the cosine direction and bsdf_finish's. */
-    const int8 sample_smooth_plastic = sample_own & smooth_plastic;
+    const int8 sample_smooth_plastic = sample_own & bs.smooth_plastic;
     if (any(sample_smooth_plastic)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       const int8 fails = o.z <= 0.0f;
-      const float8 fo = fresnel_dielectric8(o.z, spl.eta), ps = smooth_plastic8_prob_specular(&spl, fo);
+      const float8 fo = fresnel_dielectric8(o.z, bs.spl.eta), ps = smooth_plastic8_prob_specular(&bs.spl, fo);
       const int8 coat = sample_smooth_plastic & (u_lobe < ps);
       float8 pdf_e;
-      const Vec8 f = smooth_plastic8_eval(&spl, o, wl, &pdf_e);
+      const Vec8 f = smooth_plastic8_eval(&bs.spl, o, wl, &pdf_e);
       lanes_take_sample(sample_smooth_plastic & ~coat, fails, &fs, &ft, &fn, &wo, wl, f, pdf_e, &wi, &pdf, &weight);
       const Vec8 mirror = vec8_add(vec8_add(vec8_scale(fs, -o.x), vec8_scale(ft, -o.y)), vec8_scale(fn, o.z));
       const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
       wi = vec8_select(wi, vec8_select(mirror, wo, fails), coat);
       pdf = select(pdf, (float8)(0.0f), coat);
-      weight = vec8_select(weight, vec8_select(vec8_scale(spl.spec, fo / ps), zero, fails), coat);
+      weight = vec8_select(weight, vec8_select(vec8_scale(bs.spl.spec, fo / ps), zero, fails), coat);
       delta_lobe = select(delta_lobe, ~fails, coat);
     }
     /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
      * mirror direction with probability albedo.w, else the cosine direction. */
-    const int8 sample_pplastic = sample_own & pplastic;
+    const int8 sample_pplastic = sample_own & bs.pplastic;
     if (any(sample_pplastic)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const int8 spec = u_lobe < pp.ps;
-      const Vec8 h = mf8_sample(o, pp.au, pp.av, pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
+      const int8 spec = u_lobe < bs.pp.ps;
+      const Vec8 h = mf8_sample(o, bs.pp.au, bs.pp.av, bs.pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
       const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), spec);
       const int8 fails = (o.z <= 0.0f) | (spec & (i.z <= 0.0f));
       float8 pdf_e;
-      const Vec8 f = pplastic8_eval(&pp, o, i, &pdf_e);
+      const Vec8 f = pplastic8_eval(&bs.pp, o, i, &pdf_e);
       lanes_take_sample(sample_pplastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
     }
     /* A principled material's sample (principled_sample), then bsdf_finish's. */
-    const int8 sample_principled = sample_own & principled;
+    const int8 sample_principled = sample_own & bs.principled;
     if (any(sample_principled)) {
       const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
       int8 fails;
-      const Vec8 i = principled8_sample(&pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
+      const Vec8 i = principled8_sample(&bs.pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
       fails |= o.z == 0.0f;
       float8 pdf_e;
-      const Vec8 f = principled8_eval(&pr8, o, i, &pdf_e);
+      const Vec8 f = principled8_eval(&bs.pr8, o, i, &pdf_e);
       lanes_take_sample(sample_principled, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
     }
     /* A sampled direction whose sides a bump map turned carries nothing

@@ -1816,6 +1816,19 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     const std::string path = psf::test::temp_dir("lanes-beckmann-plastic") + "/box.xml";
     std::ofstream(path) << xml;
     cases.push_back({"cornell-box, Beckmann rough plastics", psf::load_scene(path), true});
+    // The same with a normal map that tilts every normal by 60 degrees, so that
+    // many directions fall between the surface and the tilted normal, where
+    // Mitsuba 3's side rule (surface_side_agrees) lets nothing through.
+    psf::Scene t = cases.back().scene;
+    psf::detail::TextureStore store(t);
+    const float st = std::sin(3.14159265f / 3), ct = std::cos(3.14159265f / 3);
+    const uint32_t tilt = store.pixels(psf::detail::TextureDesc{}, 1, 1, {0.5f * st + 0.5f, 0.5f, 0.5f * ct + 0.5f, 1});
+    for (auto& m : t.materials) {
+      m.tex_bump = tilt;
+      m.bump_scale = 1.0f;
+      m.flags |= PSF_MATFLAG_NORMALMAP;
+    }
+    cases.push_back({"cornell-box, Beckmann rough plastics, normal map", t, true});
   }
   {
     // The sphere light's scene with a GGX copper sphere (the file's is
@@ -1829,6 +1842,15 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     const std::string path = psf::test::temp_dir("lanes-ggx") + "/sphere-light.xml";
     std::ofstream(path) << xml;
     cases.push_back({"sphere-light, GGX copper", psf::load_scene(path), true});
+    // And with the diffuse sphere turned into rough glass (Beckmann, Mitsuba's
+    // default), which reflects and refracts from both sides.
+    const std::string blue = R"(<bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.5, 0.8"/></bsdf>)";
+    const size_t b = xml.find(blue);
+    REQUIRE(b != std::string::npos);
+    xml.replace(b, blue.size(), R"(<bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf>)");
+    const std::string glass = psf::test::temp_dir("lanes-rough-glass") + "/sphere-light.xml";
+    std::ofstream(glass) << xml;
+    cases.push_back({"sphere-light, GGX copper, rough glass", psf::load_scene(glass), true});
   }
   cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   {
