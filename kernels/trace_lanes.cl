@@ -1587,7 +1587,14 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The lanes whose BSDF the vectors evaluate and sample (LanesBsdfs), and a
      * bump or normal map's lanes: the normal before it (surface_side_agrees,
      * applied to every BSDF the vectors shade, below). */
-    LanesBsdfs bs = {0};
+    LanesBsdfs bs;
+    if (any(own_frame & general)) { /* zero whole only where some lane fills it (2 KiB) */
+      const LanesBsdfs zero = {0};
+      bs = zero;
+    } else {
+      bs.diffuse = bs.plastic = bs.conductor = bs.principled = bs.pplastic = bs.delta = bs.smooth_plastic =
+          bs.rough_dielectric = (int8)(0);
+    }
     int8 bump = (int8)(0);
     Vec8 unp = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
