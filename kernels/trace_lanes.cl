@@ -1588,7 +1588,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
      * bump or normal map's lanes: the normal before it (surface_side_agrees,
      * applied to every BSDF the vectors shade, below). */
     LanesBsdfs bs;
-    if (any(own_frame & general)) { /* zero whole only where some lane fills it (2 KiB) */
+    if (any(own_frame & general)) { /* zero whole only where some lane fills it (3 KiB) */
       const LanesBsdfs zero = {0};
       bs = zero;
     } else {
