@@ -1998,3 +1998,36 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     }
   }
 }
+
+/* LanesBsdfs' evaluation for tests/test_bsdf.cpp: queries k = 8 g .. 8 g + 7
+ * of work-item g (material mat[k], local wo[k] and wi[k] in the frame x, y,
+ * z): f (xyz) and pdf (w) as trace_lanes evaluates a light sample, with the
+ * diffuse BSDF the vectors' own; w = -1 where the lane's material is none of
+ * the kinds the vectors shade. */
+__kernel void lanes_test_eval(__global const Material* materials, __global const TextureInfo* textures,
+                              __global const half* texels, __global const uint* mat, __global const float4* wo,
+                              __global const float4* wi, __global float4* f_pdf, uint count) {
+  const uint k0 = get_global_id(0) * PSF_LANES;
+  if (k0 >= count) return;
+  Material mats[PSF_LANES];
+  LanesBsdfs b = {0};
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  Vec8 o = zero, i = zero, albedo = zero;
+  int8 valid = (int8)(0);
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (k0 + l >= count) continue;
+    mats[l] = materials[mat[k0 + l]];
+    LANE_I(valid, l) = -1;
+    vec8_set(&o, l, wo[k0 + l].xyz);
+    vec8_set(&i, l, wi[k0 + l].xyz);
+    vec8_set(&albedo, l, bsdf_albedo(mats[l]));
+    lanes_bsdfs_set(&b, l, &mats[l], textures, texels, LANE_F(o.z, l));
+  }
+  const int8 on = (o.z > 0.0f) & (i.z > 0.0f);
+  Vec8 f = vec8_select(zero, vec8_scale(albedo, PSF_INV_PI), on);
+  float8 pdf = select((float8)(0.0f), i.z * PSF_INV_PI, on);
+  lanes_bsdfs_eval(&b, mats, o, i, valid, &f, &pdf);
+  const int8 shaded = lanes_bsdfs_mask(&b);
+  for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l)
+    f_pdf[k0 + l] = LANE_I(shaded, l) ? (float4)(VEC8_GET(f, l), LANE_F(pdf, l)) : (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+}
