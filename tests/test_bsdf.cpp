@@ -908,21 +908,35 @@ void expect_scene_error(const std::string& path, int line, const std::string& te
 
 dvec3 xyz(const psf_float4& v) { return {v.s[0], v.s[1], v.s[2]}; }
 
+// Evaluation queries: `count` random pairs (wo from both sides where the
+// material transmits) for each material, material by material or, with
+// `interleaved`, the materials in turn.
+struct EvalQueries {
+  std::vector<uint32_t> mat;
+  std::vector<dvec3> wo, wi;
+};
+EvalQueries eval_queries(const std::vector<Params>& ps, uint32_t seed, int count, bool interleaved) {
+  std::mt19937 g(seed);
+  EvalQueries e;
+  const size_t n = ps.size() * size_t(count);
+  for (size_t k = 0; k < n; ++k) {
+    const uint32_t m = uint32_t(interleaved ? k % ps.size() : k / size_t(count));
+    e.mat.push_back(m);
+    e.wo.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
+    e.wi.push_back(random_direction(g, 0.05, false));
+  }
+  return e;
+}
+
 }  // namespace
 
 TEST_CASE("BSDF: evaluation matches the scalar references", "[bsdf]") {
   Rig rig;
   std::vector<Params> ps = test_materials();
   for (const Params& p : ps) rig.add(p);
-  std::mt19937 g(7);
-  std::vector<uint32_t> mat;
-  std::vector<dvec3> wo, wi;
-  for (uint32_t m = 0; m < ps.size(); ++m)
-    for (int q = 0; q < 3000; ++q) {
-      mat.push_back(m);
-      wo.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
-      wi.push_back(random_direction(g, 0.05, false));
-    }
+  const EvalQueries e = eval_queries(ps, 7, 3000, false);
+  const std::vector<uint32_t>& mat = e.mat;
+  const std::vector<dvec3>&wo = e.wo, &wi = e.wi;
   auto got = rig.eval(mat, wo, wi);
   std::vector<int> bad(ps.size(), 0), nonzero(ps.size(), 0);
   for (size_t q = 0; q < mat.size(); ++q) {
@@ -959,15 +973,9 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
   Rig rig;
   std::vector<Params> ps = test_materials();
   for (const Params& p : ps) rig.add(p);
-  std::mt19937 g(11);
-  std::vector<uint32_t> mat;
-  std::vector<dvec3> wo, wi;
-  for (int q = 0; q < 2000; ++q)
-    for (uint32_t m = 0; m < ps.size(); ++m) {
-      mat.push_back(m);
-      wo.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
-      wi.push_back(random_direction(g, 0.05, false));
-    }
+  const EvalQueries e = eval_queries(ps, 11, 2000, true);
+  const std::vector<uint32_t>& mat = e.mat;
+  const std::vector<dvec3>&wo = e.wo, &wi = e.wi;
   auto lanes = rig.lanes_eval(mat, wo, wi);
   auto scalar = rig.eval(mat, wo, wi);
   std::vector<int> bad(ps.size(), 0), nonzero(ps.size(), 0), vector(ps.size(), 0);
