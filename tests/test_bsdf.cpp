@@ -536,42 +536,15 @@ class Rig {
   // f (xyz) and pdf (w) of bsdf_eval.
   std::vector<glm::dvec4> eval(const std::vector<uint32_t>& mat, const std::vector<dvec3>& wo,
                                const std::vector<dvec3>& wi) {
-    upload();
-    auto& rt = psf::test::runtime();
-    uint32_t n = uint32_t(mat.size());
-    std::vector<psf_float4> a(n), b(n);
-    for (uint32_t k = 0; k < n; ++k) {
-      a[k] = f4(wo[k]);
-      b[k] = f4(wi[k]);
-    }
-    cl::Buffer bmat = rt.upload(mat), bwo = rt.upload(a), bwi = rt.upload(b);
-    cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
-    rt.launch("bsdf_test_eval", n, 64, materials_buf_, textures_buf_, texels_buf_, bmat, bwo, bwi, out, n);
-    auto o = rt.download<psf_float4>(out, n);
-    std::vector<glm::dvec4> res(n);
-    for (uint32_t k = 0; k < n; ++k) res[k] = glm::dvec4(o[k].s[0], o[k].s[1], o[k].s[2], o[k].s[3]);
-    return res;
+    return run_eval("bsdf_test_eval", uint32_t(mat.size()), mat, wo, wi);
   }
 
   // f (xyz) and pdf (w) of the lanes' vector BSDFs (trace_lanes.cl
-  // lanes_test_eval); w = -1 where the material is not one they shade.
+  // lanes_test_eval, eight queries a work-item); w = -1 where the material is
+  // not one they shade.
   std::vector<glm::dvec4> lanes_eval(const std::vector<uint32_t>& mat, const std::vector<dvec3>& wo,
                                      const std::vector<dvec3>& wi) {
-    upload();
-    auto& rt = psf::test::runtime();
-    uint32_t n = uint32_t(mat.size());
-    std::vector<psf_float4> a(n), b(n);
-    for (uint32_t k = 0; k < n; ++k) {
-      a[k] = f4(wo[k]);
-      b[k] = f4(wi[k]);
-    }
-    cl::Buffer bmat = rt.upload(mat), bwo = rt.upload(a), bwi = rt.upload(b);
-    cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
-    rt.launch("lanes_test_eval", (n + 7) / 8, 64, materials_buf_, textures_buf_, texels_buf_, bmat, bwo, bwi, out, n);
-    auto o = rt.download<psf_float4>(out, n);
-    std::vector<glm::dvec4> res(n);
-    for (uint32_t k = 0; k < n; ++k) res[k] = glm::dvec4(o[k].s[0], o[k].s[1], o[k].s[2], o[k].s[3]);
-    return res;
+    return run_eval("lanes_test_eval", (uint32_t(mat.size()) + 7) / 8, mat, wo, wi);
   }
 
   // bsdf_albedo (xyz) and bsdf_is_diffuse (w) of every material.
@@ -588,6 +561,26 @@ class Rig {
   }
 
  private:
+  // An evaluation kernel of bsdf_test_eval's arguments over `global` work-items.
+  std::vector<glm::dvec4> run_eval(const char* kernel, uint32_t global, const std::vector<uint32_t>& mat,
+                                   const std::vector<dvec3>& wo, const std::vector<dvec3>& wi) {
+    upload();
+    auto& rt = psf::test::runtime();
+    uint32_t n = uint32_t(mat.size());
+    std::vector<psf_float4> a(n), b(n);
+    for (uint32_t k = 0; k < n; ++k) {
+      a[k] = f4(wo[k]);
+      b[k] = f4(wi[k]);
+    }
+    cl::Buffer bmat = rt.upload(mat), bwo = rt.upload(a), bwi = rt.upload(b);
+    cl::Buffer out = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(psf_float4));
+    rt.launch(kernel, global, 64, materials_buf_, textures_buf_, texels_buf_, bmat, bwo, bwi, out, n);
+    auto o = rt.download<psf_float4>(out, n);
+    std::vector<glm::dvec4> res(n);
+    for (uint32_t k = 0; k < n; ++k) res[k] = glm::dvec4(o[k].s[0], o[k].s[1], o[k].s[2], o[k].s[3]);
+    return res;
+  }
+
   void upload() {
     if (!dirty_) return;
     auto& rt = psf::test::runtime();
