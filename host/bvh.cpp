@@ -453,6 +453,8 @@ RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
       nodes_(rt.upload(bvh.nodes)),
       packs_(rt.upload(bvh.packs)),
       depth_(bvh.depth),
+      pack_count_(static_cast<uint32_t>(bvh.packs.size())),
+      prim_count_(bvh.triangle_count + bvh.sphere_count),
       spheres_(bvh.sphere_count > 0),
       sphere_mode_(bvh.sphere_count == 0    ? PSF_FRAME_SPHERES_NONE
                    : bvh.double_spheres > 0 ? PSF_FRAME_SPHERES_DOUBLE

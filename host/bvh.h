@@ -94,6 +94,8 @@ class RayCaster {
   const cl::Buffer& nodes() const { return nodes_; }
   const cl::Buffer& packs() const { return packs_; }
   int depth() const { return depth_; }
+  uint32_t pack_count() const { return pack_count_; }  // BvhTriPacks in packs()
+  uint32_t prim_count() const { return prim_count_; }  // triangles and spheres in them
   bool masked() const { return masked_; }  // enable_alpha was called
   bool spheres() const { return spheres_; }  // the BVH holds sphere packs
   // FrameParams.spheres for trace_lanes' casts: PSF_FRAME_SPHERES_NONE, _DOUBLE
@@ -108,6 +110,8 @@ class RayCaster {
   cl::Buffer nodes_;
   cl::Buffer packs_;
   int depth_ = 0;
+  uint32_t pack_count_ = 0;
+  uint32_t prim_count_ = 0;
   bool spheres_ = false;  // the BVH holds sphere packs (the kernels' `spheres`)
   uint32_t sphere_mode_ = PSF_FRAME_SPHERES_NONE;
   bool masked_ = false;   // enable_alpha was called

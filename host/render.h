@@ -13,6 +13,11 @@
 
 namespace psf {
 
+// Scenes of at most this many primitives (triangles and spheres) have
+// trace_lanes cast without the BVH (RenderOptions.flat_casts; render.cpp has
+// the measurements behind it).
+constexpr uint32_t kLanesFlatPrims = 48;
+
 struct RenderOptions {
   int spp = 16;              // samples (paths) per pixel (the target of a progressive render)
   uint32_t seed = 0;         // scrambling seed: the render is a function of it
@@ -32,6 +37,9 @@ struct RenderOptions {
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
   int emission_rays = 0;     // more camera rays per path for the emission seen directly (kernels/emission.cl;
                              // none where the camera sits in a medium)
+  int flat_casts = -1;       // trace_lanes' casts in a scene of at most kLanesFlatPrims primitives: -1 or 1 each
+                             // primitive against eight rays at once, without the BVH; 0 through the BVH (tests).
+                             // The image is the same up to float rounding.
   bool emission_recast = false;  // tests: cast each path's own camera ray again instead of taking the
                                  // emission it found from its state (the same image)
   bool keep_last_batch = false;  // return the last batch's tuples (tests)
@@ -153,6 +161,11 @@ class Renderer {
   // there a light sample's visibility is a coin toss wherever part of the sky is
   // hidden), else 0.
   float visibility_ray(float option) const;
+  // The packs that trace_lanes tests each ray against without the BVH
+  // (FrameParams.flat_packs) under RenderOptions::flat_casts = `option`: all of
+  // them where the scene has at most kLanesFlatPrims primitives and none is
+  // alpha-tested, unless `option` is 0; else 0, casts through the BVH.
+  uint32_t flat_packs(int option) const;
 
  private:
   float footprint(const RenderOptions& o) const;  // sqrt(dOmega / pi) of the footprint's solid angle

@@ -82,6 +82,7 @@ __kernel void layout_report(__global uint* out) {
   out[i++] = PSF_OFFSET(FrameParams, camera_medium);
   out[i++] = PSF_OFFSET(FrameParams, max_rounds);
   out[i++] = PSF_OFFSET(FrameParams, spheres);
+  out[i++] = PSF_OFFSET(FrameParams, flat_packs);
   out[i++] = sizeof(FilterParams);
   out[i++] = PSF_OFFSET(FilterParams, count);
   out[i++] = PSF_OFFSET(FilterParams, cells27);

@@ -465,6 +465,9 @@ typedef struct {
   psf_uint null_media;     /* 1: the scene has a medium behind a null boundary, which shadow rays pass with the
                               transmittance of the media they cross (shade.cl shadow_cast); 0: none */
   psf_uint spheres;        /* PSF_FRAME_SPHERES_*: how trace_lanes' casts test the BVH's analytic spheres */
+  psf_uint flat_packs;     /* > 0: trace_lanes tests each ray against the BVH's packs, all flat_packs of them, */
+                           /* without traversing it (a scene of a few primitives); 0: through the BVH */
+  psf_uint pad[3];         /* to a multiple of 16 bytes */
 } FrameParams;
 
 #define PSF_FRAME_SPHERES_NONE 0u   /* the BVH holds none: casts without the test */

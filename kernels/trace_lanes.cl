@@ -10,7 +10,9 @@
  * its MIS weight, the cosine-weighted direction, Russian roulette) and the
  * drawing of its samples are written with float8 vectors, so every step is one
  * instruction for the eight. Lane by lane: the two casts of a bounce (the BVH8
- * traversal of raycast.cl, alpha-tested where the scene has masks), the loads
+ * traversal of raycast.cl, alpha-tested where the scene has masks; in a scene
+ * of a few primitives without masks both casts are vector code too, each
+ * primitive against the eight rays: flat_closest8, flat_any8), the loads
  * of the hit's triangle, material and light, and what is rarer or branchier: a
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
@@ -571,6 +573,182 @@ inline void lane_cast_any(bool masked, uint spheres, __global const BvhNode* nod
     lane_any_tris(nodes, packs, r, h);
 }
 
+/* Casts in scenes of a few packs (FrameParams.flat_packs > 0: host/render.cpp
+ * sets it where the BVH holds at most PSF_LANES_FLAT_PACKS packs and nothing is
+ * alpha-tested): every primitive of the packs against the eight lanes' rays at
+ * once, without the BVH. A cast through the BVH costs a call, a slab test and
+ * the branches of its traversal whatever the scene's size, and a lane's ray
+ * goes into a Ray and its hit out of a Hit; here the rays stay in the lanes'
+ * vectors. Each primitive's test is raycast.cl's (pack_test, the sphere tests)
+ * with the roles of the vectors swapped: the same arithmetic per ray and
+ * primitive, the same hits up to the choice between primitives at exactly the
+ * same distance (the BVH's order of packs against the packs' order here) and
+ * the barycentric tolerance outside a leaf's box. */
+#if defined(cl_khr_fp64)
+typedef double8 flat_real8;
+#define FLAT_REAL8(x) convert_double8(x)
+#define FLAT_REAL_SCALAR double
+#else
+typedef float8 flat_real8;
+#define FLAT_REAL8(x) (x)
+#define FLAT_REAL_SCALAR float
+#endif
+
+/* The lanes' rays as the flat tests read them: origin, direction and its
+ * length, and the unit direction and 1 / length of the sphere tests. */
+typedef struct {
+  Vec8 org, dir;
+  float8 len;
+  Vec8 unit;      /* dir / len, as sphere_pack_test_float's */
+  float8 inv_len; /* 1 / len */
+} FlatRays;
+
+inline FlatRays flat_rays(Vec8 org, Vec8 dir, bool spheres) {
+  FlatRays r;
+  r.org = org;
+  r.dir = dir;
+  r.len = vec8_length(dir);
+  r.inv_len = (float8)(0.0f);
+  r.unit = dir;
+  if (spheres) {
+    r.inv_len = 1.0f / r.len;
+    r.unit = vec8_scale(dir, r.inv_len);
+  }
+  return r;
+}
+
+/* pack_test of lane j of triangle pack p against the eight rays: the lanes hit
+ * within (tmin, tmax), their distances into *t (infinity elsewhere) and
+ * barycentrics into *u, *v. */
+inline int8 flat_triangle8(__global const float* p, uint j, const FlatRays* r, float8 tmin, float8 tmax, float8* t_out,
+                           float8* u_out, float8* v_out) {
+  const float8 dx = r->dir.x, dy = r->dir.y, dz = r->dir.z;
+  const float e1x = p[PACK_E1 + j], e1y = p[PACK_E1 + PSF_BVH_WIDTH + j], e1z = p[PACK_E1 + 2 * PSF_BVH_WIDTH + j];
+  const float e2x = p[PACK_E2 + j], e2y = p[PACK_E2 + PSF_BVH_WIDTH + j], e2z = p[PACK_E2 + 2 * PSF_BVH_WIDTH + j];
+  const float8 pvx = dy * e2z - dz * e2y, pvy = dz * e2x - dx * e2z, pvz = dx * e2y - dy * e2x;
+  const float8 inv_det = 1.0f / (e1x * pvx + e1y * pvy + e1z * pvz);
+  const float8 sx = r->org.x - p[PACK_V0 + j];
+  const float8 sy = r->org.y - p[PACK_V0 + PSF_BVH_WIDTH + j];
+  const float8 sz = r->org.z - p[PACK_V0 + 2 * PSF_BVH_WIDTH + j];
+  const float8 u = (sx * pvx + sy * pvy + sz * pvz) * inv_det;
+  const float8 qx = sy * e1z - sz * e1y, qy = sz * e1x - sx * e1z, qz = sx * e1y - sy * e1x;
+  const float8 v = (dx * qx + dy * qy + dz * qz) * inv_det;
+  const float8 t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+  const float8 eps = (PSF_BARY_EPS_DIST * r->len) * fabs(t) * p[PACK_INV_SIZE + j] + PSF_BARY_EPS;
+  const int8 ok = (u >= -eps) & (v >= -eps) & (u + v <= 1.0f + eps) & (t > tmin) & (t < tmax);
+  *t_out = select((float8)(INFINITY), t, ok);
+  *u_out = u;
+  *v_out = v;
+  return ok;
+}
+
+/* sphere_roots for the eight rays. */
+inline int8 flat_roots8(float8 t0, float8 t1, int8 hit, float8 tmin, float8 tmax, float8* t_out) {
+  const float8 tn = BVH_MIN(t0, t1), tf = BVH_MAX(t0, t1);
+  const int8 ok_n = hit & (tn > tmin) & (tn < tmax);
+  const int8 ok_f = hit & (tf > tmin) & (tf < tmax);
+  *t_out = select(select((float8)(INFINITY), tf, ok_f), tn, ok_n);
+  return ok_n | ok_f;
+}
+
+/* sphere_pack_test_float of lane j of sphere pack p against the eight rays. */
+inline int8 flat_sphere8(__global const float* p, uint j, const FlatRays* r, float8 tmin, float8 tmax, float8* t_out) {
+  const float8 dx = r->unit.x, dy = r->unit.y, dz = r->unit.z;
+  const float8 fx = r->org.x - p[PACK_V0 + j];
+  const float8 fy = r->org.y - p[PACK_V0 + PSF_BVH_WIDTH + j];
+  const float8 fz = r->org.z - p[PACK_V0 + 2 * PSF_BVH_WIDTH + j];
+  const float rad = p[PACK_E1 + j];
+  const float8 b = -(fx * dx + fy * dy + fz * dz);
+  const float8 lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
+  const float8 r2 = (float8)(rad * rad);
+  const float8 disc = r2 - (lx * lx + ly * ly + lz * lz);
+  const float8 c = (fx * fx + fy * fy + fz * fz) - r2;
+  const float8 q = b + copysign(sqrt(fmax(disc, 0.0f)), b);
+  return flat_roots8(c * r->inv_len / q, q * r->inv_len, (disc >= 0.0f) & (int8)(rad > 0.0f ? -1 : 0), tmin, tmax,
+                     t_out);
+}
+
+/* sphere_pack_test_double of lane j of sphere pack p against the eight rays. */
+inline int8 flat_sphere8_double(__global const float* p, uint j, const FlatRays* r, float8 tmin, float8 tmax,
+                                float8* t_out) {
+  const flat_real8 dirx = FLAT_REAL8(r->dir.x), diry = FLAT_REAL8(r->dir.y), dirz = FLAT_REAL8(r->dir.z);
+  const flat_real8 len = sqrt(dirx * dirx + diry * diry + dirz * dirz);
+  const flat_real8 inv_len = (FLAT_REAL_SCALAR)1 / len;
+  const flat_real8 dx = dirx * inv_len, dy = diry * inv_len, dz = dirz * inv_len;
+  const flat_real8 fx = FLAT_REAL8(r->org.x) - (FLAT_REAL_SCALAR)p[PACK_V0 + j];
+  const flat_real8 fy = FLAT_REAL8(r->org.y) - (FLAT_REAL_SCALAR)p[PACK_V0 + PSF_BVH_WIDTH + j];
+  const flat_real8 fz = FLAT_REAL8(r->org.z) - (FLAT_REAL_SCALAR)p[PACK_V0 + 2 * PSF_BVH_WIDTH + j];
+  const float radf = p[PACK_E1 + j];
+  const FLAT_REAL_SCALAR rad = radf;
+  const flat_real8 b = -(fx * dx + fy * dy + fz * dz);
+  const flat_real8 lx = fx + b * dx, ly = fy + b * dy, lz = fz + b * dz;
+  const FLAT_REAL_SCALAR r2 = rad * rad;
+  const flat_real8 disc = r2 - (lx * lx + ly * ly + lz * lz);
+  const flat_real8 c = (fx * fx + fy * fy + fz * fz) - r2;
+  const float8 bf = convert_float8(b), discf = convert_float8(disc);
+  const float8 q = bf + copysign(sqrt(fmax(discf, 0.0f)), bf);
+  const float8 inv_lenf = convert_float8(inv_len);
+  const int8 hit = convert_int8(disc >= (flat_real8)(0)) & (int8)(radf > 0.0f ? -1 : 0);
+  return flat_roots8(convert_float8(c) * inv_lenf / q, q * inv_lenf, hit, tmin, tmax, t_out);
+}
+
+/* Whether pack p's spheres are tested in double (sphere_pack_test_body). */
+inline bool flat_pack_double(__global const float* p) { return p[PACK_E1 + PSF_BVH_WIDTH] != 0.0f; }
+
+/* The closest hits of the lanes of `live` among the first `count` packs: t
+ * (tmax where none), prim (PSF_NO_HIT where none) and the barycentrics, as the
+ * lane casts give them; lanes not live get t 0 and no hit. */
+inline void flat_closest8(__global const BvhTriPack* packs, uint count, bool spheres, Vec8 org, Vec8 dir, float8 tmin,
+                          float8 tmax, int8 live, float8* t_out, uint8* prim_out, float8* u_out, float8* v_out) {
+  const FlatRays r = flat_rays(org, dir, spheres);
+  float8 best = select((float8)(-1.0f), tmax, live); /* no hit within a dead lane's (tmin, -1) */
+  uint8 prim = (uint8)(PSF_NO_HIT);
+  float8 bu = (float8)(0.0f), bv = (float8)(0.0f);
+  for (uint k = 0u; k < count; ++k) {
+    __global const float* p = (__global const float*)(packs + k);
+    __global const uint* prims = (__global const uint*)(p + PACK_PRIM);
+    const bool sphere_pack = spheres && pack_is_spheres(p);
+    const bool dbl = sphere_pack && flat_pack_double(p);
+    for (uint j = 0u; j < PSF_BVH_WIDTH; ++j) {
+      const uint id = prims[j];
+      if (id == PSF_NO_HIT) break; /* a pack's used lanes come first */
+      float8 t, u = (float8)(0.0f), v = (float8)(0.0f);
+      const int8 ok =
+          sphere_pack ? (dbl ? flat_sphere8_double(p, j, &r, tmin, best, &t) : flat_sphere8(p, j, &r, tmin, best, &t))
+                      : flat_triangle8(p, j, &r, tmin, best, &t, &u, &v);
+      best = select(best, t, ok);
+      prim = select(prim, (uint8)(id & ~(PSF_PRIM_MASKED | PSF_PRIM_SPHERE)), as_uint8(ok));
+      bu = select(bu, u, ok);
+      bv = select(bv, v, ok);
+    }
+  }
+  *t_out = select((float8)(0.0f), best, live);
+  *prim_out = prim;
+  *u_out = bu;
+  *v_out = bv;
+}
+
+/* The lanes of `cast` whose segment (tmin, tmax) meets a primitive of the
+ * first `count` packs (intersect_any_hit_leaves' verdict). */
+inline int8 flat_any8(__global const BvhTriPack* packs, uint count, bool spheres, Vec8 org, Vec8 dir, float8 tmin,
+                      float8 tmax, int8 cast) {
+  const FlatRays r = flat_rays(org, dir, spheres);
+  int8 blocked = ~cast;
+  for (uint k = 0u; k < count && !all(blocked); ++k) {
+    __global const float* p = (__global const float*)(packs + k);
+    __global const uint* prims = (__global const uint*)(p + PACK_PRIM);
+    const bool sphere_pack = spheres && pack_is_spheres(p);
+    const bool dbl = sphere_pack && flat_pack_double(p);
+    for (uint j = 0u; j < PSF_BVH_WIDTH; ++j) {
+      if (prims[j] == PSF_NO_HIT) break;
+      float8 t, u, v;
+      blocked |= sphere_pack
+                     ? (dbl ? flat_sphere8_double(p, j, &r, tmin, tmax, &t) : flat_sphere8(p, j, &r, tmin, tmax, &t))
+                     : flat_triangle8(p, j, &r, tmin, tmax, &t, &u, &v);
+    }
+  }
+  return cast & blocked;
+}
 /* One lane's surface where the vectors do not shade it (a colour texture or a
  * material of another kind), as shade_path_inline: a blend's choice by the
  * hash of the path and bounce, the frame and the textures. */
@@ -1363,10 +1541,20 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     const bool env_samples = any(env_choice);
     if (env_samples) env_lanes_row(env, env_data, env_choice, u_la, u_lb, &env_lanes);
 
-    /* The closest hits, lane by lane. */
+    /* The closest hits: all lanes at once in a scene of a few packs, else
+     * lane by lane through the BVH. */
     float8 t = (float8)(0.0f), bu = (float8)(0.0f), bv = (float8)(0.0f);
     uint8 prim = (uint8)(PSF_NO_HIT);
-    for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (params.flat_packs > 0u) { /* a scene of a few packs: all lanes at once, without the BVH */
+      if (env_samples) {
+        env_lanes_guide(env, env_data, &env_lanes);
+        env_lanes_block(env, env_data, &env_lanes);
+        env_lanes_cell(env, env_data, env.scale.w, &env_lanes);
+      }
+      flat_closest8(packs, params.flat_packs, params.spheres != PSF_FRAME_SPHERES_NONE, ln.org, ln.dir, ln.tmin,
+                    ln.tmax, ln.live, &t, &prim, &bu, &bv);
+    }
+    for (uint l = 0u; l < PSF_LANES && params.flat_packs == 0u; ++l) {
       if (env_samples && l == 2u) env_lanes_guide(env, env_data, &env_lanes);
       if (env_samples && l == 4u) env_lanes_block(env, env_data, &env_lanes);
       if (env_samples && l == 6u) env_lanes_cell(env, env_data, env.scale.w, &env_lanes);
@@ -1952,10 +2140,15 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     beta = vec8_select(beta, vec8_div(beta, q), rr);
     const int8 go = scatter & (vec8_max3(weight) > 0.0f);
 
-    /* The shadow rays, lane by lane (trace_paths' intersect_any_hit_alpha
-     * without alpha), and what they decide (shade.cl shadow_slot). */
+    /* The shadow rays (trace_paths' intersect_any_hit_alpha without alpha;
+     * all lanes at once in a scene of a few packs, else lane by lane), and
+     * what they decide (shade.cl shadow_slot). */
     int8 visible = (int8)(0);
-    for (uint todo = psf_lanes8(contributes); todo != 0u; todo &= todo - 1u) { /* its set lanes: no branch per lane */
+    if (params.flat_packs > 0u)
+      visible = contributes & ~flat_any8(packs, params.flat_packs, params.spheres != PSF_FRAME_SPHERES_NONE, shadow_org,
+                                         shadow_dir, (float8)(0.0f), shadow_tmax, contributes);
+    for (uint todo = params.flat_packs > 0u ? 0u : psf_lanes8(contributes); todo != 0u;
+         todo &= todo - 1u) { /* else its set lanes through the BVH: no branch per lane */
       const uint l = bvh_first_lane(todo);
       Ray r;
       r.org = (float4)(VEC8_GET(shadow_org, l), 0.0f);
@@ -2030,4 +2223,47 @@ __kernel void lanes_test_eval(__global const Material* materials, __global const
   const int8 shaded = lanes_bsdfs_mask(&b);
   for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l)
     f_pdf[k0 + l] = LANE_I(shaded, l) ? (float4)(VEC8_GET(f, l), LANE_F(pdf, l)) : (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+}
+
+/* Tests (tests/test_raycast.cpp): the flat casts of eight rays a work-item
+ * over all `pack_count` packs (spheres: whether sphere packs are among them),
+ * into closest as flat_closest8 gives them and into any the closest hit where
+ * flat_any8 finds the ray blocked (prim PSF_NO_HIT - 1 where the closest cast
+ * found nothing), a miss (t = tmax) where it does not. */
+__kernel void lanes_test_casts(__global const BvhTriPack* packs, uint pack_count, uint spheres,
+                               __global const Ray* rays, __global Hit* closest, __global Hit* any, uint count) {
+  const uint k0 = get_global_id(0) * PSF_LANES;
+  if (k0 >= count) return;
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  Vec8 org = zero, dir = zero;
+  float8 tmin = (float8)(0.0f), tmax = (float8)(0.0f);
+  int8 valid = (int8)(0);
+  for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l) {
+    const Ray r = rays[k0 + l];
+    vec8_set(&org, l, r.org.xyz);
+    vec8_set(&dir, l, r.dir.xyz);
+    LANE_F(tmin, l) = r.org.w;
+    LANE_F(tmax, l) = r.dir.w;
+    LANE_I(valid, l) = -1;
+  }
+  float8 t, u, v;
+  uint8 prim;
+  flat_closest8(packs, pack_count, spheres != 0u, org, dir, tmin, tmax, valid, &t, &prim, &u, &v);
+  const int8 blocked = flat_any8(packs, pack_count, spheres != 0u, org, dir, tmin, tmax, valid);
+  for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l) {
+    Hit h;
+    h.t = LANE_F(t, l);
+    h.prim = LANE_U(prim, l);
+    h.u = LANE_F(u, l);
+    h.v = LANE_F(v, l);
+    closest[k0 + l] = h;
+    if (!LANE_I(blocked, l)) {
+      h.t = LANE_F(tmax, l);
+      h.prim = PSF_NO_HIT;
+      h.u = h.v = 0.0f;
+    } else if (h.prim == PSF_NO_HIT) {
+      h.prim = PSF_NO_HIT - 1u;
+    }
+    any[k0 + l] = h;
+  }
 }

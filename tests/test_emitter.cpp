@@ -1654,7 +1654,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   struct Case {
     std::string name;
     psf::Scene scene;
-    bool lanes;  // in the class
+    bool lanes;        // in the class
+    bool flat = true;  // few primitives, none alpha-tested: the lanes cast without the BVH by default
   };
   std::vector<Case> cases;
   cases.push_back({"cornell-box", psf::load_scene(psf::test::source_path("scenes/cornell-box.xml")), true});
@@ -1731,7 +1732,7 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     point.position = {0.6f, -0.3f, 0.7f};
     point.color = {0.3f, 0.2f, 0.1f};
     t.lights = {point};
-    cases.push_back({"textured floor, masked leaf, area and point lights", t, true});
+    cases.push_back({"textured floor, masked leaf, area and point lights", t, true, false});
   }
   {
     // Our Cornell box with a BSDF of every other kind, which the lanes shade
@@ -1797,7 +1798,7 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     xml.insert(xml.rfind("</scene>"), lights);
     const std::string path = psf::test::temp_dir("lanes-lights") + "/box.xml";
     std::ofstream(path) << xml;
-    cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true});
+    cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true, false});  // 60 triangles
   }
   // Analytic spheres: a sphere light over a rough conductor sphere, a glass
   // sphere on a sphere ground under a constant sky, principled spheres,
@@ -1851,6 +1852,14 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     const std::string glass = psf::test::temp_dir("lanes-rough-glass") + "/sphere-light.xml";
     std::ofstream(glass) << xml;
     cases.push_back({"sphere-light, GGX copper, rough glass", psf::load_scene(glass), true});
+    // And with a large diffuse sphere beside the others, between part of the
+    // floor and the light: the casts test it in double (radius 4.5 above 4 and
+    // above half its centre's distance 7), shadow rays too.
+    xml.insert(xml.rfind("</scene>"), R"(<shape type="sphere"><point name="center" x="-6" y="3" z="-2"/>)"
+                                      R"(<float name="radius" value="4.5"/><bsdf type="diffuse"/></shape>)");
+    const std::string large = psf::test::temp_dir("lanes-large-sphere") + "/sphere-light.xml";
+    std::ofstream(large) << xml;
+    cases.push_back({"sphere-light, GGX copper, rough glass, a large sphere", psf::load_scene(large), true});
   }
   cases.push_back({"fog lights", psf::load_scene(psf::test::source_path("scenes/fog-lights.xml")), false});
   {
@@ -1904,45 +1913,52 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     o.lanes = 0;
     psf::RenderResult per = r.render(o);
     rt.finish();
-    rt.reset_stats();
-    o.lanes = 1;
-    psf::RenderResult lanes = r.render(o);
-    rt.finish();
-    CHECK((rt.stats().count("trace_lanes") == 1) == c.lanes);
-    if (!c.lanes) {
-      CHECK(lanes.image.rgb == per.image.rgb);
-      continue;
-    }
-    for (auto [a, b] : {std::pair{&lanes.image, &per.image}, std::pair{&lanes.unfiltered, &per.unfiltered}}) {
-      // Leave out the values that differ most, one in a thousand (none in
-      // images of fewer than 1000 values): the pixels of paths that a rounding
-      // sent elsewhere, which differ by a whole path.
-      const size_t n = a->rgb.size();
-      std::vector<double> d2(n);
-      for (size_t i = 0; i < n; ++i) d2[i] = (double(a->rgb[i]) - b->rgb[i]) * (double(a->rgb[i]) - b->rgb[i]);
-      std::vector<size_t> order(n);
-      std::iota(order.begin(), order.end(), size_t(0));
-      const size_t left_out = n / 1000;
-      std::partial_sort(order.begin(), order.begin() + left_out, order.end(),
-                        [&](size_t i, size_t j) { return d2[i] > d2[j]; });
-      std::vector<char> kept(n, 1);
-      for (size_t k = 0; k < left_out; ++k) kept[order[k]] = 0;
-      double se = 0, ref2 = 0, sa = 0, sb = 0;
-      size_t over = 0;  // values that differ by more than 0.1 %
-      for (size_t i = 0; i < n; ++i) {
-        ref2 += double(b->rgb[i]) * b->rgb[i];
-        over += std::fabs(double(a->rgb[i]) - b->rgb[i]) > 1e-3 * std::max(1e-3, std::fabs(double(b->rgb[i])));
-        if (!kept[i]) continue;
-        se += d2[i];
-        sa += a->rgb[i];
-        sb += b->rgb[i];
+    if (c.lanes) CHECK((r.flat_packs(-1) > 0) == c.flat);
+    CHECK(r.flat_packs(0) == 0);
+    for (int flat : {-1, 0}) {
+      INFO((flat ? "casts by default (without the BVH where flat)" : "casts through the BVH"));
+      if (flat == 0 && !c.flat) continue;  // the same casts again
+      rt.reset_stats();
+      o.lanes = 1;
+      o.flat_casts = flat;
+      psf::RenderResult lanes = r.render(o);
+      rt.finish();
+      CHECK((rt.stats().count("trace_lanes") == 1) == c.lanes);
+      if (!c.lanes) {
+        CHECK(lanes.image.rgb == per.image.rgb);
+        break;
       }
-      INFO("squared error " << se << " of " << ref2 << "; sums " << sa << ", " << sb << "; " << over << " of " << n
-                            << " values differ by more than 0.1 %; " << left_out << " left out, the largest "
-                            << (left_out ? std::sqrt(d2[order[0]]) : 0.0));
-      CHECK(sb > 0);
-      CHECK(se <= 1e-6 * ref2);
-      CHECK(sa == Approx(sb).epsilon(1e-4));
+      for (auto [a, b] : {std::pair{&lanes.image, &per.image}, std::pair{&lanes.unfiltered, &per.unfiltered}}) {
+        // Leave out the values that differ most, one in a thousand (none in
+        // images of fewer than 1000 values): the pixels of paths that a rounding
+        // sent elsewhere, which differ by a whole path.
+        const size_t n = a->rgb.size();
+        std::vector<double> d2(n);
+        for (size_t i = 0; i < n; ++i) d2[i] = (double(a->rgb[i]) - b->rgb[i]) * (double(a->rgb[i]) - b->rgb[i]);
+        std::vector<size_t> order(n);
+        std::iota(order.begin(), order.end(), size_t(0));
+        const size_t left_out = n / 1000;
+        std::partial_sort(order.begin(), order.begin() + left_out, order.end(),
+                          [&](size_t i, size_t j) { return d2[i] > d2[j]; });
+        std::vector<char> kept(n, 1);
+        for (size_t k = 0; k < left_out; ++k) kept[order[k]] = 0;
+        double se = 0, ref2 = 0, sa = 0, sb = 0;
+        size_t over = 0;  // values that differ by more than 0.1 %
+        for (size_t i = 0; i < n; ++i) {
+          ref2 += double(b->rgb[i]) * b->rgb[i];
+          over += std::fabs(double(a->rgb[i]) - b->rgb[i]) > 1e-3 * std::max(1e-3, std::fabs(double(b->rgb[i])));
+          if (!kept[i]) continue;
+          se += d2[i];
+          sa += a->rgb[i];
+          sb += b->rgb[i];
+        }
+        INFO("squared error " << se << " of " << ref2 << "; sums " << sa << ", " << sb << "; " << over << " of " << n
+                              << " values differ by more than 0.1 %; " << left_out << " left out, the largest "
+                              << (left_out ? std::sqrt(d2[order[0]]) : 0.0));
+        CHECK(sb > 0);
+        CHECK(se <= 1e-6 * ref2);
+        CHECK(sa == Approx(sb).epsilon(1e-4));
+      }
     }
   }
 }

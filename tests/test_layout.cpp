@@ -83,6 +83,7 @@ TEST_CASE("Layout: shared structs match between host and device", "[layout]") {
       {"offsetof(FrameParams, camera_medium)", offsetof(FrameParams, camera_medium)},
       {"offsetof(FrameParams, max_rounds)", offsetof(FrameParams, max_rounds)},
       {"offsetof(FrameParams, spheres)", offsetof(FrameParams, spheres)},
+      {"offsetof(FrameParams, flat_packs)", offsetof(FrameParams, flat_packs)},
       {"sizeof(FilterParams)", sizeof(FilterParams)},
       {"offsetof(FilterParams, count)", offsetof(FilterParams, count)},
       {"offsetof(FilterParams, cells27)", offsetof(FilterParams, cells27)},

@@ -174,7 +174,25 @@ Verdict judge(const Mesh& m, const Ray& ray, const Hit& hit, bool any) {
   return v;
 }
 
-std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any) {
+// The hits of trace_lanes' flat casts (every pack against eight rays at once,
+// without the BVH: lanes_test_casts), closest (any false) or any-hit.
+std::vector<Hit> cast_flat(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any) {
+  auto& rt = psf::test::runtime();
+  const uint32_t n = static_cast<uint32_t>(rays.size());
+  std::vector<BvhTriPack> packs = bvh.packs;
+  if (packs.empty()) packs.resize(1);  // no zero-sized buffer; pack_count 0 tests none
+  cl::Buffer pb = rt.upload(packs), rb = rt.upload(rays);
+  cl::Buffer cb = rt.buffer(CL_MEM_WRITE_ONLY, rays.size() * sizeof(Hit));
+  cl::Buffer ab = rt.buffer(CL_MEM_WRITE_ONLY, rays.size() * sizeof(Hit));
+  rt.launch("lanes_test_casts", (n + 7) / 8, 8, pb, cl_uint(bvh.packs.size()), cl_uint(bvh.sphere_count > 0), rb, cb,
+            ab, n);
+  rt.finish();
+  return rt.download<Hit>(any ? ab : cb, rays.size());
+}
+
+// The hits of the BVH's casts (RayCaster), or with `flat` trace_lanes' flat casts.
+std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any, bool flat = false) {
+  if (flat) return cast_flat(bvh, rays, any);
   auto& rt = psf::test::runtime();
   psf::RayCaster caster(rt, bvh);
   cl::Buffer rb = rt.upload(rays);
@@ -201,22 +219,28 @@ void report(size_t i, const Ray& ray, const Hit& closest, const Verdict& c, cons
 
 // Casts closest and any-hit rays and checks every result against the reference.
 // Returns the number of rays whose closest hit was a triangle.
+// Both ways: through the BVH, and as trace_lanes' flat casts test every pack.
 size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact = 0.99) {
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
-  std::vector<Hit> closest = cast(bvh, rays, false);
-  std::vector<Hit> any = cast(bvh, rays, true);
-  size_t exact = 0, hits = 0, failures = 0;
-  for (size_t i = 0; i < rays.size(); ++i) {
-    Verdict c = judge(m, rays[i], closest[i], false);
-    Verdict a = judge(m, rays[i], any[i], true);
-    exact += c.exact;
-    hits += closest[i].prim != PSF_NO_HIT;
-    report(i, rays[i], closest[i], c, any[i], a, failures);
+  size_t hits = 0;
+  for (bool flat : {false, true}) {
+    INFO((flat ? "flat casts (lanes_test_casts)" : "through the BVH"));
+    std::vector<Hit> closest = cast(bvh, rays, false, flat);
+    std::vector<Hit> any = cast(bvh, rays, true, flat);
+    size_t exact = 0, failures = 0;
+    hits = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      Verdict c = judge(m, rays[i], closest[i], false);
+      Verdict a = judge(m, rays[i], any[i], true);
+      exact += c.exact;
+      hits += closest[i].prim != PSF_NO_HIT;
+      report(i, rays[i], closest[i], c, any[i], a, failures);
+    }
+    INFO(failures << " of " << rays.size() << " rays fail");
+    CHECK(failures == 0);
+    INFO(exact << " of " << rays.size() << " rays report exactly the reference's triangle");
+    CHECK(double(exact) >= min_exact * double(rays.size()));
   }
-  INFO(failures << " of " << rays.size() << " rays fail");
-  CHECK(failures == 0);
-  INFO(exact << " of " << rays.size() << " rays report exactly the reference's triangle");
-  CHECK(double(exact) >= min_exact * double(rays.size()));
   return hits;
 }
 
@@ -352,12 +376,13 @@ TEST_CASE("Raycast: an empty scene is all misses", "[raycast]") {
   REQUIRE(bvh.nodes.size() == 1);
   for (int s = 0; s < PSF_BVH_WIDTH; ++s) CHECK(bvh.nodes[0].child[s] == PSF_EMPTY_CHILD);
   std::vector<Ray> rays = rays_in_box(3, 130, vec3(-1), vec3(1), 100.0f);
-  for (auto hits : {cast(bvh, rays, false), cast(bvh, rays, true)}) {
-    for (size_t i = 0; i < rays.size(); ++i) {
-      CHECK(hits[i].prim == PSF_NO_HIT);
-      CHECK(hits[i].t == 100.0f);
+  for (bool flat : {false, true})  // through the BVH, and as trace_lanes' flat casts
+    for (auto hits : {cast(bvh, rays, false, flat), cast(bvh, rays, true, flat)}) {
+      for (size_t i = 0; i < rays.size(); ++i) {
+        CHECK(hits[i].prim == PSF_NO_HIT);
+        CHECK(hits[i].t == 100.0f);
+      }
     }
-  }
 }
 
 TEST_CASE("Raycast: one triangle", "[raycast]") {
@@ -373,20 +398,23 @@ TEST_CASE("Raycast: one triangle", "[raycast]") {
       make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, 0.5f),    // tmax short of it
       make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, -1.0f),   // a dead ray
   };
-  std::vector<Hit> hits = cast(bvh, rays, false);
-  CHECK(hits[0].prim == 0u);
-  CHECK(hits[0].t == Approx(1.0f));
-  CHECK(hits[0].u == Approx(0.25f));
-  CHECK(hits[0].v == Approx(0.25f));
-  CHECK(hits[1].prim == 0u);
-  CHECK(hits[1].t == Approx(0.5f));
-  for (int i : {2, 3, 4, 5}) {
-    INFO("ray " << i);
-    CHECK(hits[i].prim == PSF_NO_HIT);
-    CHECK(hits[i].t == rays[i].dir.s[3]);
+  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+    INFO((flat ? "flat casts" : "through the BVH"));
+    std::vector<Hit> hits = cast(bvh, rays, false, flat);
+    CHECK(hits[0].prim == 0u);
+    CHECK(hits[0].t == Approx(1.0f));
+    CHECK(hits[0].u == Approx(0.25f));
+    CHECK(hits[0].v == Approx(0.25f));
+    CHECK(hits[1].prim == 0u);
+    CHECK(hits[1].t == Approx(0.5f));
+    for (int i : {2, 3, 4, 5}) {
+      INFO("ray " << i);
+      CHECK(hits[i].prim == PSF_NO_HIT);
+      CHECK(hits[i].t == rays[i].dir.s[3]);
+    }
+    std::vector<Hit> any = cast(bvh, rays, true, flat);
+    for (size_t i = 0; i < rays.size(); ++i) CHECK((any[i].prim == PSF_NO_HIT) == (hits[i].prim == PSF_NO_HIT));
   }
-  std::vector<Hit> any = cast(bvh, rays, true);
-  for (size_t i = 0; i < rays.size(); ++i) CHECK((any[i].prim == PSF_NO_HIT) == (hits[i].prim == PSF_NO_HIT));
   check_scene(m, rays_in_box(5, 515, vec3(-0.5f), vec3(1.5f), 5.0f));
 }
 
@@ -423,19 +451,22 @@ TEST_CASE("Raycast: degenerate triangles are never hit and do not disturb others
   Mesh proper;                                                    // the reference sees only these
   proper.positions = m.positions;
   for (size_t t = 7; t < m.triangles.size(); ++t) proper.triangles.push_back(m.triangles[t]);
-  std::vector<Hit> hits = cast(bvh, rays, false);
-  std::vector<Hit> any = cast(bvh, rays, true);
-  for (size_t i = 0; i < rays.size(); ++i) {
-    INFO("ray " << i);
-    CHECK((hits[i].prim == PSF_NO_HIT || hits[i].prim >= 7));
-    CHECK((any[i].prim == PSF_NO_HIT || any[i].prim >= 7));
-    CHECK(!std::isnan(hits[i].t));
-    // Scene indices shift by 7 against `proper`.
-    Hit h = hits[i];
-    if (h.prim != PSF_NO_HIT) h.prim -= 7;
-    Verdict v = judge(proper, rays[i], h, false);
-    INFO(v.why);
-    CHECK(v.ok);
+  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+    INFO((flat ? "flat casts" : "through the BVH"));
+    std::vector<Hit> hits = cast(bvh, rays, false, flat);
+    std::vector<Hit> any = cast(bvh, rays, true, flat);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      INFO("ray " << i);
+      CHECK((hits[i].prim == PSF_NO_HIT || hits[i].prim >= 7));
+      CHECK((any[i].prim == PSF_NO_HIT || any[i].prim >= 7));
+      CHECK(!std::isnan(hits[i].t));
+      // Scene indices shift by 7 against `proper`.
+      Hit h = hits[i];
+      if (h.prim != PSF_NO_HIT) h.prim -= 7;
+      Verdict v = judge(proper, rays[i], h, false);
+      INFO(v.why);
+      CHECK(v.ok);
+    }
   }
 }
 
@@ -483,22 +514,25 @@ TEST_CASE("Raycast: rays through edges shared by two triangles hit one of them",
       d = glm::normalize(d);
       rays.push_back(make_ray(target - dist * d, d, 0.0f, 1e3f));
     }
-    std::vector<Hit> hits = cast(bvh, rays, false);
-    std::vector<Hit> any = cast(bvh, rays, true);
-    size_t missed = 0, missed_any = 0;
-    for (size_t i = 0; i < rays.size(); ++i) {
-      missed += hits[i].prim == PSF_NO_HIT;
-      missed_any += any[i].prim == PSF_NO_HIT;
-      if (hits[i].prim != PSF_NO_HIT) {
-        INFO("ray " << i);
-        Verdict v = judge(m, rays[i], hits[i], false);
-        INFO(v.why);
-        CHECK(v.ok);
-        CHECK(hits[i].t <= dist * (1 + 1e-4f));  // the aimed-at point, or an occluder before it
+    for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+      INFO((flat ? "flat casts" : "through the BVH"));
+      std::vector<Hit> hits = cast(bvh, rays, false, flat);
+      std::vector<Hit> any = cast(bvh, rays, true, flat);
+      size_t missed = 0, missed_any = 0;
+      for (size_t i = 0; i < rays.size(); ++i) {
+        missed += hits[i].prim == PSF_NO_HIT;
+        missed_any += any[i].prim == PSF_NO_HIT;
+        if (hits[i].prim != PSF_NO_HIT) {
+          INFO("ray " << i);
+          Verdict v = judge(m, rays[i], hits[i], false);
+          INFO(v.why);
+          CHECK(v.ok);
+          CHECK(hits[i].t <= dist * (1 + 1e-4f));  // the aimed-at point, or an occluder before it
+        }
       }
+      CHECK(missed == 0);
+      CHECK(missed_any == 0);
     }
-    CHECK(missed == 0);
-    CHECK(missed_any == 0);
   }
 }
 
@@ -524,11 +558,13 @@ TEST_CASE("Raycast: rays leaving a surface with tmin > 0 skip it", "[raycast]") 
     start.push_back(t);
   }
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
-  std::vector<Hit> hits = cast(bvh, rays, false);
-  for (size_t i = 0; i < rays.size(); ++i) {
-    INFO("ray " << i << " from triangle " << start[i]);
-    CHECK(hits[i].prim != start[i]);
-    CHECK((hits[i].prim == PSF_NO_HIT || hits[i].t > 1e-2f));
+  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+    std::vector<Hit> hits = cast(bvh, rays, false, flat);
+    for (size_t i = 0; i < rays.size(); ++i) {
+      INFO("ray " << i << " from triangle " << start[i] << (flat ? ", flat casts" : ""));
+      CHECK(hits[i].prim != start[i]);
+      CHECK((hits[i].prim == PSF_NO_HIT || hits[i].t > 1e-2f));
+    }
   }
   check_scene(m, rays);
 }
@@ -542,10 +578,11 @@ TEST_CASE("Raycast: axis-aligned and special rays give no NaN", "[raycast]") {
                    vec3(-0.0f, 0.0f, 1), vec3(1, 1, 0), vec3(0, -1, -1), vec3(1e-30f, 1, 0)})
       for (float tmax : {1e30f, inf, 50.0f}) rays.push_back(make_ray(o, d, 0.0f, tmax));
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
-  for (bool any : {false, true}) {
-    std::vector<Hit> hits = cast(bvh, rays, any);
+  for (int mode = 0; mode < 4; ++mode) {  // closest and any, through the BVH and as flat casts
+    const bool any = mode & 1, flat = mode & 2;
+    std::vector<Hit> hits = cast(bvh, rays, any, flat);
     for (size_t i = 0; i < rays.size(); ++i) {
-      INFO("ray " << i << (any ? " any" : " closest"));
+      INFO("ray " << i << (any ? " any" : " closest") << (flat ? ", flat casts" : ""));
       CHECK(!std::isnan(hits[i].t));
       CHECK(!std::isnan(hits[i].u));
       CHECK(!std::isnan(hits[i].v));
@@ -822,20 +859,25 @@ size_t check_mixed(const Mesh& m, const std::vector<psf::BvhSphere>& spheres, co
       sphere_leaves += any_sphere;
     }
   CHECK((sphere_leaves > 0) == !spheres.empty());
-  std::vector<Hit> closest = cast(bvh, rays, false);
-  std::vector<Hit> any = cast(bvh, rays, true);
-  size_t exact = 0, sphere_hits = 0, failures = 0;
-  for (size_t i = 0; i < rays.size(); ++i) {
-    Verdict c = judge_mixed(m, spheres, rays[i], closest[i], false);
-    Verdict a = judge_mixed(m, spheres, rays[i], any[i], true);
-    exact += c.exact;
-    sphere_hits += closest[i].prim != PSF_NO_HIT && closest[i].prim >= m.triangles.size();
-    report(i, rays[i], closest[i], c, any[i], a, failures);
+  size_t sphere_hits = 0;
+  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+    INFO((flat ? "flat casts (lanes_test_casts)" : "through the BVH"));
+    std::vector<Hit> closest = cast(bvh, rays, false, flat);
+    std::vector<Hit> any = cast(bvh, rays, true, flat);
+    size_t exact = 0, failures = 0;
+    sphere_hits = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      Verdict c = judge_mixed(m, spheres, rays[i], closest[i], false);
+      Verdict a = judge_mixed(m, spheres, rays[i], any[i], true);
+      exact += c.exact;
+      sphere_hits += closest[i].prim != PSF_NO_HIT && closest[i].prim >= m.triangles.size();
+      report(i, rays[i], closest[i], c, any[i], a, failures);
+    }
+    INFO(failures << " of " << rays.size() << " rays fail");
+    CHECK(failures == 0);
+    INFO(exact << " of " << rays.size() << " rays report exactly the reference's prim");
+    CHECK(double(exact) >= min_exact * double(rays.size()));
   }
-  INFO(failures << " of " << rays.size() << " rays fail");
-  CHECK(failures == 0);
-  INFO(exact << " of " << rays.size() << " rays report exactly the reference's prim");
-  CHECK(double(exact) >= min_exact * double(rays.size()));
   return sphere_hits;
 }
 
@@ -897,22 +939,28 @@ TEST_CASE("Raycast: rays leaving a sphere's surface miss it outwards and cross i
       rays.push_back(make_ray(o, w * 2.0f, 0.0f, std::numeric_limits<float>::infinity()));
       chords.push_back(ref_sphere(s, rays.back()).t1);  // the far root, from the offset origin
     }
-    std::vector<Hit> hits = cast(bvh, rays, false);
-    std::vector<Hit> any = cast(bvh, rays, true);
-    int bad = 0;
-    for (size_t i = 0; i < rays.size(); ++i) {
-      bool inward = i % 2 == 1;
-      const double tol = kSlack * (chords[i] + (glm::length(glm::dvec3(rays[i].org.s[0], rays[i].org.s[1],
-                                                                        rays[i].org.s[2]) - dvec3(s.center)) + radius) / 2.0);
-      bool ok = inward ? hits[i].prim == 0 && any[i].prim == 0 && std::abs(hits[i].t - chords[i]) <= tol
-                       : hits[i].prim == PSF_NO_HIT && any[i].prim == PSF_NO_HIT;
-      if (!ok && ++bad <= 3) {
-        INFO("ray " << i << (inward ? " inwards" : " outwards") << ": prim " << hits[i].prim << " t " << hits[i].t
-                    << ", chord " << chords[i]);
-        CHECK(ok);
+    for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
+      INFO((flat ? "flat casts" : "through the BVH"));
+      std::vector<Hit> hits = cast(bvh, rays, false, flat);
+      std::vector<Hit> any = cast(bvh, rays, true, flat);
+      int bad = 0;
+      for (size_t i = 0; i < rays.size(); ++i) {
+        bool inward = i % 2 == 1;
+        const double tol =
+            kSlack * (chords[i] +
+                      (glm::length(glm::dvec3(rays[i].org.s[0], rays[i].org.s[1], rays[i].org.s[2]) - dvec3(s.center)) +
+                       radius) /
+                          2.0);
+        bool ok = inward ? hits[i].prim == 0 && any[i].prim == 0 && std::abs(hits[i].t - chords[i]) <= tol
+                         : hits[i].prim == PSF_NO_HIT && any[i].prim == PSF_NO_HIT;
+        if (!ok && ++bad <= 3) {
+          INFO("ray " << i << (inward ? " inwards" : " outwards") << ": prim " << hits[i].prim << " t " << hits[i].t
+                      << ", chord " << chords[i]);
+          CHECK(ok);
+        }
       }
+      CHECK(bad == 0);
     }
-    CHECK(bad == 0);
   }
 }
 
