@@ -95,7 +95,7 @@ inline void vec8_set(Vec8* v, uint l, float3 a) {
 }
 /* Lane l of v (an lvalue), read lane by lane where v lies. A function taking
  * the Vec8 by value copied its three vectors whole first, and such a load
- * stalls on the lane stores lanes_load has just made to them (the store
+ * stalls on lane stores made to them just before (the store
  * buffer cannot forward a scalar store to a wider load). */
 #define VEC8_GET(v, l) ((float3)(LANE_F((v).x, l), LANE_F((v).y, l), LANE_F((v).z, l)))
 /* Lane l's frame (bsdf.cl Frame) of tangents s, t and normal n. */
@@ -186,7 +186,7 @@ inline float8 pixel_filter_offset8(const Camera* c, float8 u) {
 }
 
 /* The camera rays of eight consecutive paths, drawn a vector at a time for
- * lanes to take one by one (lanes_load). */
+ * lanes to take one by one (lanes_refill). */
 typedef struct {
   Vec8 org, dir;
   float8 tmin, tmax;
@@ -278,33 +278,47 @@ __attribute__((noinline)) void camera_rays8(const FrameParams* params, const Cam
   c->sample = sample;
 }
 
-/* Lane l takes path j of the batch: its camera ray (from `c`, drawn anew when
- * it does not hold j) and the state camera_rays gives a path (the lanes' class
- * has no camera medium). */
-inline void lanes_load(Lanes* ln, uint l, uint j, const FrameParams* params, const Camera* camera,
-                       __global const uint* sobol, CameraRays8* c) {
-  if (j - c->first >= (uint)PSF_LANES) camera_rays8(params, camera, sobol, j, c);
-  const uint k = j - c->first;
-  const float3 org = VEC8_GET(c->org, k);
-  vec8_set(&ln->org, l, org);
-  vec8_set(&ln->dir, l, VEC8_GET(c->dir, k));
-  LANE_F(ln->tmin, l) = LANE_F(c->tmin, k);
-  LANE_F(ln->tmax, l) = LANE_F(c->tmax, k);
-  vec8_set(&ln->beta, l, (float3)(1.0f));
-  LANE_F(ln->bsdf_pdf, l) = 0.0f;
-  vec8_set(&ln->radiance, l, (float3)(0.0f));
-  LANE_F(ln->radiance_w, l) = 0.0f;
-  vec8_set(&ln->vertex_radiance, l, (float3)(0.0f));
-  LANE_F(ln->vertex_radiance_w, l) = 0.0f;
-  vec8_set(&ln->alpha, l, (float3)(0.0f));
-  vec8_set(&ln->prev, l, org);
-  LANE_F(ln->path_length, l) = 0.0f;
-  LANE_U(ln->pixel, l) = LANE_U(c->pixel, k);
-  LANE_U(ln->sample, l) = LANE_U(c->sample, k);
-  LANE_U(ln->depth, l) = 0u;
-  LANE_U(ln->flags, l) = PSF_PATH_ALIVE;
-  LANE_U(ln->path, l) = j;
-  LANE_I(ln->live, l) = -1;
+/* The lanes of `take` take the batch's next paths, from *next on while below
+ * `end`, in lane order: their camera rays (from `c`, drawn anew when it does
+ * not hold the path) and the state camera_rays gives a path (the lanes' class
+ * has no camera medium). Each lane's values go in by selects of whole vectors:
+ * lane stores, which the next vector loads of these fields would have waited
+ * for (a store buffer cannot forward scalar stores to a wider load), cost
+ * more. */
+inline void lanes_refill(Lanes* ln, int8 take, uint* next, uint end, const FrameParams* params,
+                         const Camera* camera, __global const uint* sobol, CameraRays8* c) {
+  const int8 ids = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+  int8 load = (int8)(0);
+  for (uint todo = psf_lanes8(take); todo != 0u && *next < end; todo &= todo - 1u) {
+    const uint l = bvh_first_lane(todo), j = (*next)++;
+    if (j - c->first >= (uint)PSF_LANES) camera_rays8(params, camera, sobol, j, c);
+    const uint k = j - c->first;
+    const int8 m = ids == (int8)((int)l);
+    load |= m;
+    const Vec8 org = vec8((float8)(LANE_F(c->org.x, k)), (float8)(LANE_F(c->org.y, k)), (float8)(LANE_F(c->org.z, k)));
+    ln->org = vec8_select(ln->org, org, m);
+    ln->dir = vec8_select(
+        ln->dir, vec8((float8)(LANE_F(c->dir.x, k)), (float8)(LANE_F(c->dir.y, k)), (float8)(LANE_F(c->dir.z, k))),
+        m);
+    ln->tmin = select(ln->tmin, (float8)(LANE_F(c->tmin, k)), m);
+    ln->tmax = select(ln->tmax, (float8)(LANE_F(c->tmax, k)), m);
+    ln->pixel = select(ln->pixel, (uint8)(LANE_U(c->pixel, k)), as_uint8(m));
+    ln->sample = select(ln->sample, (uint8)(LANE_U(c->sample, k)), as_uint8(m));
+    ln->path = select(ln->path, (uint8)(j), as_uint8(m));
+  }
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  ln->beta = vec8_select(ln->beta, vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f)), load);
+  ln->bsdf_pdf = select(ln->bsdf_pdf, (float8)(0.0f), load);
+  ln->radiance = vec8_select(ln->radiance, zero, load);
+  ln->radiance_w = select(ln->radiance_w, (float8)(0.0f), load);
+  ln->vertex_radiance = vec8_select(ln->vertex_radiance, zero, load);
+  ln->vertex_radiance_w = select(ln->vertex_radiance_w, (float8)(0.0f), load);
+  ln->alpha = vec8_select(ln->alpha, zero, load);
+  ln->prev = vec8_select(ln->prev, ln->org, load);
+  ln->path_length = select(ln->path_length, (float8)(0.0f), load);
+  ln->depth = select(ln->depth, (uint8)(0u), as_uint8(load));
+  ln->flags = select(ln->flags, (uint8)(PSF_PATH_ALIVE), as_uint8(load));
+  ln->live |= load;
 }
 
 /* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
@@ -1481,7 +1495,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
   }
   CameraRays8 cam;
   cam.first = next + PSF_LANES; /* empty */
-  for (uint l = 0u; l < PSF_LANES && next < end; ++l) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
+  lanes_refill(&ln, (int8)(-1), &next, end, &params, &camera, sobol, &cam);
   const uint seed_hash = psf_hash(params.seed);
   const AlphaScene alpha = {tri_material, materials, tri_attribs, textures, texels, 0};
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
@@ -2186,9 +2200,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     for (uint todo = psf_lanes8(ends); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, contrib);
-      LANE_I(ln.live, l) = 0;
-      if (next < end) lanes_load(&ln, l, next++, &params, &camera, sobol, &cam);
     }
+    ln.live &= ~ends;
+    lanes_refill(&ln, ends, &next, end, &params, &camera, sobol, &cam);
   }
 }
 
