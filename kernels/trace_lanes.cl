@@ -285,8 +285,8 @@ __attribute__((noinline)) void camera_rays8(const FrameParams* params, const Cam
  * lane stores, which the next vector loads of these fields would have waited
  * for (a store buffer cannot forward scalar stores to a wider load), cost
  * more. */
-inline void lanes_refill(Lanes* ln, int8 take, uint* next, uint end, const FrameParams* params,
-                         const Camera* camera, __global const uint* sobol, CameraRays8* c) {
+inline void lanes_refill(Lanes* ln, int8 take, uint* next, uint end, const FrameParams* params, const Camera* camera,
+                         __global const uint* sobol, CameraRays8* c) {
   const int8 ids = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
   int8 load = (int8)(0);
   for (uint todo = psf_lanes8(take); todo != 0u && *next < end; todo &= todo - 1u) {
@@ -298,8 +298,7 @@ inline void lanes_refill(Lanes* ln, int8 take, uint* next, uint end, const Frame
     const Vec8 org = vec8((float8)(LANE_F(c->org.x, k)), (float8)(LANE_F(c->org.y, k)), (float8)(LANE_F(c->org.z, k)));
     ln->org = vec8_select(ln->org, org, m);
     ln->dir = vec8_select(
-        ln->dir, vec8((float8)(LANE_F(c->dir.x, k)), (float8)(LANE_F(c->dir.y, k)), (float8)(LANE_F(c->dir.z, k))),
-        m);
+        ln->dir, vec8((float8)(LANE_F(c->dir.x, k)), (float8)(LANE_F(c->dir.y, k)), (float8)(LANE_F(c->dir.z, k))), m);
     ln->tmin = select(ln->tmin, (float8)(LANE_F(c->tmin, k)), m);
     ln->tmax = select(ln->tmax, (float8)(LANE_F(c->tmax, k)), m);
     ln->pixel = select(ln->pixel, (uint8)(LANE_U(c->pixel, k)), as_uint8(m));
