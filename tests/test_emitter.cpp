@@ -1644,12 +1644,15 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, five scenes of analytic spheres (a sphere light, also with
-  // a GGX conductor sphere), an
-  // emission texture, three cameras (thin lens and Gaussian filter, tent filter
-  // and crop window, orthographic), whose rays the lanes draw themselves; and a
-  // scene outside the class (media), which must fall back to trace_paths bit
-  // for bit.
+  // other kind, seven scenes of analytic spheres (a sphere light, also with
+  // a GGX conductor sphere, rough glass, and a large sphere tested in double),
+  // an emission texture, three cameras (thin lens and Gaussian filter, tent
+  // filter and crop window, orthographic), whose rays the lanes draw
+  // themselves; and a scene outside the class (media), which must fall back to
+  // trace_paths bit for bit. Scenes of at most kLanesFlatPrims primitives,
+  // none alpha-tested, render twice: with the lanes' default casts, which
+  // test every primitive against eight rays without the BVH, and through the
+  // BVH (RenderOptions.flat_casts 0).
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
