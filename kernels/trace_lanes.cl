@@ -17,8 +17,8 @@
  * colour texture's albedo and frame, any other material (a blend's choice, its
  * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
  * bsdf.cl's own functions, but for diffuse materials, a rough plastic, an
- * isotropic rough conductor, a pplastic, a principled material that transmits
- * nothing, a rough dielectric, a smooth plastic, dielectric or conductor,
+ * isotropic rough conductor, a pplastic, a principled material, a rough
+ * dielectric, a smooth plastic, dielectric or conductor,
  * whose BSDFs the vectors evaluate and sample (LanesBsdfs), with a bump map's
  * side rule), the
  * environment map an escaped ray sees, a light sample on a point, spot or
@@ -1169,22 +1169,20 @@ inline Vec8 pplastic8_eval(const PPlastic8* p, Vec8 o, Vec8 i, float8* pdf) {
 }
 
 /* --- principled in vectors ---------------------------------------------------
- * bsdf.cl's principled (principled_eval, principled_sample) for the lanes
- * whose material transmits nothing (spec_trans 0), from
- * the front: Burley's diffuse with retro-reflection, flatness and sheen, the
- * anisotropic GGX reflection with its tints and metallic part, the clearcoat;
- * the same operations in float8. Materials that transmit stay lane by lane. */
+ * bsdf.cl's principled (principled_eval, principled_sample): Burley's diffuse
+ * with retro-reflection, flatness and sheen, the anisotropic GGX reflection
+ * with its tints and metallic part, the clearcoat, and where spec_trans > 0
+ * the GGX transmission, from either side; the same operations in float8. */
 
 /* Whether the lanes shade material m as a Principled8. */
-inline bool lanes_principled(const Material* m) {
-  return m->type == PSF_MATERIAL_PRINCIPLED && m->specular.y == 0.0f;
-}
+inline bool lanes_principled(const Material* m) { return m->type == PSF_MATERIAL_PRINCIPLED; }
 
 /* The lanes' principled materials (Material's fields as host/scene/mitsuba.cpp
  * fills them). */
 typedef struct {
   float8 au, av, eta, roughness;          /* alpha_u, alpha_v, eta.x, eta.z */
-  float8 metallic, spec_tint, sheen;      /* specular.x, .z, .w */
+  float8 metallic, spec_trans;           /* specular.x, .y */
+  float8 spec_tint, sheen;                /* specular.z, .w */
   float8 sheen_tint, flatness, clearcoat; /* transmittance.x, .y, .z */
   float8 cc_alpha;                        /* principled_clearcoat_alpha */
   float8 p_diffuse, p_clearcoat, p_spec;  /* principled_lobes from the front */
@@ -1197,6 +1195,7 @@ inline void principled8_set(Principled8* p, uint l, const Material* m) {
   LANE_F(p->eta, l) = m->eta.x;
   LANE_F(p->roughness, l) = m->eta.z;
   LANE_F(p->metallic, l) = m->specular.x;
+  LANE_F(p->spec_trans, l) = m->specular.y;
   LANE_F(p->spec_tint, l) = m->specular.z;
   LANE_F(p->sheen, l) = m->specular.w;
   LANE_F(p->sheen_tint, l) = m->transmittance.x;
@@ -1219,15 +1218,14 @@ inline float8 principled_schlick8(float8 cos_i, float8 eta) {
   const float8 ct2 = 1.0f - (1.0f - cos_i * cos_i) / (eta * eta);
   return principled_schlick_weight8(select(sqrt(fmax(ct2, 0.0f)), fabs(cos_i), eta > 1.0f));
 }
-/* principled_fresnel for cos_i >= 0: F, and the refracted cosine and eta_ti. */
+/* principled_fresnel for either side: F (0 where the indices match), the
+ * refracted cosine and eta_ti. */
 inline float8 principled_fresnel8(float8 cos_i, float8 eta, float8* cos_t, float8* eta_ti) {
   const int8 matched = eta == 1.0f;
-  const float8 ci = fabs(cos_i), ct2 = 1.0f - (1.0f - ci * ci) / (eta * eta);
-  const float8 ct = sqrt(fmax(ct2, 0.0f));
-  const float8 rs = (ci - eta * ct) / (ci + eta * ct), rp = (eta * ci - ct) / (eta * ci + ct);
-  *eta_ti = select(1.0f / eta, (float8)(1.0f), matched);
-  *cos_t = select(select(-ct, (float8)(0.0f), ct2 <= 0.0f), -cos_i, matched);
-  return select(select(0.5f * (rs * rs + rp * rp), (float8)(1.0f), ct2 <= 0.0f), (float8)(0.0f), matched);
+  const float8 f = fresnel_dielectric_t8(cos_i, eta, cos_t, eta_ti);
+  *eta_ti = select(*eta_ti, (float8)(1.0f), matched);
+  *cos_t = select(*cos_t, -cos_i, matched);
+  return select(f, (float8)(0.0f), matched);
 }
 inline Vec8 principled_tint8(Vec8 base) {
   const float8 lum = 0.212671f * base.x + 0.715160f * base.y + 0.072169f * base.z;
@@ -1244,47 +1242,73 @@ inline float8 principled_ggx_g1_8(Vec8 v, Vec8 m, float8 a) {
   return select(g, (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
 }
 
-/* principled_eval for local o and i (o from the front: the lanes' own
- * condition; a lane whose o lies behind gets 0): f and *pdf. */
+/* The lobe probabilities of principled_lobes for the side o lies on (front:
+ * the lanes' diffuse, clearcoat and specular; from inside only the specular,
+ * where anything transmits). */
+inline void principled8_lobes(const Principled8* p, int8 front, float8* diffuse, float8* coat, float8* spec) {
+  const float8 inside = select((float8)(0.0f), (float8)(1.0f), (1.0f - p->metallic) * p->spec_trans > 0.0f);
+  *diffuse = select((float8)(0.0f), p->p_diffuse, front);
+  *coat = select((float8)(0.0f), p->p_clearcoat, front);
+  *spec = select(inside, p->p_spec, front);
+}
+
+/* principled_eval for local o and i: f and *pdf. */
 inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) {
   const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
   const float8 co = o.z, ci = i.z;
   const int8 reflect = co * ci > 0.0f, front = co > 0.0f;
-  Vec8 h = vec8_normalize(vec8_add(o, i));
+  const float8 one_m = 1.0f - p->metallic;
+  const float8 brdf = one_m * (1.0f - p->spec_trans), btdf = one_m * p->spec_trans;
+  const float8 eta_p = select(1.0f / p->eta, p->eta, front); /* i's side over o's, for refraction */
+  Vec8 h = vec8_normalize(vec8_add(o, vec8_scale(i, select(eta_p, (float8)(1.0f), reflect))));
   h = vec8_select(h, vec8_neg(h), h.z < 0.0f);
   const float8 oh = vec8_dot(o, h), ih = vec8_dot(i, h);
-  const int8 micro_r = front & reflect & (oh > 0.0f) & (ih > 0.0f);
+  const float8 side = select((float8)(-1.0f), (float8)(1.0f), front);
+  const int8 micro_r = reflect & (oh * side > 0.0f) & (ih * side > 0.0f);
+  const int8 micro_t = ~reflect & (oh * side > 0.0f) & (ih * side < 0.0f);
   float8 cos_t, eta_ti;
   const float8 fd = principled_fresnel8(oh, p->eta, &cos_t, &eta_ti);
   const float8 d = ggx_D8(h, p->au, p->av);
   const float8 g_o = ggx_G1_8(o, h, p->au, p->av), g = g_o * ggx_G1_8(i, h, p->au, p->av);
-  const float8 pm = d * g_o * fabs(oh) / o.z;
-  const float8 w = select((float8)(0.0f), principled_schlick8(oh, p->eta), micro_r);
-  float8 pdf_r = select((float8)(0.0f), p->p_spec * pm / (4.0f * fabs(ih)), micro_r);
+  const float8 pm = d * g_o * fabs(oh) / fabs(co); /* mf_pdf of o turned to the front */
+  float8 l_diffuse, l_coat, l_spec;
+  principled8_lobes(p, front, &l_diffuse, &l_coat, &l_spec);
+  const float8 w = select((float8)(0.0f), principled_schlick8(oh, p->eta), front & micro_r);
+  const float8 prefl = select(fd, 1.0f - btdf * (1.0f - fd), front);
+  float8 pdf_r = select((float8)(0.0f), l_spec * prefl * pm / (4.0f * fabs(ih)), micro_r);
   Vec8 f = zero;
   {
     const float8 r = (p->eta - 1.0f) / (p->eta + 1.0f);
     const Vec8 r0 = vec8_scale(principled_tint8(p->base), r * r);
-    const float8 one_m = 1.0f - p->metallic;
     const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
     const Vec8 metal = vec8_scale(vec8_add(p->base, vec8_scale(vec8_sub(one, p->base), w)), p->metallic);
     const Vec8 tinted = vec8_scale(vec8_add(r0, vec8_scale(vec8_sub(one, r0), w)), one_m * p->spec_tint);
     const float8 plain = one_m * (1.0f - p->spec_tint) * fd;
-    const Vec8 F = vec8_add(vec8_add(vec8((float8)(plain), plain, plain), metal), tinted);
+    const Vec8 F_front = vec8_add(vec8_add(vec8((float8)(plain), plain, plain), metal), tinted);
+    const float8 bf = btdf * fd;
+    const Vec8 F = vec8_select(vec8(bf, bf, bf), F_front, front);
     f = vec8_select(f, vec8_scale(F, d * g / (4.0f * fabs(co * ci))), micro_r & (fd > 0.0f));
   }
-  const int8 coat = micro_r & (p->clearcoat > 0.0f);
+  const int8 trans = micro_t & (btdf > 0.0f);
+  if (any(trans)) { /* main specular transmission, radiance scaled by 1 / eta_p^2 */
+    const float8 denom = oh + eta_p * ih;
+    const float8 ft = btdf * fabs((1.0f - fd) * d * g * oh * ih / (co * ci * denom * denom));
+    const Vec8 tint = vec8(sqrt(p->base.x), sqrt(p->base.y), sqrt(p->base.z));
+    f = vec8_select(f, vec8_add(f, vec8_scale(tint, ft)), trans & (fd < 1.0f));
+    const float8 ptrans = select(1.0f - fd, btdf * (1.0f - fd), front);
+    pdf_r = select(pdf_r, pdf_r + l_spec * ptrans * pm * eta_p * eta_p * fabs(ih) / (denom * denom), trans);
+  }
+  const int8 coat = front & micro_r & (p->clearcoat > 0.0f);
   if (any(coat)) {
     const float8 dcc = principled_gtr1_8(h.z, p->cc_alpha);
     const float8 fcc = 0.04f + 0.96f * w;
     const float8 gcc = principled_ggx_g1_8(o, h, (float8)(0.25f)) * principled_ggx_g1_8(i, h, (float8)(0.25f));
     const float8 c = 0.25f * p->clearcoat * fcc * dcc * gcc;
     f = vec8_select(f, vec8_add(f, vec8(c, c, c)), coat);
-    pdf_r = select(pdf_r, pdf_r + p->p_clearcoat * dcc * h.z / (4.0f * fabs(ih)), coat);
+    pdf_r = select(pdf_r, pdf_r + l_coat * dcc * h.z / (4.0f * fabs(ih)), coat);
   }
-  const float8 brdf = 1.0f - p->metallic; /* (1 - metallic)(1 - spec_trans), spec_trans 0 */
   const int8 diffuse = front & reflect & (brdf > 0.0f);
-  {
+  if (any(diffuse)) {
     const float8 cos_d = vec8_dot(h, i);
     const float8 fo = principled_schlick_weight8(ci), fi = principled_schlick_weight8(co);
     const float8 rr = 2.0f * p->roughness * cos_d * cos_d;
@@ -1307,7 +1331,7 @@ inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) 
           sheen);
     }
     f = vec8_select(f, fd_, diffuse);
-    pdf_r = select(pdf_r, pdf_r + p->p_diffuse * ci * PSF_INV_PI, diffuse);
+    pdf_r = select(pdf_r, pdf_r + l_diffuse * ci * PSF_INV_PI, diffuse);
   }
   const int8 none = (co == 0.0f) | (ci == 0.0f);
   *pdf = select(pdf_r, (float8)(0.0f), none);
@@ -1316,15 +1340,18 @@ inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) 
 
 /* principled_sample's local direction for o in the lanes of `lanes` (the
  * lobe by uc: the cosine direction wl, a clearcoat normal's mirror direction,
- * or the GGX visible normal's reflection or refraction); *fails where it
- * returns bsdf_fail. */
+ * or the GGX visible normal's reflection or refraction, for o turned to the
+ * front); *fails where it returns bsdf_fail. */
 inline Vec8 principled8_sample(const Principled8* p, int8 lanes, Vec8 o, Vec8 wl, float8 u1, float8 u2, float8 uc,
                                int8* fails) {
-  const float8 lxy = p->p_diffuse + p->p_clearcoat;
-  const int8 diffuse = uc < p->p_diffuse, coat = lanes & ~diffuse & (uc < lxy), spec = lanes & ~diffuse & ~coat;
+  const int8 front = o.z > 0.0f;
+  float8 l_diffuse, l_coat, l_spec;
+  principled8_lobes(p, front, &l_diffuse, &l_coat, &l_spec);
+  const float8 lxy = l_diffuse + l_coat;
+  const int8 diffuse = uc < l_diffuse, coat = lanes & ~diffuse & (uc < lxy), spec = lanes & ~diffuse & ~coat;
   Vec8 i = wl;
-  int8 bad = o.z <= 0.0f; /* from behind, principled_lobes gives nothing without transmission */
-  if (any(coat)) {        /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
+  int8 bad = o.z == 0.0f;
+  if (any(coat)) { /* a GTR1 normal: cos^2 = (1 - a^2^(1 - u2)) / (1 - a^2) */
     const float8 a2 = p->cc_alpha * p->cc_alpha;
     const float8 c2 = (1.0f - pow(a2, 1.0f - u2)) / (1.0f - a2);
     const float8 st = sqrt(fmax(0.0f, 1.0f - c2));
@@ -1336,17 +1363,18 @@ inline Vec8 principled8_sample(const Principled8* p, int8 lanes, Vec8 o, Vec8 wl
     bad |= coat & (ic.z <= 0.0f);
   }
   if (any(spec)) {
-    const Vec8 h = ggx_sample8(o, p->au, p->av, u1, u2);
+    const Vec8 h = ggx_sample8(vec8_select(vec8_neg(o), o, front), p->au, p->av, u1, u2);
     const float8 oh = vec8_dot(o, h);
     float8 cos_t, eta_ti;
     const float8 fd = principled_fresnel8(oh, p->eta, &cos_t, &eta_ti);
-    /* prefl = 1 - btdf (1 - fd) with btdf 0 */
-    const int8 reflect = uc < lxy + p->p_spec * (1.0f - 0.0f * (1.0f - fd));
+    const float8 btdf = (1.0f - p->metallic) * p->spec_trans;
+    const float8 prefl = select(fd, 1.0f - btdf * (1.0f - fd), front); /* reflection, else refraction */
+    const int8 reflect = uc < lxy + l_spec * prefl;
     const Vec8 ir = vec8_sub(vec8_scale(h, 2.0f * oh), o);
     const Vec8 it = vec8_sub(vec8_scale(h, oh * eta_ti + cos_t), vec8_scale(o, eta_ti));
     const Vec8 is = vec8_select(it, ir, reflect);
     i = vec8_select(i, is, spec);
-    bad |= spec & (~(p->p_spec > 0.0f) | select(is.z * o.z >= 0.0f, is.z * o.z <= 0.0f, reflect));
+    bad |= spec & (~(l_spec > 0.0f) | select(is.z * o.z >= 0.0f, is.z * o.z <= 0.0f, reflect));
   }
   *fails = bad;
   return i;
@@ -1467,6 +1495,122 @@ inline void lanes_take_sample(int8 take, int8 fails, const Vec8* s, const Vec8* 
   *pdf = select(*pdf, select((float8)(0.0f), pdf_i, ok), take);
   const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
   *weight = vec8_select(*weight, vec8_select(zero, vec8_scale(f, fabs(i.z) / pdf_i), ok), take);
+}
+
+/* bsdf_sample of the lanes of `sample_own` whose material is one of
+ * LanesBsdfs' kinds (lanes_bsdfs_mask), for wo (world) in the frame (fs, ft,
+ * fn), fn_wo = <wo, fn>, wl the cosine-weighted direction (local) of u_b1,
+ * u_b2, and the lobe choice u_lobe: each kind's own sample, then its value and
+ * pdf (bsdf_finish) into *wi, *pdf and *weight, and *delta_lobe where a delta
+ * lobe was chosen; the other lanes keep what they hold. mats: the lanes'
+ * materials (a rough plastic's table lookup). */
+inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 sample_own, const Vec8* fs,
+                               const Vec8* ft, const Vec8* fn, const Vec8* wo, float8 fn_wo, Vec8 wl, float8 u_b1,
+                               float8 u_b2, float8 u_lobe, Vec8* wi, float8* pdf, Vec8* weight, int8* delta_lobe) {
+  /* A rough plastic's sample (bsdf_sample_general): the coat's visible
+   * normal with its probability, else the cosine-weighted direction (wl),
+   * then bsdf_finish's value and pdf. */
+  const int8 sample_plastic = sample_own & b->plastic;
+  if (any(sample_plastic)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    const int8 coat = u_lobe < plastic8_prob_specular(&b->pl);
+    const Vec8 h = mf8_sample(o, b->pl.au, b->pl.av, b->pl.beckmann, sample_plastic & coat, u_b1, u_b2);
+    const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
+    const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
+    float8 t_i = (float8)(0.0f), pdf_p;
+    for (uint l = 0u; l < PSF_LANES; ++l)
+      if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], b->plastic_table[l], LANE_F(i.z, l));
+    const Vec8 f = plastic8_eval(&b->pl, o, i, t_i, &pdf_p);
+    lanes_take_sample(sample_plastic, fails, fs, ft, fn, wo, i, f, pdf_p, wi, pdf, weight);
+  }
+  /* A rough conductor's sample (bsdf_sample_general): the visible normal's
+   * mirror direction, then bsdf_finish's value and pdf. */
+  const int8 sample_conductor = sample_own & b->conductor;
+  if (any(sample_conductor)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    const Vec8 h = mf8_sample(o, b->co.alpha, b->co.alpha, b->co.beckmann, sample_conductor, u_b1, u_b2);
+    const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
+    const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
+    float8 pdf_c;
+    const Vec8 f = conductor8_eval(&b->co, o, i, &pdf_c);
+    lanes_take_sample(sample_conductor, fails, fs, ft, fn, wo, i, f, pdf_c, wi, pdf, weight);
+  }
+  /* A smooth dielectric's or conductor's sample (bsdf_delta, bsdf_fail). */
+  const int8 sample_delta = sample_own & b->delta;
+  if (any(sample_delta)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    Vec8 w;
+    int8 fails;
+    const Vec8 i = delta8_sample(&b->dl, o, u_lobe, &w, &fails);
+    const Vec8 world = vec8_add(vec8_add(vec8_scale(*fs, i.x), vec8_scale(*ft, i.y)), vec8_scale(*fn, i.z));
+    *wi = vec8_select(*wi, vec8_select(world, *wo, fails), sample_delta);
+    *pdf = select(*pdf, (float8)(0.0f), sample_delta);
+    *weight =
+        vec8_select(*weight, vec8_select(w, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), fails), sample_delta);
+    *delta_lobe = select(*delta_lobe, ~fails, sample_delta);
+  }
+  /* A rough dielectric's sample (bsdf_sample_general): the microfacet
+   * normal for o turned to the normals' side, reflected or refracted by
+   * its Fresnel term (microfacet_scatter), then bsdf_finish's. */
+  const int8 sample_rough_dielectric = sample_own & b->rough_dielectric;
+  if (any(sample_rough_dielectric)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    const Vec8 of = vec8_select(vec8_neg(o), o, o.z > 0.0f);
+    const Vec8 h = mf8_sample(of, b->rd.au, b->rd.av, b->rd.beckmann, sample_rough_dielectric, u_b1, u_b2);
+    const float8 oh = vec8_dot(o, h);
+    float8 cos_t, eta_ti;
+    const float8 fr = fresnel_dielectric_t8(oh, b->rd.eta, &cos_t, &eta_ti);
+    const int8 reflect = u_lobe < fr;
+    const Vec8 ir = vec8_sub(vec8_scale(h, 2.0f * oh), o);
+    const Vec8 it = vec8_sub(vec8_scale(h, oh * eta_ti + cos_t), vec8_scale(o, eta_ti));
+    const Vec8 i = vec8_select(it, ir, reflect);
+    const int8 fails = (o.z == 0.0f) | select(i.z * o.z >= 0.0f, i.z * o.z <= 0.0f, reflect);
+    float8 pdf_e;
+    const Vec8 f = rough_dielectric8_eval(&b->rd, o, i, &pdf_e);
+    lanes_take_sample(sample_rough_dielectric, fails, fs, ft, fn, wo, i, f, pdf_e, wi, pdf, weight);
+  }
+  /* A smooth plastic's sample (bsdf_sample_general): the coat's mirror
+   * direction, a delta lobe, else the cosine direction and bsdf_finish's. */
+  const int8 sample_smooth_plastic = sample_own & b->smooth_plastic;
+  if (any(sample_smooth_plastic)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    const int8 fails = o.z <= 0.0f;
+    const float8 fo = fresnel_dielectric8(o.z, b->spl.eta), ps = smooth_plastic8_prob_specular(&b->spl, fo);
+    const int8 coat = sample_smooth_plastic & (u_lobe < ps);
+    float8 pdf_e;
+    const Vec8 f = smooth_plastic8_eval(&b->spl, o, wl, &pdf_e);
+    lanes_take_sample(sample_smooth_plastic & ~coat, fails, fs, ft, fn, wo, wl, f, pdf_e, wi, pdf, weight);
+    const Vec8 mirror = vec8_add(vec8_add(vec8_scale(*fs, -o.x), vec8_scale(*ft, -o.y)), vec8_scale(*fn, o.z));
+    const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+    *wi = vec8_select(*wi, vec8_select(mirror, *wo, fails), coat);
+    *pdf = select(*pdf, (float8)(0.0f), coat);
+    *weight = vec8_select(*weight, vec8_select(vec8_scale(b->spl.spec, fo / ps), zero, fails), coat);
+    *delta_lobe = select(*delta_lobe, ~fails, coat);
+  }
+  /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
+   * mirror direction with probability albedo.w, else the cosine direction. */
+  const int8 sample_pplastic = sample_own & b->pplastic;
+  if (any(sample_pplastic)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    const int8 spec = u_lobe < b->pp.ps;
+    const Vec8 h = mf8_sample(o, b->pp.au, b->pp.av, b->pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
+    const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), spec);
+    const int8 fails = (o.z <= 0.0f) | (spec & (i.z <= 0.0f));
+    float8 pdf_e;
+    const Vec8 f = pplastic8_eval(&b->pp, o, i, &pdf_e);
+    lanes_take_sample(sample_pplastic, fails, fs, ft, fn, wo, i, f, pdf_e, wi, pdf, weight);
+  }
+  /* A principled material's sample (principled_sample), then bsdf_finish's. */
+  const int8 sample_principled = sample_own & b->principled;
+  if (any(sample_principled)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    int8 fails;
+    const Vec8 i = principled8_sample(&b->pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
+    fails |= o.z == 0.0f;
+    float8 pdf_e;
+    const Vec8 f = principled8_eval(&b->pr8, o, i, &pdf_e);
+    lanes_take_sample(sample_principled, fails, fs, ft, fn, wo, i, f, pdf_e, wi, pdf, weight);
+  }
 }
 
 __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobol,
@@ -2038,110 +2182,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       vec8_set(&weight, l, sm.weight);
       LANE_I(delta_lobe, l) = (sm.flags & BSDF_DELTA) ? -1 : 0;
     }
-    /* A rough plastic's sample (bsdf_sample_general): the coat's visible
-     * normal with its probability, else the cosine-weighted direction (wl),
-     * then bsdf_finish's value and pdf. */
-    const int8 sample_plastic = sample_own & bs.plastic;
-    if (any(sample_plastic)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const int8 coat = u_lobe < plastic8_prob_specular(&bs.pl);
-      const Vec8 h = mf8_sample(o, bs.pl.au, bs.pl.av, bs.pl.beckmann, sample_plastic & coat, u_b1, u_b2);
-      const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
-      const int8 fails = (o.z <= 0.0f) | (coat & (i.z <= 0.0f));
-      float8 t_i = (float8)(0.0f), pdf_p;
-      for (uint l = 0u; l < PSF_LANES; ++l)
-        if (LANE_I(sample_plastic, l)) LANE_F(t_i, l) = rough_transmittance(mats[l], bs.plastic_table[l], LANE_F(i.z, l));
-      const Vec8 f = plastic8_eval(&bs.pl, o, i, t_i, &pdf_p);
-      lanes_take_sample(sample_plastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_p, &wi, &pdf, &weight);
-    }
-    /* A rough conductor's sample (bsdf_sample_general): the visible normal's
-     * mirror direction, then bsdf_finish's value and pdf. */
-    const int8 sample_conductor = sample_own & bs.conductor;
-    if (any(sample_conductor)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const Vec8 h = mf8_sample(o, bs.co.alpha, bs.co.alpha, bs.co.beckmann, sample_conductor, u_b1, u_b2);
-      const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
-      const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
-      float8 pdf_c;
-      const Vec8 f = conductor8_eval(&bs.co, o, i, &pdf_c);
-      lanes_take_sample(sample_conductor, fails, &fs, &ft, &fn, &wo, i, f, pdf_c, &wi, &pdf, &weight);
-    }
-    /* A smooth dielectric's or conductor's sample (bsdf_delta, bsdf_fail). */
-    const int8 sample_delta = sample_own & bs.delta;
-    if (any(sample_delta)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      Vec8 w;
-      int8 fails;
-      const Vec8 i = delta8_sample(&bs.dl, o, u_lobe, &w, &fails);
-      const Vec8 world = vec8_add(vec8_add(vec8_scale(fs, i.x), vec8_scale(ft, i.y)), vec8_scale(fn, i.z));
-      wi = vec8_select(wi, vec8_select(world, wo, fails), sample_delta);
-      pdf = select(pdf, (float8)(0.0f), sample_delta);
-      weight = vec8_select(weight, vec8_select(w, vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f)), fails),
-                           sample_delta);
-      delta_lobe = select(delta_lobe, ~fails, sample_delta);
-    }
-    /* A rough dielectric's sample (bsdf_sample_general): the microfacet
-     * normal for o turned to the normals' side, reflected or refracted by
-     * its Fresnel term (microfacet_scatter), then bsdf_finish's. */
-    const int8 sample_rough_dielectric = sample_own & bs.rough_dielectric;
-    if (any(sample_rough_dielectric)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const Vec8 of = vec8_select(vec8_neg(o), o, o.z > 0.0f);
-      const Vec8 h = mf8_sample(of, bs.rd.au, bs.rd.av, bs.rd.beckmann, sample_rough_dielectric, u_b1, u_b2);
-      const float8 oh = vec8_dot(o, h);
-      float8 cos_t, eta_ti;
-      const float8 fr = fresnel_dielectric_t8(oh, bs.rd.eta, &cos_t, &eta_ti);
-      const int8 reflect = u_lobe < fr;
-      const Vec8 ir = vec8_sub(vec8_scale(h, 2.0f * oh), o);
-      const Vec8 it = vec8_sub(vec8_scale(h, oh * eta_ti + cos_t), vec8_scale(o, eta_ti));
-      const Vec8 i = vec8_select(it, ir, reflect);
-      const int8 fails = (o.z == 0.0f) | select(i.z * o.z >= 0.0f, i.z * o.z <= 0.0f, reflect);
-      float8 pdf_e;
-      const Vec8 f = rough_dielectric8_eval(&bs.rd, o, i, &pdf_e);
-      lanes_take_sample(sample_rough_dielectric, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
-    }
-    /* A smooth plastic's sample (bsdf_sample_general): the coat's mirror
-     * direction, a delta lobe, else the cosine direction and bsdf_finish's. */
-    const int8 sample_smooth_plastic = sample_own & bs.smooth_plastic;
-    if (any(sample_smooth_plastic)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const int8 fails = o.z <= 0.0f;
-      const float8 fo = fresnel_dielectric8(o.z, bs.spl.eta), ps = smooth_plastic8_prob_specular(&bs.spl, fo);
-      const int8 coat = sample_smooth_plastic & (u_lobe < ps);
-      float8 pdf_e;
-      const Vec8 f = smooth_plastic8_eval(&bs.spl, o, wl, &pdf_e);
-      lanes_take_sample(sample_smooth_plastic & ~coat, fails, &fs, &ft, &fn, &wo, wl, f, pdf_e, &wi, &pdf, &weight);
-      const Vec8 mirror = vec8_add(vec8_add(vec8_scale(fs, -o.x), vec8_scale(ft, -o.y)), vec8_scale(fn, o.z));
-      const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
-      wi = vec8_select(wi, vec8_select(mirror, wo, fails), coat);
-      pdf = select(pdf, (float8)(0.0f), coat);
-      weight = vec8_select(weight, vec8_select(vec8_scale(bs.spl.spec, fo / ps), zero, fails), coat);
-      delta_lobe = select(delta_lobe, ~fails, coat);
-    }
-    /* A pplastic's sample (bsdf_sample_general): the microfacet normal's
-     * mirror direction with probability albedo.w, else the cosine direction. */
-    const int8 sample_pplastic = sample_own & bs.pplastic;
-    if (any(sample_pplastic)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      const int8 spec = u_lobe < bs.pp.ps;
-      const Vec8 h = mf8_sample(o, bs.pp.au, bs.pp.av, bs.pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
-      const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), spec);
-      const int8 fails = (o.z <= 0.0f) | (spec & (i.z <= 0.0f));
-      float8 pdf_e;
-      const Vec8 f = pplastic8_eval(&bs.pp, o, i, &pdf_e);
-      lanes_take_sample(sample_pplastic, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
-    }
-    /* A principled material's sample (principled_sample), then bsdf_finish's. */
-    const int8 sample_principled = sample_own & bs.principled;
-    if (any(sample_principled)) {
-      const Vec8 o = vec8(vec8_dot(wo, fs), vec8_dot(wo, ft), fn_wo);
-      int8 fails;
-      const Vec8 i = principled8_sample(&bs.pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
-      fails |= o.z == 0.0f;
-      float8 pdf_e;
-      const Vec8 f = principled8_eval(&bs.pr8, o, i, &pdf_e);
-      lanes_take_sample(sample_principled, fails, &fs, &ft, &fn, &wo, i, f, pdf_e, &wi, &pdf, &weight);
-    }
+    lanes_bsdfs_sample(&bs, mats, sample_own, &fs, &ft, &fn, &wo, fn_wo, wl, u_b1, u_b2, u_lobe, &wi, &pdf, &weight,
+                       &delta_lobe);
     /* A sampled direction whose sides a bump map turned carries nothing
      * (lane_bsdf_sample's surface_side_agrees). */
     const int8 side_off = sample_own & sample_vector & bump & ~(vec8_dot(wi, unp) * vec8_dot(wi, fn) > 0.0f);
@@ -2278,5 +2320,51 @@ __kernel void lanes_test_casts(__global const BvhTriPack* packs, uint pack_count
       h.prim = PSF_NO_HIT - 1u;
     }
     any[k0 + l] = h;
+  }
+}
+
+/* Tests (tests/test_bsdf.cpp): lanes_bsdfs_sample for queries k of
+ * bsdf_test_sample's arguments (material mat[k], local wo[k], (u1, u2, uc) =
+ * u[k].xyz), eight a work-item, in the local frame: wi (xyz) and pdf (w),
+ * weight (xyz) and 1 where a delta lobe was chosen, else 0 (w); w = -1 where
+ * the lane's material is none of the kinds the vectors sample (the diffuse
+ * kind's lanes take the kernel's own cosine sample). */
+__kernel void lanes_test_sample(__global const Material* materials, __global const TextureInfo* textures,
+                                __global const half* texels, __global const uint* mat, __global const float4* wo,
+                                __global const float4* u, __global float4* wi_pdf, __global float4* weight_flags,
+                                uint count) {
+  const uint k0 = get_global_id(0) * PSF_LANES;
+  if (k0 >= count) return;
+  Material mats[PSF_LANES];
+  LanesBsdfs b = {0};
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  Vec8 o = zero;
+  float8 u1 = (float8)(0.0f), u2 = (float8)(0.0f), uc = (float8)(0.0f);
+  int8 valid = (int8)(0);
+  for (uint l = 0u; l < PSF_LANES; ++l) {
+    if (k0 + l >= count) continue;
+    mats[l] = materials[mat[k0 + l]];
+    LANE_I(valid, l) = -1;
+    vec8_set(&o, l, wo[k0 + l].xyz);
+    const float4 r = u[k0 + l];
+    LANE_F(u1, l) = r.x;
+    LANE_F(u2, l) = r.y;
+    LANE_F(uc, l) = r.z;
+    lanes_bsdfs_set(&b, l, &mats[l], textures, texels, LANE_F(o.z, l));
+  }
+  const Vec8 fs = vec8((float8)(1.0f), (float8)(0.0f), (float8)(0.0f));
+  const Vec8 ft = vec8((float8)(0.0f), (float8)(1.0f), (float8)(0.0f));
+  const Vec8 fn = vec8((float8)(0.0f), (float8)(0.0f), (float8)(1.0f));
+  const int8 sampled = valid & lanes_bsdfs_mask(&b) & ~b.diffuse;
+  Vec8 wi = o, weight = zero;
+  float8 pdf = (float8)(0.0f);
+  int8 delta = (int8)(0);
+  lanes_bsdfs_sample(&b, mats, sampled, &fs, &ft, &fn, &o, o.z, cosine_hemisphere8(u1, u2), u1, u2, uc, &wi, &pdf,
+                     &weight, &delta);
+  for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l) {
+    const bool s = LANE_I(sampled, l) != 0;
+    wi_pdf[k0 + l] = s ? (float4)(VEC8_GET(wi, l), LANE_F(pdf, l)) : (float4)(0.0f);
+    weight_flags[k0 + l] = s ? (float4)(VEC8_GET(weight, l), LANE_I(delta, l) ? 1.0f : 0.0f)
+                             : (float4)(0.0f, 0.0f, 0.0f, -1.0f);
   }
 }
