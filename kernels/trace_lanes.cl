@@ -991,14 +991,15 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
  * nothing). */
 
 inline bool lanes_delta(const Material* m) {
-  return m->type == PSF_MATERIAL_DIELECTRIC || m->type == PSF_MATERIAL_CONDUCTOR;
+  return m->type == PSF_MATERIAL_DIELECTRIC || m->type == PSF_MATERIAL_CONDUCTOR ||
+         m->type == PSF_MATERIAL_THIN_DIELECTRIC;
 }
 
-/* The lanes' smooth dielectrics and conductors: Material's specular,
- * transmittance, eta and k, and which are conductors. */
+/* The lanes' smooth dielectrics, conductors and thin dielectrics: Material's
+ * specular, transmittance, eta and k, and which are conductors and which thin. */
 typedef struct {
   Vec8 spec, trans, eta, k;
-  int8 conductor;
+  int8 conductor, thin;
 } Delta8;
 
 inline void delta8_set(Delta8* d, uint l, const Material* m) {
@@ -1007,6 +1008,7 @@ inline void delta8_set(Delta8* d, uint l, const Material* m) {
   vec8_set(&d->eta, l, m->eta.xyz);
   vec8_set(&d->k, l, m->k.xyz);
   LANE_I(d->conductor, l) = m->type == PSF_MATERIAL_CONDUCTOR ? -1 : 0;
+  LANE_I(d->thin, l) = m->type == PSF_MATERIAL_THIN_DIELECTRIC ? -1 : 0;
 }
 
 /* fresnel_dielectric for either side: F, the refracted cosine and eta_ti. */
@@ -1027,13 +1029,17 @@ inline float8 fresnel_dielectric_t8(float8 cos_i, float8 eta, float8* cos_t, flo
 inline Vec8 delta8_sample(const Delta8* d, Vec8 o, float8 uc, Vec8* weight, int8* fails) {
   float8 cos_t, eta_ti;
   const float8 fr = fresnel_dielectric_t8(o.z, d->eta.x, &cos_t, &eta_ti);
-  const int8 reflect = d->conductor | (uc < fr);
+  /* A thin sheet: the reflectance of its two interfaces and their
+   * interreflections, and transmission straight through. */
+  float8 r = fresnel_dielectric8(fabs(o.z), d->eta.x);
+  r = select(r, r + (1.0f - r) * (1.0f - r) * r / (1.0f - r * r), r < 1.0f);
+  const int8 reflect = d->conductor | select(uc < fr, uc < r, d->thin);
   const Vec8 mirror = vec8(-o.x, -o.y, o.z);
-  const Vec8 refracted = vec8(-eta_ti * o.x, -eta_ti * o.y, cos_t);
+  const Vec8 refracted = vec8_select(vec8(-eta_ti * o.x, -eta_ti * o.y, cos_t), vec8_neg(o), d->thin);
   const Vec8 fc = vec8(fresnel_conductor8(o.z, d->eta.x, d->k.x), fresnel_conductor8(o.z, d->eta.y, d->k.y),
                        fresnel_conductor8(o.z, d->eta.z, d->k.z));
-  *weight = vec8_select(vec8_select(vec8_scale(d->trans, eta_ti * eta_ti), d->spec, reflect), vec8_mul(d->spec, fc),
-                        d->conductor);
+  const Vec8 trans = vec8_select(vec8_scale(d->trans, eta_ti * eta_ti), d->trans, d->thin);
+  *weight = vec8_select(vec8_select(trans, d->spec, reflect), vec8_mul(d->spec, fc), d->conductor);
   *fails = d->conductor & (o.z <= 0.0f);
   return vec8_select(refracted, mirror, reflect);
 }
@@ -1242,6 +1248,27 @@ inline float8 principled_ggx_g1_8(Vec8 v, Vec8 m, float8 a) {
   return select(g, (float8)(0.0f), vec8_dot(v, m) * v.z <= 0.0f);
 }
 
+/* principled_diffuse for the lanes of `lanes`, with their roughness and
+ * flatness. */
+inline float8 principled_diffuse8(float8 roughness, float8 flatness, int8 lanes, float8 co, float8 ci, float8 cos_d) {
+  const float8 fo = principled_schlick_weight8(ci), fi = principled_schlick_weight8(co);
+  const float8 rr = 2.0f * roughness * cos_d * cos_d;
+  float8 dif = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
+  const int8 flat = flatness > 0.0f;
+  if (any(flat & lanes)) {
+    const float8 fss = mix((float8)(1.0f), 0.5f * rr, fo) * mix((float8)(1.0f), 0.5f * rr, fi);
+    const float8 ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
+    dif = select(dif, mix(dif, ss, flatness), flat);
+  }
+  return dif;
+}
+/* The sheen's colour: white mixed towards principled_tint by sheen_tint. */
+inline Vec8 principled_sheen_tint8(Vec8 base, float8 sheen_tint) {
+  const Vec8 t = principled_tint8(base);
+  return vec8(mix((float8)(1.0f), t.x, sheen_tint), mix((float8)(1.0f), t.y, sheen_tint),
+              mix((float8)(1.0f), t.z, sheen_tint));
+}
+
 /* The lobe probabilities of principled_lobes for the side o lies on (front:
  * the lanes' diffuse, clearcoat and specular; from inside only the specular,
  * where anything transmits). */
@@ -1310,25 +1337,14 @@ inline Vec8 principled8_eval(const Principled8* p, Vec8 o, Vec8 i, float8* pdf) 
   const int8 diffuse = front & reflect & (brdf > 0.0f);
   if (any(diffuse)) {
     const float8 cos_d = vec8_dot(h, i);
-    const float8 fo = principled_schlick_weight8(ci), fi = principled_schlick_weight8(co);
-    const float8 rr = 2.0f * p->roughness * cos_d * cos_d;
-    float8 dif = (1.0f - 0.5f * fi) * (1.0f - 0.5f * fo) + rr * (fo + fi + fo * fi * (rr - 1.0f));
-    const int8 flat = p->flatness > 0.0f;
-    if (any(flat & diffuse)) {
-      const float8 fss = mix((float8)(1.0f), 0.5f * rr, fo) * mix((float8)(1.0f), 0.5f * rr, fi);
-      const float8 ss = 1.25f * (fss * (1.0f / (co + ci) - 0.5f) + 0.5f);
-      dif = select(dif, mix(dif, ss, p->flatness), flat);
-    }
+    const float8 dif = principled_diffuse8(p->roughness, p->flatness, diffuse, co, ci, cos_d);
     Vec8 fd_ = vec8_add(f, vec8_scale(p->base, brdf * PSF_INV_PI * dif));
     const int8 sheen = diffuse & (p->sheen > 0.0f);
     if (any(sheen)) {
-      const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
-      const Vec8 t = principled_tint8(p->base);
-      const Vec8 tint =
-          vec8(mix(one.x, t.x, p->sheen_tint), mix(one.y, t.y, p->sheen_tint), mix(one.z, t.z, p->sheen_tint));
-      fd_ = vec8_select(
-          fd_, vec8_add(fd_, vec8_scale(tint, p->sheen * (1.0f - p->metallic) * principled_schlick_weight8(cos_d))),
-          sheen);
+      fd_ = vec8_select(fd_,
+                        vec8_add(fd_, vec8_scale(principled_sheen_tint8(p->base, p->sheen_tint),
+                                                 p->sheen * (1.0f - p->metallic) * principled_schlick_weight8(cos_d))),
+                        sheen);
     }
     f = vec8_select(f, fd_, diffuse);
     pdf_r = select(pdf_r, pdf_r + l_diffuse * ci * PSF_INV_PI, diffuse);
@@ -1380,13 +1396,131 @@ inline Vec8 principled8_sample(const Principled8* p, int8 lanes, Vec8 o, Vec8 wl
   return i;
 }
 
+/* --- principledthin in vectors -----------------------------------------------
+ * bsdf.cl's principledthin (thin_eval, thin_sample): the sheet seen from the
+ * front (o and i turned together), GGX reflection with its tint, GGX
+ * transmission as reflection carried through the sheet, Burley's diffuse with
+ * flatness and sheen, and the diffuse transmission. */
+
+inline bool lanes_thin(const Material* m) { return m->type == PSF_MATERIAL_PRINCIPLED_THIN; }
+
+/* The lanes' principledthin materials (psf_shared.h's layout). */
+typedef struct {
+  float8 au, av, atu, atv, eta, roughness;  /* alpha_u, alpha_v, transmittance.z, .w, eta.x, eta.z */
+  float8 diff_trans, spec_trans, spec_tint; /* specular.x, .y, .z */
+  float8 sheen, sheen_tint, flatness;       /* specular.w, transmittance.x, .y */
+  float8 l_sr, l_st, l_dr, l_dt;            /* thin_lobes */
+  Vec8 base;                                /* albedo */
+} Thin8;
+
+inline void thin8_set(Thin8* p, uint l, const Material* m) {
+  LANE_F(p->au, l) = m->alpha_u;
+  LANE_F(p->av, l) = m->alpha_v;
+  LANE_F(p->atu, l) = m->transmittance.z;
+  LANE_F(p->atv, l) = m->transmittance.w;
+  LANE_F(p->eta, l) = m->eta.x;
+  LANE_F(p->roughness, l) = m->eta.z;
+  LANE_F(p->diff_trans, l) = m->specular.x;
+  LANE_F(p->spec_trans, l) = m->specular.y;
+  LANE_F(p->spec_tint, l) = m->specular.z;
+  LANE_F(p->sheen, l) = m->specular.w;
+  LANE_F(p->sheen_tint, l) = m->transmittance.x;
+  LANE_F(p->flatness, l) = m->transmittance.y;
+  const float4 lobes = thin_lobes(*m);
+  LANE_F(p->l_sr, l) = lobes.x;
+  LANE_F(p->l_st, l) = lobes.y;
+  LANE_F(p->l_dr, l) = lobes.z;
+  LANE_F(p->l_dt, l) = lobes.w;
+  vec8_set(&p->base, l, m->albedo.xyz);
+}
+
+/* thin_eval for local o and i: f and *pdf. */
+inline Vec8 thin8_eval(const Thin8* p, Vec8 o, Vec8 i, float8* pdf) {
+  const Vec8 zero = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
+  const int8 none = (o.z == 0.0f) | (i.z == 0.0f), back = o.z < 0.0f;
+  o = vec8_select(o, vec8_neg(o), back);
+  i = vec8_select(i, vec8_neg(i), back);
+  const float8 co = o.z, ci = fabs(i.z);
+  const int8 reflect = i.z > 0.0f;
+  const Vec8 ir = vec8(i.x, i.y, ci);
+  const Vec8 h = vec8_normalize(vec8_add(o, ir));
+  const float8 oh = vec8_dot(o, h), ih = vec8_dot(i, h);
+  const int8 micro = (oh > 0.0f) & select(ih < 0.0f, ih > 0.0f, reflect);
+  Vec8 f = zero;
+  float8 pdf_ = (float8)(0.0f);
+  const int8 spec = (p->spec_trans > 0.0f) & micro;
+  if (any(spec)) {
+    float8 cos_t, eta_ti;
+    const float8 fd = principled_fresnel8(oh, p->eta, &cos_t, &eta_ti);
+    const float8 jacobian = 1.0f / (4.0f * fabs(vec8_dot(ir, h))); /* dh / di */
+    const float8 au = select(p->atu, p->au, reflect), av = select(p->atv, p->av, reflect);
+    const float8 d = ggx_D8(h, au, av);
+    const float8 g_o = ggx_G1_8(o, h, au, av), g = g_o * ggx_G1_8(i, h, au, av);
+    const float8 pm = d * g_o * fabs(oh) / o.z;
+    Vec8 F = vec8(fd, fd, fd);
+    const int8 tint = reflect & (p->spec_tint > 0.0f);
+    if (any(tint)) {
+      const float8 r = (p->eta - 1.0f) / (p->eta + 1.0f), w = principled_schlick8(oh, p->eta);
+      const Vec8 r0 = vec8_scale(principled_tint8(p->base), r * r);
+      const Vec8 one = vec8((float8)(1.0f), (float8)(1.0f), (float8)(1.0f));
+      const Vec8 ft = vec8_add(r0, vec8_scale(vec8_sub(one, r0), w));
+      F = vec8_select(F, vec8(mix(F.x, ft.x, p->spec_tint), mix(F.y, ft.y, p->spec_tint), mix(F.z, ft.z, p->spec_tint)),
+                      tint);
+    }
+    const float8 s = p->spec_trans * d * g / (4.0f * co * ci);
+    f = vec8_select(f, vec8_select(vec8_scale(p->base, s * (1.0f - fd)), vec8_scale(F, s), reflect), spec);
+    pdf_ = select(pdf_, select(p->l_st, p->l_sr, reflect) * pm * jacobian, spec);
+  }
+  const int8 diffuse = reflect & (p->spec_trans < 1.0f) & (p->diff_trans < 1.0f);
+  if (any(diffuse)) {
+    const float8 cos_d = vec8_dot(h, i);
+    const float8 dif = principled_diffuse8(p->roughness, p->flatness, diffuse, co, ci, cos_d);
+    const float8 w = (1.0f - p->spec_trans) * (1.0f - p->diff_trans);
+    Vec8 fd_ = vec8_add(f, vec8_scale(p->base, w * PSF_INV_PI * dif));
+    const int8 sheen = diffuse & (p->sheen > 0.0f);
+    if (any(sheen))
+      fd_ = vec8_select(fd_,
+                        vec8_add(fd_, vec8_scale(principled_sheen_tint8(p->base, p->sheen_tint),
+                                                 p->sheen * w * principled_schlick_weight8(fabs(cos_d)))),
+                        sheen);
+    f = vec8_select(f, fd_, diffuse);
+  }
+  const int8 diffuse_t = ~reflect & (p->spec_trans < 1.0f) & (p->diff_trans > 0.0f);
+  f = vec8_select(f, vec8_add(f, vec8_scale(p->base, (1.0f - p->spec_trans) * p->diff_trans * PSF_INV_PI)), diffuse_t);
+  pdf_ += select(p->l_dt, p->l_dr, reflect) * ci * PSF_INV_PI;
+  *pdf = select(pdf_, (float8)(0.0f), none);
+  return vec8_select(f, zero, none);
+}
+
+/* thin_sample's local direction for o (the lobe by uc: a GGX visible normal's
+ * mirror direction, carried through the sheet for transmission, or the
+ * cosine direction wl, through the sheet for the diffuse transmission), for
+ * o turned to the front and turned back with it; *fails where it returns
+ * bsdf_fail. */
+inline Vec8 thin8_sample(const Thin8* p, Vec8 o, Vec8 wl, float8 u1, float8 u2, float8 uc, int8* fails) {
+  const float8 side = select((float8)(-1.0f), (float8)(1.0f), o.z > 0.0f);
+  const Vec8 of = vec8_scale(o, side);
+  const float8 lxy = p->l_sr + p->l_st;
+  const int8 spec = uc < lxy, reflect = uc < p->l_sr;
+  const Vec8 h = ggx_sample8(of, select(p->atu, p->au, reflect), select(p->atv, p->av, reflect), u1, u2);
+  const float8 oh = vec8_dot(of, h);
+  Vec8 is = vec8_sub(vec8_scale(h, 2.0f * oh), of);
+  is.z = select(-is.z, is.z, reflect);
+  const float8 ih = vec8_dot(is, h);
+  *fails = (o.z == 0.0f) |
+           (spec & ((oh <= 0.0f) | select((is.z >= 0.0f) | (ih >= 0.0f), (is.z <= 0.0f) | (ih <= 0.0f), reflect)));
+  Vec8 id = wl;
+  id.z = select(wl.z, -wl.z, uc >= lxy + p->l_dr);
+  return vec8_scale(vec8_select(id, is, spec), side);
+}
+
 /* --- the lanes' vector BSDFs together -------------------------------------------- */
 
 /* Which kind of vector BSDF each lane's material is (none: bsdf.cl's scalar
  * functions, lane by lane), and each kind's parameters. Zero where no lane
  * fills them: their functions branch on any() of lanes they leave unused. */
 typedef struct {
-  int8 diffuse, plastic, conductor, principled, pplastic, delta, smooth_plastic, rough_dielectric;
+  int8 diffuse, plastic, conductor, principled, pplastic, delta, smooth_plastic, rough_dielectric, thin;
   Plastic8 pl;
   Conductor8 co;
   Principled8 pr8;
@@ -1394,12 +1528,13 @@ typedef struct {
   Delta8 dl;
   SmoothPlastic8 spl;
   RoughDielectric8 rd;
+  Thin8 th;
   __global const half* plastic_table[PSF_LANES]; /* a rough plastic's coat transmittance */
 } LanesBsdfs;
 
 inline int8 lanes_bsdfs_mask(const LanesBsdfs* b) {
   return b->diffuse | b->plastic | b->conductor | b->principled | b->pplastic | b->delta | b->smooth_plastic |
-         b->rough_dielectric;
+         b->rough_dielectric | b->thin;
 }
 
 /* Lane l's kind and parameters for its material m (as lane_surface left it);
@@ -1424,6 +1559,9 @@ inline void lanes_bsdfs_set(LanesBsdfs* b, uint l, const Material* m, __global c
   } else if (lanes_principled(m)) {
     LANE_I(b->principled, l) = -1;
     principled8_set(&b->pr8, l, m);
+  } else if (lanes_thin(m)) {
+    LANE_I(b->thin, l) = -1;
+    thin8_set(&b->th, l, m);
   } else if (lanes_conductor(m)) {
     LANE_I(b->conductor, l) = -1;
     conductor8_set(&b->co, l, m);
@@ -1453,6 +1591,11 @@ inline void lanes_bsdfs_eval(const LanesBsdfs* b, const Material* mats, Vec8 o, 
   const int8 e_pplastic = evaluate & b->pplastic, e_rough_dielectric = evaluate & b->rough_dielectric;
   const int8 e_smooth_plastic = evaluate & b->smooth_plastic, e_principled = evaluate & b->principled;
   const int8 e_conductor = evaluate & b->conductor, e_plastic = evaluate & b->plastic, e_delta = evaluate & b->delta;
+  const int8 e_thin = evaluate & b->thin;
+  if (any(e_thin)) {
+    *f = vec8_select(*f, thin8_eval(&b->th, o, i, &pdf_v), e_thin);
+    *pdf = select(*pdf, pdf_v, e_thin);
+  }
   if (any(e_pplastic)) {
     *f = vec8_select(*f, pplastic8_eval(&b->pp, o, i, &pdf_v), e_pplastic);
     *pdf = select(*pdf, pdf_v, e_pplastic);
@@ -1599,6 +1742,16 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
     float8 pdf_e;
     const Vec8 f = pplastic8_eval(&b->pp, o, i, &pdf_e);
     lanes_take_sample(sample_pplastic, fails, fs, ft, fn, wo, i, f, pdf_e, wi, pdf, weight);
+  }
+  /* A principledthin's sample (thin_sample), then bsdf_finish's. */
+  const int8 sample_thin = sample_own & b->thin;
+  if (any(sample_thin)) {
+    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
+    int8 fails;
+    const Vec8 i = thin8_sample(&b->th, o, wl, u_b1, u_b2, u_lobe, &fails);
+    float8 pdf_e;
+    const Vec8 f = thin8_eval(&b->th, o, i, &pdf_e);
+    lanes_take_sample(sample_thin, fails, fs, ft, fn, wo, i, f, pdf_e, wi, pdf, weight);
   }
   /* A principled material's sample (principled_sample), then bsdf_finish's. */
   const int8 sample_principled = sample_own & b->principled;

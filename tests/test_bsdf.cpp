@@ -791,8 +791,9 @@ std::vector<Params> test_materials() {
   add(p);
   p = {};
   p.type = PSF_MATERIAL_PRINCIPLED_THIN;
-  p.label = "principledthin spec_trans 0.5, diff_trans 1.2, roughness 0.3, rates 1/0.5/2/1";
+  p.label = "principledthin spec_trans 0.5, diff_trans 1.2, sheen 0.7, roughness 0.3, rates 1/0.5/2/1";
   p.albedo = {0.5, 0.5, 0.8};
+  p.sheen = 0.7;
   p.eta = dvec3(1.5);
   p.roughness = 0.3;
   p.spec_trans = 0.5;
@@ -975,7 +976,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
   // within each group of eight lanes: f and pdf within 1e-4 (relative, 1e-6
   // absolute: rounding of a different operation order). Every material of the
   // set is one the lanes shade in vectors but for the anisotropic rough
-  // conductors, principledthin and the thin dielectric, which must report so.
+  // conductors, which must report so.
   Rig rig;
   std::vector<Params> ps = test_materials();
   for (const Params& p : ps) rig.add(p);
@@ -1002,8 +1003,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
   }
   for (size_t m = 0; m < ps.size(); ++m) {
     INFO(ps[m].label);
-    const bool scalar_only = (ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av) ||
-                             ps[m].type == PSF_MATERIAL_PRINCIPLED_THIN || ps[m].type == PSF_MATERIAL_THIN_DIELECTRIC;
+    const bool scalar_only = ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av;
     CHECK(vector[m] == (scalar_only ? 0 : 2000));
     CHECK(bad[m] == 0);
     if (!scalar_only) CHECK(nonzero[m] > 300);  // the comparison is not vacuous
@@ -1013,13 +1013,34 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
 TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   // trace_lanes.cl's lanes_bsdfs_sample against bsdf_sample on the same queries
   // (material, wo, u1, u2, uc), the materials mixed within each group of eight
-  // lanes: the same direction (within 1e-4), pdf and weight within 1e-4
-  // (relative, 1e-6 absolute), the same delta flag, a failed sample where
-  // bsdf_sample fails. Every material of the set is sampled in vectors but for
-  // the anisotropic rough conductors, principledthin and the thin dielectric,
-  // and the diffuse ones, whose lanes take the kernel's own cosine sample.
+  // lanes: the same direction (within 1e-4), pdf within 1e-4 (relative, 1e-6
+  // absolute) and weight within 2e-4 (f |cos| / pdf: the rounding of f and of
+  // the pdf, each within 1e-4 in the evaluation test), the same delta flag, a
+  // failed sample where
+  // bsdf_sample fails. The BSDF tests' materials and the delta ones (a
+  // dielectric, a thin dielectric, a gold conductor), each sampled in vectors
+  // but for the anisotropic rough conductors, and the diffuse ones, whose
+  // lanes take the kernel's own cosine sample.
   Rig rig;
   std::vector<Params> ps = test_materials();
+  {
+    Params p;
+    p.label = "dielectric 1.5, transmittance 0.9";
+    p.type = PSF_MATERIAL_DIELECTRIC;
+    p.transmittance = dvec3(0.9);
+    ps.push_back(p);
+    p.label = "thindielectric 1.33, specular 0.8";
+    p.type = PSF_MATERIAL_THIN_DIELECTRIC;
+    p.eta = dvec3(1.33);
+    p.specular = dvec3(0.8);
+    ps.push_back(p);
+    p = {};
+    p.label = "conductor Au";
+    p.type = PSF_MATERIAL_CONDUCTOR;
+    p.eta = dvec3(0.143, 0.374, 1.442);
+    p.k = dvec3(3.983, 2.385, 1.603);
+    ps.push_back(p);
+  }
   for (const Params& p : ps) rig.add(p);
   std::mt19937 g(13);
   std::uniform_real_distribution<float> u01(0.0f, 1.0f);
@@ -1042,7 +1063,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
     ++vector[mat[q]];
     const auto close = [](double x, double y) { return std::abs(x - y) <= 1e-4 * std::abs(y) + 1e-6; };
     const bool ok = max3(glm::abs(a.wi - b.wi)) <= 1e-4 && close(a.pdf, b.pdf) &&
-                    max3(glm::abs(a.weight - b.weight)) <= 1e-4 * max3(glm::abs(b.weight)) + 1e-6 &&
+                    max3(glm::abs(a.weight - b.weight)) <= 2e-4 * max3(glm::abs(b.weight)) + 1e-6 &&
                     a.flags == (b.flags & 1u);
     if (max3(b.weight) > 0) ++scattered[mat[q]];
     if (!ok && bad[mat[q]]++ < 3) {
@@ -1056,9 +1077,8 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   }
   for (size_t m = 0; m < ps.size(); ++m) {
     INFO(ps[m].label);
-    const bool scalar_only = (ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av) ||
-                             ps[m].type == PSF_MATERIAL_PRINCIPLED_THIN || ps[m].type == PSF_MATERIAL_THIN_DIELECTRIC ||
-                             ps[m].type == PSF_MATERIAL_DIFFUSE;
+    const bool scalar_only =
+        (ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av) || ps[m].type == PSF_MATERIAL_DIFFUSE;
     CHECK(vector[m] == (scalar_only ? 0 : count));
     CHECK(bad[m] == 0);
     if (!scalar_only) CHECK(scattered[m] > 300);  // the comparison is not vacuous

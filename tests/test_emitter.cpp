@@ -1644,8 +1644,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, seven scenes of analytic spheres (a sphere light, also with
-  // a GGX conductor sphere, rough glass, and a large sphere tested in double),
+  // other kind, eight scenes of analytic spheres (a sphere light, also with
+  // a GGX conductor sphere, rough glass, a thin dielectric, and a large sphere
+  // tested in double), principledthin sheets,
   // an emission texture, three cameras (thin lens and Gaussian filter, tent
   // filter and crop window, orthographic), whose rays the lanes draw
   // themselves; and a scene outside the class (media), which must fall back to
@@ -1806,7 +1807,8 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // Analytic spheres: a sphere light over a rough conductor sphere, a glass
   // sphere on a sphere ground under a constant sky, principled spheres,
   // pplastic spheres (GGX, Beckmann, anisotropic, textured).
-  for (const char* name : {"sphere-light", "sphere-ground", "principled-spheres", "pplastic-spheres"})
+  for (const char* name :
+       {"sphere-light", "sphere-ground", "principled-spheres", "pplastic-spheres", "principledthin-sheets"})
     cases.push_back({name, psf::load_scene(psf::test::source_path(std::string("scenes/") + name + ".xml")), true});
   {
     // Our Cornell box in Mitsuba's default roughplastic (Beckmann, alpha 0.1).
@@ -1855,6 +1857,16 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     const std::string glass = psf::test::temp_dir("lanes-rough-glass") + "/sphere-light.xml";
     std::ofstream(glass) << xml;
     cases.push_back({"sphere-light, GGX copper, rough glass", psf::load_scene(glass), true});
+    {  // and a thin dielectric in its place (Delta8's thin sheets)
+      std::string thin = xml;
+      const std::string rough = R"(<bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf>)";
+      const size_t at = thin.find(rough);
+      REQUIRE(at != std::string::npos);
+      thin.replace(at, rough.size(), R"(<bsdf type="thindielectric"/>)");
+      const std::string path = psf::test::temp_dir("lanes-thin-dielectric") + "/sphere-light.xml";
+      std::ofstream(path) << thin;
+      cases.push_back({"sphere-light, GGX copper, thin dielectric", psf::load_scene(path), true});
+    }
     // And with a large diffuse sphere beside the others, between part of the
     // floor and the light: the casts test it in double (radius 4.5 above 4 and
     // above half its centre's distance 7), shadow rays too.
