@@ -937,20 +937,19 @@ inline Vec8 plastic8_eval(const Plastic8* p, Vec8 o, Vec8 i, float8 t_i, float8*
  * with the same operations in float8. */
 
 /* Whether the lanes shade material m as a Conductor8. */
-inline bool lanes_conductor(const Material* m) {
-  return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR && m->alpha_u == m->alpha_v;
-}
+inline bool lanes_conductor(const Material* m) { return m->type == PSF_MATERIAL_ROUGH_CONDUCTOR; }
 
-/* The lanes' rough conductors: Material's alpha_u, specular, eta and k, and
- * whether the distribution is Beckmann's. */
+/* The lanes' rough conductors: Material's alpha_u, alpha_v, specular, eta and
+ * k, and whether the distribution is Beckmann's. */
 typedef struct {
-  float8 alpha;
+  float8 au, av;
   Vec8 spec, eta, k;
   int8 beckmann;
 } Conductor8;
 
 inline void conductor8_set(Conductor8* c, uint l, const Material* m) {
-  LANE_F(c->alpha, l) = m->alpha_u;
+  LANE_F(c->au, l) = m->alpha_u;
+  LANE_F(c->av, l) = m->alpha_v;
   vec8_set(&c->spec, l, m->specular.xyz);
   vec8_set(&c->eta, l, m->eta.xyz);
   vec8_set(&c->k, l, m->k.xyz);
@@ -976,7 +975,7 @@ inline Vec8 conductor8_eval(const Conductor8* c, Vec8 o, Vec8 i, float8* pdf) {
   const Vec8 h = vec8_normalize(vec8_add(o, i));
   const float8 oh = vec8_dot(o, h);
   float8 d, g_o, g_i, pm;
-  mf8_terms(h, o, i, c->alpha, c->alpha, c->beckmann, &d, &g_o, &g_i, &pm);
+  mf8_terms(h, o, i, c->au, c->av, c->beckmann, &d, &g_o, &g_i, &pm);
   const float8 g = g_o * g_i;
   *pdf = select((float8)(0.0f), pm / (4.0f * oh), on);
   const Vec8 fr = vec8(fresnel_conductor8(oh, c->eta.x, c->k.x), fresnel_conductor8(oh, c->eta.y, c->k.y),
@@ -1671,7 +1670,7 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
   const int8 sample_conductor = sample_own & b->conductor;
   if (any(sample_conductor)) {
     const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
-    const Vec8 h = mf8_sample(o, b->co.alpha, b->co.alpha, b->co.beckmann, sample_conductor, u_b1, u_b2);
+    const Vec8 h = mf8_sample(o, b->co.au, b->co.av, b->co.beckmann, sample_conductor, u_b1, u_b2);
     const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
     const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
     float8 pdf_c;

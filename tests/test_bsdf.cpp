@@ -975,8 +975,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
   // functions) against bsdf_eval on the same queries, the materials mixed
   // within each group of eight lanes: f and pdf within 1e-4 (relative, 1e-6
   // absolute: rounding of a different operation order). Every material of the
-  // set is one the lanes shade in vectors but for the anisotropic rough
-  // conductors, which must report so.
+  // set is one the lanes shade in vectors.
   Rig rig;
   std::vector<Params> ps = test_materials();
   for (const Params& p : ps) rig.add(p);
@@ -1003,10 +1002,9 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
   }
   for (size_t m = 0; m < ps.size(); ++m) {
     INFO(ps[m].label);
-    const bool scalar_only = ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av;
-    CHECK(vector[m] == (scalar_only ? 0 : 2000));
+    CHECK(vector[m] == 2000);
     CHECK(bad[m] == 0);
-    if (!scalar_only) CHECK(nonzero[m] > 300);  // the comparison is not vacuous
+    CHECK(nonzero[m] > 300);  // the comparison is not vacuous
   }
 }
 
@@ -1019,8 +1017,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   // failed sample where
   // bsdf_sample fails. The BSDF tests' materials and the delta ones (a
   // dielectric, a thin dielectric, a gold conductor), each sampled in vectors
-  // but for the anisotropic rough conductors, and the diffuse ones, whose
-  // lanes take the kernel's own cosine sample.
+  // but for the diffuse ones, whose lanes take the kernel's own cosine sample.
   Rig rig;
   std::vector<Params> ps = test_materials();
   {
@@ -1077,8 +1074,7 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   }
   for (size_t m = 0; m < ps.size(); ++m) {
     INFO(ps[m].label);
-    const bool scalar_only =
-        (ps[m].type == PSF_MATERIAL_ROUGH_CONDUCTOR && ps[m].au != ps[m].av) || ps[m].type == PSF_MATERIAL_DIFFUSE;
+    const bool scalar_only = ps[m].type == PSF_MATERIAL_DIFFUSE;
     CHECK(vector[m] == (scalar_only ? 0 : count));
     CHECK(bad[m] == 0);
     if (!scalar_only) CHECK(scattered[m] > 300);  // the comparison is not vacuous

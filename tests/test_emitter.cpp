@@ -1644,9 +1644,9 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // normals and hidden lights, an environment map (a floor, then with an
   // occluder), a textured floor with an alpha-masked leaf and a point light,
   // the Cornell box with a BSDF of every
-  // other kind, eight scenes of analytic spheres (a sphere light, also with
-  // a GGX conductor sphere, rough glass, a thin dielectric, and a large sphere
-  // tested in double), principledthin sheets,
+  // other kind, nine scenes of analytic spheres (a sphere light, also with
+  // a GGX conductor sphere, an anisotropic one, rough glass, a thin
+  // dielectric, and a large sphere tested in double), principledthin sheets,
   // an emission texture, three cameras (thin lens and Gaussian filter, tent
   // filter and crop window, orthographic), whose rays the lanes draw
   // themselves; and a scene outside the class (media), which must fall back to
@@ -1848,6 +1848,16 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     const std::string path = psf::test::temp_dir("lanes-ggx") + "/sphere-light.xml";
     std::ofstream(path) << xml;
     cases.push_back({"sphere-light, GGX copper", psf::load_scene(path), true});
+    {  // anisotropic (Conductor8's alpha_u and alpha_v; the sphere's tangents give its frame)
+      std::string aniso = xml;
+      const std::string alpha = R"(<float name="alpha" value="0.2"/>)";
+      const size_t a = aniso.find(alpha, at);
+      REQUIRE(a != std::string::npos);
+      aniso.replace(a, alpha.size(), R"(<float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.4"/>)");
+      const std::string p = psf::test::temp_dir("lanes-aniso") + "/sphere-light.xml";
+      std::ofstream(p) << aniso;
+      cases.push_back({"sphere-light, anisotropic GGX copper", psf::load_scene(p), true});
+    }
     // And with the diffuse sphere turned into rough glass (Beckmann, Mitsuba's
     // default), which reflects and refracts from both sides.
     const std::string blue = R"(<bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.5, 0.8"/></bsdf>)";
