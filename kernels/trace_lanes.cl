@@ -14,13 +14,10 @@
  * of a few primitives without masks both casts are vector code too, each
  * primitive against the eight rays: flat_closest8, flat_any8), the loads
  * of the hit's triangle, material and light, and what is rarer or branchier: a
- * colour texture's albedo and frame, any other material (a blend's choice, its
- * frame and bump map, its BSDF's value, pdf and sample: surface.cl's and
- * bsdf.cl's own functions, but for diffuse materials, a rough plastic, an
- * isotropic rough conductor, a pplastic, a principled material, a rough
- * dielectric, a smooth plastic, dielectric or conductor,
- * whose BSDFs the vectors evaluate and sample (LanesBsdfs), with a bump map's
- * side rule), the
+ * colour texture's albedo and frame, any other material's surface (a blend's
+ * choice, its frame and bump map: surface.cl's own functions; its BSDF's value,
+ * pdf and sample are the vectors', LanesBsdfs, for every kind of BSDF, with a
+ * bump map's side rule; a kind they lacked would go through bsdf.cl's), the
  * environment map an escaped ray sees, a light sample on a point, spot or
  * directional light, on a sphere light other than below, or on any light but
  * a triangle among many lights (emitter.cl emitter_sample), a hit on an
