@@ -583,17 +583,20 @@ inline void lane_cast_any(bool masked, uint spheres, __global const BvhNode* nod
     lane_any_tris(nodes, packs, r, h);
 }
 
-/* Casts in scenes of a few packs (FrameParams.flat_packs > 0: host/render.cpp
- * sets it where the BVH holds at most PSF_LANES_FLAT_PACKS packs and nothing is
- * alpha-tested): every primitive of the packs against the eight lanes' rays at
- * once, without the BVH. A cast through the BVH costs a call, a slab test and
- * the branches of its traversal whatever the scene's size, and a lane's ray
- * goes into a Ray and its hit out of a Hit; here the rays stay in the lanes'
- * vectors. Each primitive's test is raycast.cl's (pack_test, the sphere tests)
- * with the roles of the vectors swapped: the same arithmetic per ray and
- * primitive, the same hits up to the choice between primitives at exactly the
- * same distance (the BVH's order of packs against the packs' order here) and
- * the barycentric tolerance outside a leaf's box. */
+/* Casts in scenes of a few primitives (FrameParams.flat_packs > 0:
+ * Renderer::flat_packs sets it where the BVH holds at most kLanesFlatPrims
+ * primitives and none is alpha-tested): every primitive of the packs against
+ * the eight lanes' rays at once, without the BVH. A cast through the BVH costs
+ * a call, a slab test and the branches of its traversal whatever the scene's
+ * size, and a lane's ray goes into a Ray and its hit out of a Hit; here the
+ * rays stay in the lanes' vectors. Each primitive's test is raycast.cl's
+ * (pack_test, the sphere tests) with the roles of the vectors swapped: the
+ * same arithmetic per ray and primitive, the same hits up to the choice
+ * between primitives at exactly the same distance (the BVH's order of packs
+ * against the packs' order here), the barycentric tolerance outside a leaf's
+ * box, and a sphere's precision, which is its pack's (float or double, as
+ * sphere_pack_test has it; the lanes' BVH casts test every sphere in double
+ * where any needs it). */
 #if defined(cl_khr_fp64)
 typedef double8 flat_real8;
 #define FLAT_REAL8(x) convert_double8(x)
@@ -733,7 +736,7 @@ inline void flat_closest8(__global const BvhTriPack* packs, uint count, bool sph
     }
   }
   *t_out = select((float8)(0.0f), best, live);
-  *prim_out = prim;
+  *prim_out = select((uint8)(PSF_NO_HIT), prim, as_uint8(live));
   *u_out = bu;
   *v_out = bv;
 }
@@ -2087,7 +2090,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
       bs = zero;
     } else {
       bs.diffuse = bs.plastic = bs.conductor = bs.principled = bs.pplastic = bs.delta = bs.smooth_plastic =
-          bs.rough_dielectric = (int8)(0);
+          bs.rough_dielectric = bs.thin = (int8)(0);
     }
     int8 bump = (int8)(0);
     Vec8 unp = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));

@@ -1011,7 +1011,8 @@ TEST_CASE("BSDF: the lanes' vector BSDFs evaluate as bsdf.cl does", "[bsdf]") {
 TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   // trace_lanes.cl's lanes_bsdfs_sample against bsdf_sample on the same queries
   // (material, wo, u1, u2, uc), the materials mixed within each group of eight
-  // lanes: the same direction (within 1e-4), pdf within 1e-4 (relative, 1e-6
+  // lanes (wo from both sides, and in the surface's plane): the same direction
+  // (within 1e-4), pdf within 1e-4 (relative, 1e-6
   // absolute) and weight within 2e-4 (f |cos| / pdf: the rounding of f and of
   // the pdf, each within 1e-4 in the evaluation test), the same delta flag, a
   // failed sample where
@@ -1048,7 +1049,9 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
   for (size_t k = 0; k < ps.size() * size_t(count); ++k) {
     const uint32_t m = uint32_t(k % ps.size());
     mat.push_back(m);
-    wo.push_back(random_direction(g, 0.05, !transmissive(ps[m])));
+    // From behind too (every sample of a reflecting material fails there) and,
+    // one query in 100, exactly in the surface's plane (every sample fails).
+    wo.push_back((k / ps.size()) % 100 == 0 ? dvec3(0.6, 0.8, 0.0) : random_direction(g, 0.05, false));
     u.push_back({u01(g), u01(g), u01(g)});
   }
   const std::vector<SampleOut> lanes = rig.lanes_sample(mat, wo, u), scalar = rig.sample(mat, wo, u);
@@ -1059,8 +1062,13 @@ TEST_CASE("BSDF: the lanes' vector BSDFs sample as bsdf.cl does", "[bsdf]") {
     if (a.flags == uint32_t(-1)) continue;
     ++vector[mat[q]];
     const auto close = [](double x, double y) { return std::abs(x - y) <= 1e-4 * std::abs(y) + 1e-6; };
+    // A direction within 0.01 of the surface's plane: its weight's |cos| turns
+    // the direction's rounding (1e-6 and more) into a relative error of 1e-4
+    // and more (a principled sample at cos 0.00125 read 0.2 %), so only the
+    // direction and pdf are compared there.
+    const bool grazing = std::abs(b.wi.z) < 0.01;
     const bool ok = max3(glm::abs(a.wi - b.wi)) <= 1e-4 && close(a.pdf, b.pdf) &&
-                    max3(glm::abs(a.weight - b.weight)) <= 2e-4 * max3(glm::abs(b.weight)) + 1e-6 &&
+                    (grazing || max3(glm::abs(a.weight - b.weight)) <= 2e-4 * max3(glm::abs(b.weight)) + 1e-6) &&
                     a.flags == (b.flags & 1u);
     if (max3(b.weight) > 0) ++scattered[mat[q]];
     if (!ok && bad[mat[q]]++ < 3) {
