@@ -1539,33 +1539,52 @@ inline int8 lanes_bsdfs_mask(const LanesBsdfs* b) {
 /* Lane l's kind and parameters for its material m (as lane_surface left it);
  * cos_o: wo's cosine to the shading normal (a rough plastic's coat
  * transmittance towards wo). */
+/* A kind's parameters zeroed as its first lane is set: the lanes it leaves
+ * unused then hold zeros, not what the stack held (its functions branch on
+ * any() of such lanes). */
+#define LANES_KIND_FIRST(MASK, PARAMS, TYPE) \
+  do {                                       \
+    if (!any(MASK)) {                        \
+      const TYPE zero_ = {0};                \
+      PARAMS = zero_;                        \
+    }                                        \
+  } while (0)
+
 inline void lanes_bsdfs_set(LanesBsdfs* b, uint l, const Material* m, __global const TextureInfo* textures,
                             __global const half* texels, float cos_o) {
   if (m->type == PSF_MATERIAL_DIFFUSE) { /* a blend's, a bump map's, vertex colours': the vectors' diffuse BSDF */
     LANE_I(b->diffuse, l) = -1;
   } else if (lanes_rough_dielectric(m)) {
+    LANES_KIND_FIRST(b->rough_dielectric, b->rd, RoughDielectric8);
     LANE_I(b->rough_dielectric, l) = -1;
     rough_dielectric8_set(&b->rd, l, m);
   } else if (lanes_smooth_plastic(m)) {
+    LANES_KIND_FIRST(b->smooth_plastic, b->spl, SmoothPlastic8);
     LANE_I(b->smooth_plastic, l) = -1;
     smooth_plastic8_set(&b->spl, l, m);
   } else if (lanes_delta(m)) {
+    LANES_KIND_FIRST(b->delta, b->dl, Delta8);
     LANE_I(b->delta, l) = -1;
     delta8_set(&b->dl, l, m);
   } else if (lanes_pplastic(m)) {
+    LANES_KIND_FIRST(b->pplastic, b->pp, PPlastic8);
     LANE_I(b->pplastic, l) = -1;
     pplastic8_set(&b->pp, l, m);
   } else if (lanes_principled(m)) {
+    LANES_KIND_FIRST(b->principled, b->pr8, Principled8);
     LANE_I(b->principled, l) = -1;
     principled8_set(&b->pr8, l, m);
   } else if (lanes_thin(m)) {
+    LANES_KIND_FIRST(b->thin, b->th, Thin8);
     LANE_I(b->thin, l) = -1;
     thin8_set(&b->th, l, m);
   } else if (lanes_conductor(m)) {
+    LANES_KIND_FIRST(b->conductor, b->co, Conductor8);
     LANE_I(b->conductor, l) = -1;
     conductor8_set(&b->co, l, m);
   } else if (lanes_plastic(m)) {
     Plastic8* pl = &b->pl;
+    LANES_KIND_FIRST(b->plastic, b->pl, Plastic8);
     LANE_I(b->plastic, l) = -1;
     b->plastic_table[l] = surface_table(*m, textures, texels);
     LANE_F(pl->au, l) = m->alpha_u;
@@ -2084,14 +2103,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The lanes whose BSDF the vectors evaluate and sample (LanesBsdfs), and a
      * bump or normal map's lanes: the normal before it (surface_side_agrees,
      * applied to every BSDF the vectors shade, below). */
-    LanesBsdfs bs;
-    if (any(own_frame & general)) { /* zero whole only where some lane fills it (3 KiB) */
-      const LanesBsdfs zero = {0};
-      bs = zero;
-    } else {
-      bs.diffuse = bs.plastic = bs.conductor = bs.principled = bs.pplastic = bs.delta = bs.smooth_plastic =
-          bs.rough_dielectric = bs.thin = (int8)(0);
-    }
+    LanesBsdfs bs; /* the kinds' parameters zeroed as each kind's first lane is set (LANES_KIND_FIRST) */
+    bs.diffuse = bs.plastic = bs.conductor = bs.principled = bs.pplastic = bs.delta = bs.smooth_plastic =
+        bs.rough_dielectric = bs.thin = (int8)(0);
     int8 bump = (int8)(0);
     Vec8 unp = vec8((float8)(0.0f), (float8)(0.0f), (float8)(0.0f));
     for (uint todo = psf_lanes8(own_frame & general); todo != 0u; todo &= todo - 1u) {
