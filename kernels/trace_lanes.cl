@@ -1536,56 +1536,49 @@ inline int8 lanes_bsdfs_mask(const LanesBsdfs* b) {
          b->rough_dielectric | b->thin;
 }
 
+/* Lane l joins a kind (its MASK): the kind's parameters zeroed as its first
+ * lane joins, so that the lanes it leaves unused hold zeros, not what the
+ * stack held (its functions branch on any() of such lanes). */
+#define LANES_KIND_TAKE(MASK, PARAMS, TYPE, L) \
+  do {                                         \
+    if (!any(MASK)) {                          \
+      const TYPE zero_ = {0};                  \
+      PARAMS = zero_;                          \
+    }                                          \
+    LANE_I(MASK, L) = -1;                      \
+  } while (0)
+
 /* Lane l's kind and parameters for its material m (as lane_surface left it);
  * cos_o: wo's cosine to the shading normal (a rough plastic's coat
  * transmittance towards wo). */
-/* A kind's parameters zeroed as its first lane is set: the lanes it leaves
- * unused then hold zeros, not what the stack held (its functions branch on
- * any() of such lanes). */
-#define LANES_KIND_FIRST(MASK, PARAMS, TYPE) \
-  do {                                       \
-    if (!any(MASK)) {                        \
-      const TYPE zero_ = {0};                \
-      PARAMS = zero_;                        \
-    }                                        \
-  } while (0)
-
 inline void lanes_bsdfs_set(LanesBsdfs* b, uint l, const Material* m, __global const TextureInfo* textures,
                             __global const half* texels, float cos_o) {
   if (m->type == PSF_MATERIAL_DIFFUSE) { /* a blend's, a bump map's, vertex colours': the vectors' diffuse BSDF */
     LANE_I(b->diffuse, l) = -1;
   } else if (lanes_rough_dielectric(m)) {
-    LANES_KIND_FIRST(b->rough_dielectric, b->rd, RoughDielectric8);
-    LANE_I(b->rough_dielectric, l) = -1;
+    LANES_KIND_TAKE(b->rough_dielectric, b->rd, RoughDielectric8, l);
     rough_dielectric8_set(&b->rd, l, m);
   } else if (lanes_smooth_plastic(m)) {
-    LANES_KIND_FIRST(b->smooth_plastic, b->spl, SmoothPlastic8);
-    LANE_I(b->smooth_plastic, l) = -1;
+    LANES_KIND_TAKE(b->smooth_plastic, b->spl, SmoothPlastic8, l);
     smooth_plastic8_set(&b->spl, l, m);
   } else if (lanes_delta(m)) {
-    LANES_KIND_FIRST(b->delta, b->dl, Delta8);
-    LANE_I(b->delta, l) = -1;
+    LANES_KIND_TAKE(b->delta, b->dl, Delta8, l);
     delta8_set(&b->dl, l, m);
   } else if (lanes_pplastic(m)) {
-    LANES_KIND_FIRST(b->pplastic, b->pp, PPlastic8);
-    LANE_I(b->pplastic, l) = -1;
+    LANES_KIND_TAKE(b->pplastic, b->pp, PPlastic8, l);
     pplastic8_set(&b->pp, l, m);
   } else if (lanes_principled(m)) {
-    LANES_KIND_FIRST(b->principled, b->pr8, Principled8);
-    LANE_I(b->principled, l) = -1;
+    LANES_KIND_TAKE(b->principled, b->pr8, Principled8, l);
     principled8_set(&b->pr8, l, m);
   } else if (lanes_thin(m)) {
-    LANES_KIND_FIRST(b->thin, b->th, Thin8);
-    LANE_I(b->thin, l) = -1;
+    LANES_KIND_TAKE(b->thin, b->th, Thin8, l);
     thin8_set(&b->th, l, m);
   } else if (lanes_conductor(m)) {
-    LANES_KIND_FIRST(b->conductor, b->co, Conductor8);
-    LANE_I(b->conductor, l) = -1;
+    LANES_KIND_TAKE(b->conductor, b->co, Conductor8, l);
     conductor8_set(&b->co, l, m);
   } else if (lanes_plastic(m)) {
     Plastic8* pl = &b->pl;
-    LANES_KIND_FIRST(b->plastic, b->pl, Plastic8);
-    LANE_I(b->plastic, l) = -1;
+    LANES_KIND_TAKE(b->plastic, b->pl, Plastic8, l);
     b->plastic_table[l] = surface_table(*m, textures, texels);
     LANE_F(pl->au, l) = m->alpha_u;
     LANE_F(pl->av, l) = m->alpha_v;
@@ -1668,12 +1661,12 @@ inline void lanes_take_sample(int8 take, int8 fails, const Vec8* s, const Vec8* 
 inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 sample_own, const Vec8* fs,
                                const Vec8* ft, const Vec8* fn, const Vec8* wo, float8 fn_wo, Vec8 wl, float8 u_b1,
                                float8 u_b2, float8 u_lobe, Vec8* wi, float8* pdf, Vec8* weight, int8* delta_lobe) {
+  const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo); /* wo in the frame */
   /* A rough plastic's sample (bsdf_sample_general): the coat's visible
    * normal with its probability, else the cosine-weighted direction (wl),
    * then bsdf_finish's value and pdf. */
   const int8 sample_plastic = sample_own & b->plastic;
   if (any(sample_plastic)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     const int8 coat = u_lobe < plastic8_prob_specular(&b->pl);
     const Vec8 h = mf8_sample(o, b->pl.au, b->pl.av, b->pl.beckmann, sample_plastic & coat, u_b1, u_b2);
     const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), coat);
@@ -1688,7 +1681,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
    * mirror direction, then bsdf_finish's value and pdf. */
   const int8 sample_conductor = sample_own & b->conductor;
   if (any(sample_conductor)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     const Vec8 h = mf8_sample(o, b->co.au, b->co.av, b->co.beckmann, sample_conductor, u_b1, u_b2);
     const Vec8 i = vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o);
     const int8 fails = (o.z <= 0.0f) | (i.z <= 0.0f);
@@ -1699,7 +1691,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
   /* A smooth dielectric's or conductor's sample (bsdf_delta, bsdf_fail). */
   const int8 sample_delta = sample_own & b->delta;
   if (any(sample_delta)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     Vec8 w;
     int8 fails;
     const Vec8 i = delta8_sample(&b->dl, o, u_lobe, &w, &fails);
@@ -1715,7 +1706,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
    * its Fresnel term (microfacet_scatter), then bsdf_finish's. */
   const int8 sample_rough_dielectric = sample_own & b->rough_dielectric;
   if (any(sample_rough_dielectric)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     const Vec8 of = vec8_select(vec8_neg(o), o, o.z > 0.0f);
     const Vec8 h = mf8_sample(of, b->rd.au, b->rd.av, b->rd.beckmann, sample_rough_dielectric, u_b1, u_b2);
     const float8 oh = vec8_dot(o, h);
@@ -1734,7 +1724,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
    * direction, a delta lobe, else the cosine direction and bsdf_finish's. */
   const int8 sample_smooth_plastic = sample_own & b->smooth_plastic;
   if (any(sample_smooth_plastic)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     const int8 fails = o.z <= 0.0f;
     const float8 fo = fresnel_dielectric8(o.z, b->spl.eta), ps = smooth_plastic8_prob_specular(&b->spl, fo);
     const int8 coat = sample_smooth_plastic & (u_lobe < ps);
@@ -1752,7 +1741,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
    * mirror direction with probability albedo.w, else the cosine direction. */
   const int8 sample_pplastic = sample_own & b->pplastic;
   if (any(sample_pplastic)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     const int8 spec = u_lobe < b->pp.ps;
     const Vec8 h = mf8_sample(o, b->pp.au, b->pp.av, b->pp.beckmann, sample_pplastic & spec, u_b1, u_b2);
     const Vec8 i = vec8_select(wl, vec8_sub(vec8_scale(h, 2.0f * vec8_dot(o, h)), o), spec);
@@ -1764,7 +1752,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
   /* A principledthin's sample (thin_sample), then bsdf_finish's. */
   const int8 sample_thin = sample_own & b->thin;
   if (any(sample_thin)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     int8 fails;
     const Vec8 i = thin8_sample(&b->th, o, wl, u_b1, u_b2, u_lobe, &fails);
     float8 pdf_e;
@@ -1774,7 +1761,6 @@ inline void lanes_bsdfs_sample(const LanesBsdfs* b, const Material* mats, int8 s
   /* A principled material's sample (principled_sample), then bsdf_finish's. */
   const int8 sample_principled = sample_own & b->principled;
   if (any(sample_principled)) {
-    const Vec8 o = vec8(vec8_dot(*wo, *fs), vec8_dot(*wo, *ft), fn_wo);
     int8 fails;
     const Vec8 i = principled8_sample(&b->pr8, sample_principled, o, wl, u_b1, u_b2, u_lobe, &fails);
     fails |= o.z == 0.0f;
@@ -2103,7 +2089,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     /* The lanes whose BSDF the vectors evaluate and sample (LanesBsdfs), and a
      * bump or normal map's lanes: the normal before it (surface_side_agrees,
      * applied to every BSDF the vectors shade, below). */
-    LanesBsdfs bs; /* the kinds' parameters zeroed as each kind's first lane is set (LANES_KIND_FIRST) */
+    LanesBsdfs bs; /* the kinds' parameters zeroed as each kind's first lane is set (LANES_KIND_TAKE) */
     bs.diffuse = bs.plastic = bs.conductor = bs.principled = bs.pplastic = bs.delta = bs.smooth_plastic =
         bs.rough_dielectric = bs.thin = (int8)(0);
     int8 bump = (int8)(0);
