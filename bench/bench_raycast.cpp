@@ -7,7 +7,8 @@
 // runs it on an AVX-512 machine (`perf` of its renders: the spatial-split
 // builder, Embree's high quality, and the hybrid traversal of packets of 16):
 // RTC_BUILD_QUALITY_HIGH and rtcIntersect16 on 16 consecutive rays. The rays
-// are incoherent either way.
+// are incoherent either way. psf's BVH is the renderer's, with spatial splits
+// (--spatial_splits=0: without); each scene's line gives its references.
 //
 // Rays: 2^21 (--rays_log2) area-uniform points on the scene's triangles, offset
 // along the geometric normal by 1e-5 of the scene's bounding-box diagonal, with
@@ -33,7 +34,7 @@
 // their occlusion checked against rtcOccluded1's.
 //
 // Usage: bench_raycast [benchmark flags] [--scene=PATH ...] [--local=N] [--rays_log2=N]
-//                      [--trials=N] [--embree_config=STRING]
+//                      [--trials=N] [--embree_config=STRING] [--spatial_splits=0|1]
 // Without --scene: scenes/cornell-box.xml of the source tree, Dabrovic Sponza and
 // Bitterli's living room from $PSF_SHARED (else ../shared beside the source tree);
 // absent ones are skipped.
@@ -73,6 +74,7 @@ struct Options {
   int rays_log2 = 21;               // 2^rays_log2 rays per scene
   int trials = 7;                   // timed launches per scene
   std::string embree_config;        // rtcNewDevice's configuration string ("verbose=3": its BVH statistics)
+  bool spatial_splits = true;       // psf's BVH with spatial splits (BvhParams), as the renderer builds it
 };
 
 using bench::summarize;
@@ -482,6 +484,8 @@ int main(int argc, char** argv) {
       opt.trials = std::max(1, bench::number<int>("bench_raycast", "trials", v));
     } else if (const char* v = value("--embree_config=")) {
       opt.embree_config = v;
+    } else if (const char* v = value("--spatial_splits=")) {
+      opt.spatial_splits = bench::number<int>("bench_raycast", "spatial_splits", v) != 0;
     } else {
       std::fprintf(stderr, "bench_raycast: unknown argument '%s'\n", a.c_str());
       return 2;
@@ -501,6 +505,7 @@ int main(int argc, char** argv) {
   benchmark::AddCustomContext("psf_device", dev.platform + " / " + dev.name);
   benchmark::AddCustomContext("psf_driver", dev.driver + " (" + dev.version + ")");
   benchmark::AddCustomContext("psf_build_options", build_options);
+  benchmark::AddCustomContext("psf_spatial_splits", opt.spatial_splits ? "on" : "off");
   benchmark::AddCustomContext("psf_compute_units", std::to_string(dev.compute_units));
   benchmark::AddCustomContext("psf_rays", std::to_string(num_rays));
   benchmark::AddCustomContext("psf_local_size", std::to_string(opt.local));
@@ -526,14 +531,19 @@ int main(int argc, char** argv) {
       report("skipped %s: %s\n", path.c_str(), e.what());
       continue;
     }
-    b->bvh = psf::build_bvh(b->positions, b->triangles);
+    psf::BvhParams bvh_params;
+    bvh_params.spatial_splits = opt.spatial_splits;
+    b->bvh = psf::build_bvh(b->positions, b->triangles, bvh_params);
     b->rays = diffuse_rays(b->positions, b->triangles, num_rays, 1234567u);
     b->shadow = shadow_rays(b->rays, diffuse_rays(b->positions, b->triangles, num_rays, 7654321u));
-    report("%s: %zu triangles, BVH build %.1f ms, %zu nodes and %zu triangle packs (%.1f MiB), depth %d, %u triangles "
-           "left out\n",
-           b->name.c_str(), b->triangles.size(), b->bvh.build_ms, b->bvh.nodes.size(), b->bvh.packs.size(),
-           (b->bvh.nodes.size() * sizeof(BvhNode) + b->bvh.packs.size() * sizeof(BvhTriPack)) / 1048576.0,
-           b->bvh.depth, b->bvh.skipped);
+    report(
+        "%s: %zu triangles, BVH build %.1f ms (spatial splits %s: %u references, +%.1f %%), %zu nodes and %zu "
+        "triangle packs (%.1f MiB), depth %d, %u triangles left out\n",
+        b->name.c_str(), b->triangles.size(), b->bvh.build_ms, opt.spatial_splits ? "on" : "off", b->bvh.references,
+        100.0 * (double(b->bvh.references) / std::max(1u, b->bvh.triangle_count) - 1.0), b->bvh.nodes.size(),
+        b->bvh.packs.size(),
+        (b->bvh.nodes.size() * sizeof(BvhNode) + b->bvh.packs.size() * sizeof(BvhTriPack)) / 1048576.0, b->bvh.depth,
+        b->bvh.skipped);
     const SahCost sah = sah_cost(b->bvh);
     report("%s: SAH of a random line through the root's box (Embree's statistics): %.2f nodes, %.2f packs, %.1f "
            "triangles\n",

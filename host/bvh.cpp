@@ -1,6 +1,9 @@
 // Binned SAH BVH build (Wald, "On fast construction of SAH-based bounding volume
-// hierarchies", RT 2007) of a binary BVH, collapsed into a PSF_BVH_WIDTH-wide BVH
-// by repeatedly opening the child of largest surface area (Wald et al., "Getting
+// hierarchies", RT 2007) of a binary BVH with spatial splits (Stich, Friedrich,
+// Dietrich, "Spatial splits in bounding volume hierarchies", HPG 2009: where an
+// object split's sides overlap, a plane may cut primitives, which both sides
+// then reference, clipped), collapsed into a PSF_BVH_WIDTH-wide BVH by
+// repeatedly opening the child of largest surface area (Wald et al., "Getting
 // rid of packets", RT 2008), and the RayCaster that uploads it.
 #include "bvh.h"
 
@@ -14,6 +17,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
 
 namespace psf {
 namespace {
@@ -42,33 +46,109 @@ struct Box {
 };
 
 // A node of the binary BVH: an inner node (left, right) or a leaf (first, count)
-// over a range of the builder's triangle index array.
+// over a range of the builder's primitive index array.
 struct BinaryNode {
-  Box box;             // bounds of the node's triangles
+  Box box;             // bounds of the node's references
   uint32_t left = 0;   // inner node: children (binary node indices)
   uint32_t right = 0;
   uint32_t first = 0;  // leaf: first position in the index array
-  uint32_t count = 0;  // leaf: number of triangles; 0 for an inner node
+  uint32_t count = 0;  // leaf: number of primitives; 0 for an inner node
+};
+
+// A reference to a primitive during the build: the whole primitive, or with
+// spatial splits the part of it inside `box` (a triangle clipped to the split
+// planes; a sphere's box cut by them).
+struct Ref {
+  Box box;
+  uint32_t prim = 0;
+  glm::vec3 centroid() const { return 0.5f * (box.lo + box.hi); }
+};
+
+// Float bounds of double points, rounded outwards.
+void grow_outwards(Box* box, const glm::dvec3& p) {
+  for (int d = 0; d < 3; ++d) {
+    const float f = static_cast<float>(p[d]);
+    box->lo[d] = std::min(box->lo[d], double(f) > p[d] ? std::nextafter(f, -kInf) : f);
+    box->hi[d] = std::max(box->hi[d], double(f) < p[d] ? std::nextafter(f, kInf) : f);
+  }
+}
+
+Box intersect(const Box& a, const Box& b) {
+  Box r;
+  r.lo = glm::max(a.lo, b.lo);
+  r.hi = glm::min(a.hi, b.hi);
+  return r;
+}
+
+// The primitives a spatial split cuts: triangles [0, first_sphere), then spheres.
+struct SplitGeometry {
+  const std::vector<glm::vec3>& positions;
+  const std::vector<glm::uvec3>& triangles;
+  size_t first_sphere;
+
+  // The bounds of the parts of primitive `prim` on either side of the plane
+  // x[axis] = plane, each cut to `box` (the reference's) and to its side: a
+  // triangle's vertices and its edges' crossings of the plane, a sphere's box
+  // cut by the plane. `exact`: the crossings in double and their bounds
+  // rounded outwards (the splits made), else in float (the bins' estimates).
+  template <bool exact>
+  void split(uint32_t prim, const Box& box, int axis, float plane, Box* left, Box* right) const {
+    *left = box;
+    *right = box;
+    left->hi[axis] = std::min(left->hi[axis], plane);
+    right->lo[axis] = std::max(right->lo[axis], plane);
+    if (prim >= first_sphere) return;
+    using vec = std::conditional_t<exact, glm::dvec3, glm::vec3>;
+    using real = typename vec::value_type;
+    const glm::uvec3& tri = triangles[prim];
+    const vec v[3] = {vec(positions[tri.x]), vec(positions[tri.y]), vec(positions[tri.z])};
+    const real p = plane;
+    Box l, r;
+    auto grow = [](Box* b, const vec& x) {
+      if constexpr (exact)
+        grow_outwards(b, x);
+      else
+        b->grow(x);
+    };
+    for (int k = 0; k < 3; ++k) {
+      const vec &a = v[k], &b = v[(k + 1) % 3];
+      if (a[axis] <= p) grow(&l, a);
+      if (a[axis] >= p) grow(&r, a);
+      if ((a[axis] < p && b[axis] > p) || (a[axis] > p && b[axis] < p)) {
+        vec x = a + (b - a) * ((p - a[axis]) / (b[axis] - a[axis]));
+        x[axis] = p;
+        grow(&l, x);
+        grow(&r, x);
+      }
+    }
+    *left = intersect(*left, l);
+    *right = intersect(*right, r);
+  }
 };
 
 class BinaryBuilder {
  public:
-  BinaryBuilder(const std::vector<Box>& boxes, const BvhParams& params)
-      : boxes_(boxes), params_(params) {
-    centroids_.reserve(boxes.size());
-    for (const Box& b : boxes) centroids_.push_back(0.5f * (b.lo + b.hi));
-  }
+  BinaryBuilder(const std::vector<Box>& boxes, const BvhParams& params, const SplitGeometry& geometry)
+      : boxes_(boxes), params_(params), geometry_(geometry) {}
 
-  // Builds over the given triangle ids; returns the root (binary node 0).
+  // Builds over the given primitive ids; returns the root (binary node 0).
   // `threads` > 1: the subtrees of the top splits are built on threads of their
   // own (the same tree whatever the count; only the nodes' numbering differs).
-  void build(std::vector<uint32_t> ids, unsigned threads) {
-    index_ = std::move(ids);
-    nodes_.reserve(2 * index_.size());
+  void build(const std::vector<uint32_t>& ids, unsigned threads) {
+    std::vector<Ref> refs(ids.size());
+    Box box;
+    for (size_t i = 0; i < ids.size(); ++i) {
+      refs[i] = {boxes_[ids[i]], ids[i]};
+      box.grow(refs[i].box);
+    }
+    root_area_ = box.half_area();
+    const uint32_t budget = params_.spatial_splits ? static_cast<uint32_t>(params_.split_budget * ids.size()) : 0u;
+    nodes_.reserve(2 * ids.size());
+    index_.reserve(ids.size());
     nodes_.emplace_back();
     int parallel_levels = 0;
     while ((2u << parallel_levels) <= threads && parallel_levels < 4) ++parallel_levels;
-    build_node(nodes_, 0, 0, static_cast<uint32_t>(index_.size()), 1, parallel_levels);
+    build_node(nodes_, index_, 0, std::move(refs), 1, parallel_levels, budget);
   }
 
   const std::vector<BinaryNode>& nodes() const { return nodes_; }
@@ -79,13 +159,14 @@ class BinaryBuilder {
     int axis = -1;                                  // -1: none found
     int bin = 0;                                    // left side is bins [0, bin]
     float cost = std::numeric_limits<float>::max();  // sum of area * count of both sides
+    Box left, right;                                 // bounds of both sides
   };
 
   // Triangle tests come in packs of PSF_BVH_WIDTH: the SAH counts packs.
   static float packs(uint32_t n) { return float((n + PSF_BVH_WIDTH - 1) / PSF_BVH_WIDTH); }
 
-  // The bin of centroid coordinate c; clamped before the conversion to int so that
-  // an overflowing scale (a tiny extent) cannot produce an out-of-range value.
+  // The bin of coordinate c; clamped before the conversion to int so that an
+  // overflowing scale (a tiny extent) cannot produce an out-of-range value.
   static int bin_of(float c, float lo, float scale, int bins) {
     float f = (c - lo) * scale;
     if (!(f > 0.0f)) return 0;
@@ -93,126 +174,276 @@ class BinaryBuilder {
     return static_cast<int>(f);
   }
 
-  Split find_split(uint32_t first, uint32_t count, const Box& cbox) const {
+  // The cheapest boundary between an axis's bins by the SAH: the left side
+  // bins [0, bin], which hold the references that enter[] counts in their
+  // first bin, the right side those that leave[] counts in their last; both
+  // sides must hold some, and neither all `total`.
+  struct Sweep {
+    int bin = -1;
+    float cost = std::numeric_limits<float>::max();
+    Box left, right;
+  };
+  static Sweep sweep(const std::vector<Box>& bin_box, const std::vector<uint32_t>& enter,
+                     const std::vector<uint32_t>& leave, uint32_t total) {
+    const int bins = static_cast<int>(bin_box.size());
+    std::vector<Box> right_box(bins);
+    std::vector<uint32_t> right_count(bins);
+    Box acc;
+    uint32_t n = 0;
+    for (int b = bins - 1; b > 0; --b) {
+      acc.grow(bin_box[b]);
+      n += leave[b];
+      right_box[b] = acc;
+      right_count[b] = n;
+    }
+    Sweep best;
+    acc = Box{};
+    n = 0;
+    for (int b = 0; b < bins - 1; ++b) {
+      acc.grow(bin_box[b]);
+      n += enter[b];
+      const uint32_t nr = right_count[b + 1];
+      if (n == 0 || nr == 0 || n >= total || nr >= total) continue;
+      const float cost = acc.half_area() * packs(n) + right_box[b + 1].half_area() * packs(nr);
+      if (cost < best.cost) best = {b, cost, acc, right_box[b + 1]};
+    }
+    return best;
+  }
+
+  // The best split of the references by their centroids' bins (object split).
+  Split find_split(const std::vector<Ref>& refs, const Box& cbox) const {
     const int bins = std::max(2, params_.bins);
     Split best;
     std::vector<Box> bin_box(bins);
     std::vector<uint32_t> bin_count(bins);
-    std::vector<float> right_area(bins);
-    std::vector<uint32_t> right_count(bins);
     for (int axis = 0; axis < 3; ++axis) {
       float lo = cbox.lo[axis], extent = cbox.hi[axis] - cbox.lo[axis];
       if (!(extent > 0.0f)) continue;
       float scale = bins / extent;
       std::fill(bin_box.begin(), bin_box.end(), Box{});
       std::fill(bin_count.begin(), bin_count.end(), 0u);
-      for (uint32_t i = first; i < first + count; ++i) {
-        uint32_t t = index_[i];
-        int b = bin_of(centroids_[t][axis], lo, scale, bins);
-        bin_box[b].grow(boxes_[t]);
+      for (const Ref& r : refs) {
+        int b = bin_of(r.centroid()[axis], lo, scale, bins);
+        bin_box[b].grow(r.box);
         bin_count[b] += 1;
       }
-      Box acc;
-      uint32_t n = 0;
-      for (int b = bins - 1; b > 0; --b) {
-        acc.grow(bin_box[b]);
-        n += bin_count[b];
-        right_area[b] = acc.half_area();
-        right_count[b] = n;
-      }
-      acc = Box{};
-      n = 0;
-      for (int b = 0; b < bins - 1; ++b) {
-        acc.grow(bin_box[b]);
-        n += bin_count[b];
-        if (n == 0 || right_count[b + 1] == 0) continue;
-        float cost = acc.half_area() * packs(n) + right_area[b + 1] * packs(right_count[b + 1]);
-        if (cost < best.cost) best = {axis, b, cost};
-      }
+      const Sweep w = sweep(bin_box, bin_count, bin_count, static_cast<uint32_t>(refs.size()));
+      if (w.cost < best.cost) best = {axis, w.bin, w.cost, w.left, w.right};
     }
     return best;
   }
 
-  static void make_leaf(std::vector<BinaryNode>& nodes, uint32_t node, uint32_t first, uint32_t count) {
-    nodes[node].first = first;
-    nodes[node].count = count;
+  // A spatial split (Stich, Friedrich, Dietrich, "Spatial splits in bounding
+  // volume hierarchies", HPG 2009): a plane through the node's box; references
+  // crossing it go to both sides, each clipped to its side.
+  struct SpatialSplit {
+    int axis = -1;
+    float plane = 0.0f;
+    float cost = std::numeric_limits<float>::max();
+  };
+
+  // The plane between spatial bins b and b + 1 of an axis over [lo, lo + extent].
+  static float spatial_plane(float lo, float extent, int b, int bins) { return lo + extent * float(b + 1) / bins; }
+
+  SpatialSplit find_spatial_split(const std::vector<Ref>& refs, const Box& box) const {
+    const int bins = std::max(2, params_.bins);
+    SpatialSplit best;
+    std::vector<Box> bin_box(bins);
+    std::vector<uint32_t> enter(bins), leave(bins);
+    for (int axis = 0; axis < 3; ++axis) {
+      const float lo = box.lo[axis], extent = box.hi[axis] - box.lo[axis];
+      if (!(extent > 0.0f)) continue;
+      const float scale = bins / extent;
+      std::fill(bin_box.begin(), bin_box.end(), Box{});
+      std::fill(enter.begin(), enter.end(), 0u);
+      std::fill(leave.begin(), leave.end(), 0u);
+      for (const Ref& r : refs) {
+        const int b0 = bin_of(r.box.lo[axis], lo, scale, bins),
+                  b1 = std::max(b0, bin_of(r.box.hi[axis], lo, scale, bins));
+        enter[b0] += 1;
+        leave[b1] += 1;
+        if (b0 == b1) {
+          bin_box[b0].grow(r.box);
+          continue;
+        }
+        // Cut at each plane in turn: the part left of it into its bin.
+        Box rest = r.box;
+        for (int b = b0; b < b1; ++b) {
+          Box part;
+          geometry_.split<false>(r.prim, rest, axis, spatial_plane(lo, extent, b, bins), &part, &rest);
+          bin_box[b].grow(part);
+        }
+        bin_box[b1].grow(rest);
+      }
+      const Sweep w = sweep(bin_box, enter, leave, static_cast<uint32_t>(refs.size()));
+      if (w.cost < best.cost) best = {axis, spatial_plane(lo, extent, w.bin, bins), w.cost};
+    }
+    return best;
   }
 
-  // Node `node` of `nodes` over index_[first, first + count). parallel_levels > 0:
-  // the left subtree goes to another thread, into a vector of its own that is
-  // then appended to `nodes` (the two threads partition disjoint ranges of index_).
-  void build_node(std::vector<BinaryNode>& nodes, uint32_t node, uint32_t first, uint32_t count, int depth,
-                  int parallel_levels) {
+  // Splits `refs` at the plane of `s` into *left and *right: a reference wholly
+  // on one side goes there; one that crosses it goes to both, clipped, unless
+  // moving it whole to one side costs less by the SAH (Stich et al.'s reference
+  // unsplitting), or its part on one side is empty.
+  void spatial_partition(const std::vector<Ref>& refs, const SpatialSplit& s, std::vector<Ref>* left,
+                         std::vector<Ref>* right) const {
+    std::vector<const Ref*> crossing;
+    Box lbox, rbox;
+    for (const Ref& r : refs) {
+      if (r.box.hi[s.axis] <= s.plane) {
+        left->push_back(r);
+        lbox.grow(r.box);
+      } else if (r.box.lo[s.axis] >= s.plane) {
+        right->push_back(r);
+        rbox.grow(r.box);
+      } else {
+        crossing.push_back(&r);
+      }
+    }
+    for (const Ref* r : crossing) {
+      Box lpart, rpart;
+      geometry_.split<true>(r->prim, r->box, s.axis, s.plane, &lpart, &rpart);
+      const float nl = packs(uint32_t(left->size()) + 1u), nr = packs(uint32_t(right->size()) + 1u);
+      const float nl0 = packs(uint32_t(left->size())), nr0 = packs(uint32_t(right->size()));
+      Box l = lbox, r2 = rbox, lwhole = lbox, rwhole = rbox;
+      l.grow(lpart);
+      r2.grow(rpart);
+      lwhole.grow(r->box);
+      rwhole.grow(r->box);
+      const float split = l.half_area() * nl + r2.half_area() * nr;
+      const float to_left = lwhole.half_area() * nl + rbox.half_area() * nr0;
+      const float to_right = lbox.half_area() * nl0 + rwhole.half_area() * nr;
+      if (rpart.empty() || (!lpart.empty() && to_left <= split && to_left <= to_right)) {
+        left->push_back(*r);
+        lbox.grow(r->box);
+      } else if (lpart.empty() || to_right <= split) {
+        right->push_back(*r);
+        rbox.grow(r->box);
+      } else {
+        left->push_back({lpart, r->prim});
+        right->push_back({rpart, r->prim});
+        lbox.grow(lpart);
+        rbox.grow(rpart);
+      }
+    }
+  }
+
+  static void make_leaf(std::vector<BinaryNode>& nodes, std::vector<uint32_t>& index, uint32_t node,
+                        const std::vector<Ref>& refs) {
+    nodes[node].first = static_cast<uint32_t>(index.size());
+    nodes[node].count = static_cast<uint32_t>(refs.size());
+    for (const Ref& r : refs) index.push_back(r.prim);
+  }
+
+  // Node `node` of `nodes` over the references `refs`, its leaves' primitives
+  // appended to `index`; `budget`: how many references spatial splits may
+  // still add in this subtree. parallel_levels > 0: the left subtree goes to
+  // another thread, into vectors of its own that are then appended to `nodes`
+  // and `index`.
+  void build_node(std::vector<BinaryNode>& nodes, std::vector<uint32_t>& index, uint32_t node, std::vector<Ref> refs,
+                  int depth, int parallel_levels, uint32_t budget) {
     Box box, cbox;
-    for (uint32_t i = first; i < first + count; ++i) {
-      box.grow(boxes_[index_[i]]);
-      cbox.grow(centroids_[index_[i]]);
+    for (const Ref& r : refs) {
+      box.grow(r.box);
+      cbox.grow(r.centroid());
     }
     nodes[node].box = box;
-    if (count <= 1) return make_leaf(nodes, node, first, count);
+    const uint32_t count = static_cast<uint32_t>(refs.size());
+    if (count <= 1) return make_leaf(nodes, index, node, refs);
 
     // Balanced splits from here on must still end within PSF_BVH_MAX_DEPTH levels.
     int levels_needed = static_cast<int>(std::ceil(std::log2(double(count)))) + 1;
     bool force_median = depth + levels_needed >= PSF_BVH_MAX_DEPTH;
 
-    uint32_t mid = first;
-    if (force_median && count <= params_.max_leaf) return make_leaf(nodes, node, first, count);
+    std::vector<Ref> left, right;
+    if (force_median && count <= params_.max_leaf) return make_leaf(nodes, index, node, refs);
     if (!force_median) {
-      Split s = find_split(first, count, cbox);
+      Split s = find_split(refs, cbox);
       float area = box.half_area();
+      SpatialSplit ss;
+      // Spatial splits where the object split's sides overlap by more than
+      // split_alpha of the root's area.
+      if (budget > 0 && s.axis >= 0 && intersect(s.left, s.right).half_area() > params_.split_alpha * root_area_)
+        ss = find_spatial_split(refs, box);
+      const bool spatial = ss.axis >= 0 && ss.cost < s.cost;
+      const float best_cost = spatial ? ss.cost : s.cost;
       float leaf_cost = params_.intersection_cost * packs(count);
-      float split_cost = params_.traversal_cost +
-                         (area > 0.0f ? params_.intersection_cost * s.cost / area : 0.0f);
-      if (count <= params_.max_leaf && (s.axis < 0 || leaf_cost <= split_cost))
-        return make_leaf(nodes, node, first, count);
-      if (s.axis >= 0) {
+      float split_cost = params_.traversal_cost + (area > 0.0f ? params_.intersection_cost * best_cost / area : 0.0f);
+      if (count <= params_.max_leaf && ((s.axis < 0 && !spatial) || leaf_cost <= split_cost))
+        return make_leaf(nodes, index, node, refs);
+      if (spatial) {
+        spatial_partition(refs, ss, &left, &right);
+        if (left.size() + right.size() - count > budget || left.empty() || right.empty()) {
+          left.clear();
+          right.clear();
+        }
+      }
+      if (left.empty() && s.axis >= 0) {
         const int bins = std::max(2, params_.bins);
         float lo = cbox.lo[s.axis], scale = bins / (cbox.hi[s.axis] - cbox.lo[s.axis]);
-        auto it = std::partition(index_.begin() + first, index_.begin() + first + count, [&](uint32_t t) {
-          return bin_of(centroids_[t][s.axis], lo, scale, bins) <= s.bin;
-        });
-        mid = static_cast<uint32_t>(it - index_.begin());
+        auto it = std::partition(refs.begin(), refs.end(),
+                                 [&](const Ref& r) { return bin_of(r.centroid()[s.axis], lo, scale, bins) <= s.bin; });
+        left.assign(refs.begin(), it);
+        right.assign(it, refs.end());
       }
     }
-    if (mid == first || mid == first + count) {
+    if (left.empty() || right.empty()) {
       // No usable SAH split (all centroids equal) or the depth budget is short:
       // median split along the widest centroid axis.
       glm::vec3 ext = cbox.hi - cbox.lo;
       int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
-      mid = first + count / 2;
-      std::nth_element(index_.begin() + first, index_.begin() + mid, index_.begin() + first + count,
-                       [&](uint32_t a, uint32_t b) { return centroids_[a][axis] < centroids_[b][axis]; });
+      const uint32_t mid = count / 2;
+      std::nth_element(refs.begin(), refs.begin() + mid, refs.end(),
+                       [&](const Ref& a, const Ref& b) { return a.centroid()[axis] < b.centroid()[axis]; });
+      left.assign(refs.begin(), refs.begin() + mid);
+      right.assign(refs.begin() + mid, refs.end());
     }
-    uint32_t left = static_cast<uint32_t>(nodes.size());
+    // What is left of the budget, shared by the sides' sizes.
+    const uint32_t added = static_cast<uint32_t>(left.size() + right.size()) - count;
+    const uint32_t rest = budget - std::min(budget, added);
+    const uint32_t left_budget = static_cast<uint32_t>(uint64_t(rest) * left.size() / (left.size() + right.size()));
+    const uint32_t right_budget = rest - left_budget;
+    refs.clear();
+    refs.shrink_to_fit();
+
+    uint32_t first_child = static_cast<uint32_t>(nodes.size());
     nodes.emplace_back();
     nodes.emplace_back();
-    nodes[node].left = left;
-    nodes[node].right = left + 1;
-    const uint32_t left_count = mid - first, right_count = first + count - mid;
+    nodes[node].left = first_child;
+    nodes[node].right = first_child + 1;
+    const size_t left_count = left.size(), right_count = right.size();
     if (parallel_levels <= 0 || std::min(left_count, right_count) < kParallelMin) {
-      build_node(nodes, left, first, left_count, depth + 1, 0);
-      build_node(nodes, left + 1, mid, right_count, depth + 1, 0);
+      build_node(nodes, index, first_child, std::move(left), depth + 1, 0, left_budget);
+      build_node(nodes, index, first_child + 1, std::move(right), depth + 1, 0, right_budget);
       return;
     }
+    // The left subtree on another thread, into `sub` and `sub_index`; its
+    // leaves' primitives then follow the right subtree's in `index`.
     std::vector<BinaryNode> sub;
-    sub.reserve(2 * size_t(left_count));
+    std::vector<uint32_t> sub_index;
+    sub.reserve(2 * left_count);
+    sub_index.reserve(left_count);
     sub.emplace_back();
     std::future<void> done = std::async(std::launch::async, [&] {
-      build_node(sub, 0, first, left_count, depth + 1, parallel_levels - 1);
+      build_node(sub, sub_index, 0, std::move(left), depth + 1, parallel_levels - 1, left_budget);
     });
-    build_node(nodes, left + 1, mid, right_count, depth + 1, parallel_levels - 1);
+    build_node(nodes, index, first_child + 1, std::move(right), depth + 1, parallel_levels - 1, right_budget);
     done.get();  // rethrows what the thread threw
-    // sub[0] becomes nodes[left], sub[k] (k >= 1) nodes[base + k - 1]; an inner
-    // node's children are never node 0, so left == 0 marks a leaf.
+    // sub[0] becomes nodes[first_child], sub[k] (k >= 1) nodes[base + k - 1]; an
+    // inner node's children are never node 0, so left == 0 marks a leaf.
     const uint32_t base = static_cast<uint32_t>(nodes.size());
-    auto place = [&](uint32_t k) { return k == 0 ? left : base + k - 1; };
+    const uint32_t index_base = static_cast<uint32_t>(index.size());
+    auto place = [&](uint32_t k) { return k == 0 ? first_child : base + k - 1; };
     for (BinaryNode& n : sub)
       if (n.left != 0) {
         n.left = place(n.left);
         n.right = place(n.right);
+      } else {
+        n.first += index_base;
       }
-    nodes[left] = sub[0];
+    nodes[first_child] = sub[0];
     nodes.insert(nodes.end(), sub.begin() + 1, sub.end());
+    index.insert(index.end(), sub_index.begin(), sub_index.end());
   }
 
   // Subtrees smaller than this are built on the thread that split them.
@@ -220,7 +451,8 @@ class BinaryBuilder {
 
   const std::vector<Box>& boxes_;
   const BvhParams& params_;
-  std::vector<glm::vec3> centroids_;
+  const SplitGeometry& geometry_;
+  float root_area_ = 0.0f;
   std::vector<uint32_t> index_;
   std::vector<BinaryNode> nodes_;
 };
@@ -382,13 +614,15 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
     bvh.nodes.push_back(empty_node());
     bvh.depth = 1;
   } else {
-    BinaryBuilder builder(boxes, params);
-    builder.build(std::move(ids), params.threads > 0 ? unsigned(params.threads)
-                                                     : std::max(1u, std::thread::hardware_concurrency()));
+    const SplitGeometry geometry{positions, triangles, first_sphere};
+    BinaryBuilder builder(boxes, params, geometry);
+    builder.build(ids,
+                  params.threads > 0 ? unsigned(params.threads) : std::max(1u, std::thread::hardware_concurrency()));
     const std::vector<uint32_t>& order = builder.index();
     // A binary leaf's triangles, PSF_BVH_WIDTH to a pack, then its spheres in
     // packs of their own, appended in leaf order.
     auto write_leaf = [&](const BinaryNode& leaf) {
+      bvh.references += leaf.count;
       uint32_t first = static_cast<uint32_t>(bvh.packs.size());
       uint32_t lanes = 0;
       for (uint32_t k = 0; k < leaf.count; ++k) {

@@ -593,16 +593,19 @@ TEST_CASE("Raycast: axis-aligned and special rays give no NaN", "[raycast]") {
   }
 }
 
-TEST_CASE("Raycast: BVH structure references every triangle once inside its boxes", "[raycast]") {
+TEST_CASE("Raycast: without spatial splits the BVH references every triangle once inside its boxes", "[raycast]") {
   Mesh m = random_soup(77, 5000, 0.05f);
   m.add_triangle({0.5f, 0.5f, 0.5f}, {0.5f, 0.5f, 0.5f}, {0.6f, 0.5f, 0.5f});  // degenerate: left out
   for (int k = 0; k < 100; ++k)  // equal centroids
     m.add_triangle({0.2f, 0.2f, 0.2f}, {0.3f, 0.2f, 0.2f}, {0.2f, 0.3f, 0.2f});
   for (int k = 0; k < 50; ++k)  // centroids a denormal apart: bins / extent overflows
     m.add_triangle({k * 1e-43f, 0, 0}, {1e-3f, 0, 0}, {0, 1e-3f, 0});
-  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  psf::BvhParams whole;
+  whole.spatial_splits = false;
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, {}, whole);
   REQUIRE(bvh.skipped == 1);
   REQUIRE(bvh.triangle_count == m.triangles.size() - 1);
+  CHECK(bvh.references == bvh.triangle_count);
   CHECK(bvh.depth >= 1);
   CHECK(bvh.depth <= PSF_BVH_MAX_DEPTH);
   std::vector<int> refs(m.triangles.size(), 0);     // leaf references of each scene triangle
@@ -686,11 +689,105 @@ TEST_CASE("Raycast: BVH structure references every triangle once inside its boxe
   CHECK(leaves >= bvh.triangle_count / PSF_LEAF_MAX_TRIS);
 }
 
+// Long thin triangles across a soup of small ones: their boxes overlap most of
+// the soup's, which is where spatial splits cut them.
+Mesh soup_with_slivers(uint32_t seed, size_t small, size_t slivers) {
+  Mesh m = random_soup(seed, small, 0.02f);
+  std::mt19937 rng(seed + 1000);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  for (size_t k = 0; k < slivers; ++k) {
+    const vec3 a(u01(rng), u01(rng), u01(rng)), b(u01(rng), u01(rng), u01(rng));
+    m.add_triangle(a, b, b + 0.01f * uniform_sphere(rng));
+  }
+  return m;
+}
+
+TEST_CASE("Raycast: spatial splits cut long triangles, every point of a triangle in a leaf box that holds it",
+          "[raycast]") {
+  Mesh m = soup_with_slivers(5, 3000, 300);
+  const psf::BvhParams params;
+  REQUIRE(params.spatial_splits);
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles, {}, params);
+  REQUIRE(bvh.triangle_count == m.triangles.size());
+  // The slivers were cut (some triangles are in several leaves), within the budget.
+  CHECK(bvh.references > bvh.triangle_count + 100);
+  CHECK(bvh.references <= bvh.triangle_count + uint32_t(params.split_budget * bvh.triangle_count));
+  // Every leaf's triangles with its box.
+  struct Leaf {
+    glm::dvec3 lo, hi;
+  };
+  std::vector<std::vector<Leaf>> leaves_of(m.triangles.size());
+  uint32_t lanes = 0;
+  std::vector<uint32_t> todo = {0};
+  while (!todo.empty()) {
+    const BvhNode& n = bvh.nodes[todo.back()];
+    todo.pop_back();
+    for (int s = 0; s < PSF_BVH_WIDTH; ++s) {
+      const uint32_t c = n.child[s];
+      if (c == PSF_EMPTY_CHILD) continue;
+      if (!psf::is_leaf(c)) {
+        REQUIRE(c < bvh.nodes.size());
+        todo.push_back(c);
+        continue;
+      }
+      const Leaf box{{n.min_x[s], n.min_y[s], n.min_z[s]}, {n.max_x[s], n.max_y[s], n.max_z[s]}};
+      std::vector<uint32_t> seen;
+      for (uint32_t k = psf::leaf_first(c); k < psf::leaf_first(c) + psf::leaf_count(c); ++k)
+        for (int lane = 0; lane < PSF_BVH_WIDTH; ++lane) {
+          const uint32_t prim = bvh.packs[k].prim[lane];
+          if (prim == PSF_NO_HIT) continue;
+          REQUIRE(prim < m.triangles.size());
+          CHECK(std::find(seen.begin(), seen.end(), prim) == seen.end());  // once in a leaf
+          seen.push_back(prim);
+          leaves_of[prim].push_back(box);
+          ++lanes;
+        }
+    }
+  }
+  CHECK(lanes == bvh.references);
+  // Points on each triangle (its corners, edges and inside, in double) lie in
+  // some leaf box that holds it: the clipped boxes are conservative.
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  size_t cut = 0, missed = 0;
+  for (size_t t = 0; t < m.triangles.size(); ++t) {
+    const std::vector<Leaf>& boxes = leaves_of[t];
+    REQUIRE(!boxes.empty());
+    cut += boxes.size() > 1;
+    const glm::dvec3 a(m.positions[m.triangles[t].x]), b(m.positions[m.triangles[t].y]),
+        c(m.positions[m.triangles[t].z]);
+    // The corners, the edges' midpoints, then random points inside.
+    const double fixed_u[6] = {0, 1, 0, 0.5, 0, 0.5}, fixed_v[6] = {0, 0, 1, 0, 0.5, 0.5};
+    for (int k = 0; k < 64; ++k) {
+      double u = u01(rng), v = u01(rng);
+      if (k < 6) {
+        u = fixed_u[k];
+        v = fixed_v[k];
+      } else if (u + v > 1.0) {
+        u = 1.0 - u;
+        v = 1.0 - v;
+      }
+      const glm::dvec3 p = a + u * (b - a) + v * (c - a);
+      bool inside = false;
+      for (const Leaf& l : boxes)
+        inside |= glm::all(glm::lessThanEqual(l.lo, p)) && glm::all(glm::lessThanEqual(p, l.hi));
+      missed += !inside;
+    }
+  }
+  CHECK(cut > 50);
+  CHECK(missed == 0);
+  // Casts through it (and the flat casts over its packs, duplicates included)
+  // against the brute-force reference.
+  std::vector<Ray> rays = rays_in_box(23, 4001, vec3(-0.1f), vec3(1.1f), 3.0f);
+  CHECK(check_scene(m, rays) > rays.size() / 10);
+}
+
 TEST_CASE("Raycast: the BVH is the same whatever the number of build threads", "[raycast]") {
   // Subtrees of at least 4096 triangles on both sides of a top split are built
   // on threads of their own and their nodes spliced in: the wide nodes and packs
   // must come out byte for byte as from one thread (images never depend on cores).
-  Mesh m = random_soup(91, 40000, 0.02f);
+  // Spatial splits too: long triangles cut in the subtrees built on threads.
+  Mesh m = soup_with_slivers(91, 40000, 2000);
   for (int k = 0; k < 6000; ++k)  // a cluster of equal centroids: median splits below a parallel level
     m.add_triangle({0.7f, 0.7f, 0.7f}, {0.71f, 0.7f, 0.7f}, {0.7f, 0.71f, 0.7f});
   psf::BvhParams one, many;
@@ -699,6 +796,7 @@ TEST_CASE("Raycast: the BVH is the same whatever the number of build threads", "
   const psf::Bvh a = psf::build_bvh(m.positions, m.triangles, {}, one);
   const psf::Bvh b = psf::build_bvh(m.positions, m.triangles, {}, many);
   REQUIRE(a.nodes.size() > 500);
+  CHECK(a.references > a.triangle_count + 1000);
   REQUIRE(a.nodes.size() == b.nodes.size());
   REQUIRE(a.packs.size() == b.packs.size());
   CHECK(a.depth == b.depth);
