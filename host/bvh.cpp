@@ -86,22 +86,34 @@ struct SplitGeometry {
   const std::vector<glm::uvec3>& triangles;
   size_t first_sphere;
 
-  // The bounds of the parts of primitive `prim` on either side of the plane
+  // A primitive as a split sees it: a triangle's vertices, or a sphere.
+  struct Shape {
+    bool sphere = false;
+    glm::vec3 v[3];
+  };
+  Shape shape(uint32_t prim) const {
+    Shape s;
+    s.sphere = prim >= first_sphere;
+    if (!s.sphere)
+      for (int k = 0; k < 3; ++k) s.v[k] = positions[triangles[prim][k]];
+    return s;
+  }
+
+  // The bounds of the parts of primitive `shape` on either side of the plane
   // x[axis] = plane, each cut to `box` (the reference's) and to its side: a
   // triangle's vertices and its edges' crossings of the plane, a sphere's box
   // cut by the plane. `exact`: the crossings in double and their bounds
   // rounded outwards (the splits made), else in float (the bins' estimates).
   template <bool exact>
-  void split(uint32_t prim, const Box& box, int axis, float plane, Box* left, Box* right) const {
+  static void split(const Shape& shape, const Box& box, int axis, float plane, Box* left, Box* right) {
     *left = box;
     *right = box;
     left->hi[axis] = std::min(left->hi[axis], plane);
     right->lo[axis] = std::max(right->lo[axis], plane);
-    if (prim >= first_sphere) return;
+    if (shape.sphere) return;
     using vec = std::conditional_t<exact, glm::dvec3, glm::vec3>;
     using real = typename vec::value_type;
-    const glm::uvec3& tri = triangles[prim];
-    const vec v[3] = {vec(positions[tri.x]), vec(positions[tri.y]), vec(positions[tri.z])};
+    const vec v[3] = {vec(shape.v[0]), vec(shape.v[1]), vec(shape.v[2])};
     const real p = plane;
     Box l, r;
     auto grow = [](Box* b, const vec& x) {
@@ -142,7 +154,11 @@ class BinaryBuilder {
       box.grow(refs[i].box);
     }
     root_area_ = box.half_area();
-    const uint32_t budget = params_.spatial_splits ? static_cast<uint32_t>(params_.split_budget * ids.size()) : 0u;
+    Budget budget;
+    if (params_.spatial_splits) {
+      budget.refs = static_cast<uint64_t>(params_.split_budget * ids.size());
+      budget.cuts = static_cast<uint64_t>(params_.split_cuts * ids.size());
+    }
     nodes_.reserve(2 * ids.size());
     index_.reserve(ids.size());
     nodes_.emplace_back();
@@ -183,9 +199,7 @@ class BinaryBuilder {
     float cost = std::numeric_limits<float>::max();
     Box left, right;
   };
-  static Sweep sweep(const std::vector<Box>& bin_box, const std::vector<uint32_t>& enter,
-                     const std::vector<uint32_t>& leave, uint32_t total) {
-    const int bins = static_cast<int>(bin_box.size());
+  static Sweep sweep(const Box* bin_box, const uint32_t* enter, const uint32_t* leave, int bins, uint32_t total) {
     std::vector<Box> right_box(bins);
     std::vector<uint32_t> right_count(bins);
     Box acc;
@@ -227,7 +241,8 @@ class BinaryBuilder {
         bin_box[b].grow(r.box);
         bin_count[b] += 1;
       }
-      const Sweep w = sweep(bin_box, bin_count, bin_count, static_cast<uint32_t>(refs.size()));
+      const Sweep w =
+          sweep(bin_box.data(), bin_count.data(), bin_count.data(), bins, static_cast<uint32_t>(refs.size()));
       if (w.cost < best.cost) best = {axis, w.bin, w.cost, w.left, w.right};
     }
     return best;
@@ -240,43 +255,77 @@ class BinaryBuilder {
     int axis = -1;
     float plane = 0.0f;
     float cost = std::numeric_limits<float>::max();
+    uint64_t cuts = 0;  // cuts of references at bin planes that the search made
+  };
+
+  // What spatial splits may still spend in a subtree: references added, and
+  // cuts of references at bin planes in the searches (the build's time), each
+  // shared by the two sides of a split in proportion to their sizes, so that
+  // the tree does not depend on the build's threads.
+  struct Budget {
+    uint64_t refs = 0;
+    uint64_t cuts = 0;
+    // What is left after `added` references and `cuts` cuts, for a side of
+    // `part` of `total` references.
+    Budget share(uint64_t added, uint64_t spent, size_t part, size_t total) const {
+      const uint64_t r = refs - std::min(refs, added), c = cuts - std::min(cuts, spent);
+      return {r * part / total, c * part / total};
+    }
   };
 
   // The plane between spatial bins b and b + 1 of an axis over [lo, lo + extent].
   static float spatial_plane(float lo, float extent, int b, int bins) { return lo + extent * float(b + 1) / bins; }
 
+  // Bins every reference on the three axes in one pass over them (a
+  // triangle's vertices read once), then sweeps each axis.
   SpatialSplit find_spatial_split(const std::vector<Ref>& refs, const Box& box) const {
     const int bins = std::max(2, params_.bins);
     SpatialSplit best;
-    std::vector<Box> bin_box(bins);
-    std::vector<uint32_t> enter(bins), leave(bins);
+    std::vector<Box> bin_box(3 * bins);
+    std::vector<uint32_t> enter(3 * bins), leave(3 * bins);
+    float scale[3];
+    bool axes[3];
     for (int axis = 0; axis < 3; ++axis) {
-      const float lo = box.lo[axis], extent = box.hi[axis] - box.lo[axis];
-      if (!(extent > 0.0f)) continue;
-      const float scale = bins / extent;
-      std::fill(bin_box.begin(), bin_box.end(), Box{});
-      std::fill(enter.begin(), enter.end(), 0u);
-      std::fill(leave.begin(), leave.end(), 0u);
-      for (const Ref& r : refs) {
-        const int b0 = bin_of(r.box.lo[axis], lo, scale, bins),
-                  b1 = std::max(b0, bin_of(r.box.hi[axis], lo, scale, bins));
-        enter[b0] += 1;
-        leave[b1] += 1;
-        if (b0 == b1) {
-          bin_box[b0].grow(r.box);
-          continue;
-        }
-        // Cut at each plane in turn: the part left of it into its bin.
-        Box rest = r.box;
-        for (int b = b0; b < b1; ++b) {
-          Box part;
-          geometry_.split<false>(r.prim, rest, axis, spatial_plane(lo, extent, b, bins), &part, &rest);
-          bin_box[b].grow(part);
-        }
-        bin_box[b1].grow(rest);
+      const float extent = box.hi[axis] - box.lo[axis];
+      axes[axis] = extent > 0.0f;
+      scale[axis] = axes[axis] ? bins / extent : 0.0f;
+    }
+    for (const Ref& r : refs) {
+      int b0[3], b1[3];
+      bool crossing = false;
+      for (int axis = 0; axis < 3; ++axis) {
+        if (!axes[axis]) continue;
+        b0[axis] = bin_of(r.box.lo[axis], box.lo[axis], scale[axis], bins);
+        b1[axis] = std::max(b0[axis], bin_of(r.box.hi[axis], box.lo[axis], scale[axis], bins));
+        enter[axis * bins + b0[axis]] += 1;
+        leave[axis * bins + b1[axis]] += 1;
+        if (b0[axis] == b1[axis])
+          bin_box[axis * bins + b0[axis]].grow(r.box);
+        else
+          crossing = true;
       }
-      const Sweep w = sweep(bin_box, enter, leave, static_cast<uint32_t>(refs.size()));
-      if (w.cost < best.cost) best = {axis, spatial_plane(lo, extent, w.bin, bins), w.cost};
+      if (!crossing) continue;
+      const SplitGeometry::Shape shape = geometry_.shape(r.prim);
+      for (int axis = 0; axis < 3; ++axis) {
+        if (!axes[axis] || b0[axis] == b1[axis]) continue;
+        // Cut at each plane in turn: the part left of it into its bin.
+        const float extent = box.hi[axis] - box.lo[axis];
+        Box rest = r.box;
+        for (int b = b0[axis]; b < b1[axis]; ++b) {
+          Box part;
+          SplitGeometry::split<false>(shape, rest, axis, spatial_plane(box.lo[axis], extent, b, bins), &part, &rest);
+          bin_box[axis * bins + b].grow(part);
+        }
+        bin_box[axis * bins + b1[axis]].grow(rest);
+        best.cuts += static_cast<uint64_t>(b1[axis] - b0[axis]);
+      }
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!axes[axis]) continue;
+      const Sweep w = sweep(&bin_box[axis * bins], &enter[axis * bins], &leave[axis * bins], bins,
+                            static_cast<uint32_t>(refs.size()));
+      if (w.cost < best.cost)
+        best = {axis, spatial_plane(box.lo[axis], box.hi[axis] - box.lo[axis], w.bin, bins), w.cost, best.cuts};
     }
     return best;
   }
@@ -302,7 +351,7 @@ class BinaryBuilder {
     }
     for (const Ref* r : crossing) {
       Box lpart, rpart;
-      geometry_.split<true>(r->prim, r->box, s.axis, s.plane, &lpart, &rpart);
+      SplitGeometry::split<true>(geometry_.shape(r->prim), r->box, s.axis, s.plane, &lpart, &rpart);
       const float nl = packs(uint32_t(left->size()) + 1u), nr = packs(uint32_t(right->size()) + 1u);
       const float nl0 = packs(uint32_t(left->size())), nr0 = packs(uint32_t(right->size()));
       Box l = lbox, r2 = rbox, lwhole = lbox, rwhole = rbox;
@@ -336,12 +385,12 @@ class BinaryBuilder {
   }
 
   // Node `node` of `nodes` over the references `refs`, its leaves' primitives
-  // appended to `index`; `budget`: how many references spatial splits may
-  // still add in this subtree. parallel_levels > 0: the left subtree goes to
+  // appended to `index`; `budget`: what spatial splits may still spend in
+  // this subtree. parallel_levels > 0: the left subtree goes to
   // another thread, into vectors of its own that are then appended to `nodes`
   // and `index`.
   void build_node(std::vector<BinaryNode>& nodes, std::vector<uint32_t>& index, uint32_t node, std::vector<Ref> refs,
-                  int depth, int parallel_levels, uint32_t budget) {
+                  int depth, int parallel_levels, const Budget& budget) {
     Box box, cbox;
     for (const Ref& r : refs) {
       box.grow(r.box);
@@ -356,6 +405,7 @@ class BinaryBuilder {
     bool force_median = depth + levels_needed >= PSF_BVH_MAX_DEPTH;
 
     std::vector<Ref> left, right;
+    uint64_t cuts = 0;  // spent by the spatial split's search
     if (force_median && count <= params_.max_leaf) return make_leaf(nodes, index, node, refs);
     if (!force_median) {
       Split s = find_split(refs, cbox);
@@ -363,8 +413,10 @@ class BinaryBuilder {
       SpatialSplit ss;
       // Spatial splits where the object split's sides overlap by more than
       // split_alpha of the root's area.
-      if (budget > 0 && s.axis >= 0 && intersect(s.left, s.right).half_area() > params_.split_alpha * root_area_)
+      if (budget.refs > 0 && budget.cuts > 0 && s.axis >= 0 &&
+          intersect(s.left, s.right).half_area() > params_.split_alpha * root_area_)
         ss = find_spatial_split(refs, box);
+      cuts = ss.cuts;
       const bool spatial = ss.axis >= 0 && ss.cost < s.cost;
       const float best_cost = spatial ? ss.cost : s.cost;
       float leaf_cost = params_.intersection_cost * packs(count);
@@ -373,7 +425,7 @@ class BinaryBuilder {
         return make_leaf(nodes, index, node, refs);
       if (spatial) {
         spatial_partition(refs, ss, &left, &right);
-        if (left.size() + right.size() - count > budget || left.empty() || right.empty()) {
+        if (left.size() + right.size() - count > budget.refs || left.empty() || right.empty()) {
           left.clear();
           right.clear();
         }
@@ -399,10 +451,9 @@ class BinaryBuilder {
       right.assign(refs.begin() + mid, refs.end());
     }
     // What is left of the budget, shared by the sides' sizes.
-    const uint32_t added = static_cast<uint32_t>(left.size() + right.size()) - count;
-    const uint32_t rest = budget - std::min(budget, added);
-    const uint32_t left_budget = static_cast<uint32_t>(uint64_t(rest) * left.size() / (left.size() + right.size()));
-    const uint32_t right_budget = rest - left_budget;
+    const uint64_t added = left.size() + right.size() - count;
+    const Budget left_budget = budget.share(added, cuts, left.size(), left.size() + right.size());
+    const Budget right_budget = budget.share(added, cuts, right.size(), left.size() + right.size());
     refs.clear();
     refs.shrink_to_fit();
 

@@ -780,6 +780,15 @@ TEST_CASE("Raycast: spatial splits cut long triangles, every point of a triangle
   // against the brute-force reference.
   std::vector<Ray> rays = rays_in_box(23, 4001, vec3(-0.1f), vec3(1.1f), 3.0f);
   CHECK(check_scene(m, rays) > rays.size() / 10);
+  // The budgets hold: no cuts allowed, no references added; a budget of 1 %
+  // of references, at most that many.
+  psf::BvhParams no_cuts = params, few = params;
+  no_cuts.split_cuts = 0.0f;
+  few.split_budget = 0.01f;
+  CHECK(psf::build_bvh(m.positions, m.triangles, {}, no_cuts).references == bvh.triangle_count);
+  const psf::Bvh small = psf::build_bvh(m.positions, m.triangles, {}, few);
+  CHECK(small.references > bvh.triangle_count);
+  CHECK(small.references <= bvh.triangle_count + bvh.triangle_count / 100);
 }
 
 TEST_CASE("Raycast: the BVH is the same whatever the number of build threads", "[raycast]") {
