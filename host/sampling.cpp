@@ -31,9 +31,18 @@ std::vector<uint32_t> sobol_matrices() {
       }
     }
   }
-  std::vector<uint32_t> t(c.size());
+  std::vector<uint32_t> t(c.size() + size_t(B / 4) * 16 * PSF_SOBOL_DIMS);
   for (int dim = 0; dim < PSF_SOBOL_DIMS; ++dim)
     for (int b = 0; b < B; ++b) t[size_t(b) * PSF_SOBOL_DIMS + dim] = c[size_t(dim) * B + b];
+  // The nibbles' xors (psf_shared.h PSF_SOBOL_NIBBLES).
+  for (int n = 0; n < B / 4; ++n)
+    for (uint32_t v = 0; v < 16; ++v)
+      for (int dim = 0; dim < PSF_SOBOL_DIMS; ++dim) {
+        uint32_t x = 0;
+        for (int k = 0; k < 4; ++k)
+          if ((v >> k) & 1u) x ^= c[size_t(dim) * B + 4 * n + k];
+        t[PSF_SOBOL_NIBBLES + (size_t(n) * 16 + v) * PSF_SOBOL_DIMS + dim] = x;
+      }
   return t;
 }
 

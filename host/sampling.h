@@ -18,7 +18,9 @@ const std::vector<JoeKuoRow>& joe_kuo_rows();
 
 // Generator matrices: PSF_SOBOL_DIMS x 32 columns, column b of dimension d at
 // [b * PSF_SOBOL_DIMS + d] (the direction number v_{b+1} scaled to 32 bits), so
-// that the kernels read the columns of consecutive dimensions as one vector.
+// that the kernels read the columns of consecutive dimensions as one vector;
+// then, from PSF_SOBOL_NIBBLES on, the xors of each nibble's four columns for
+// its 16 values, so that four bits of an index take one read.
 std::vector<uint32_t> sobol_matrices();
 
 }  // namespace psf

@@ -26,6 +26,11 @@ typedef cl_uint psf_uint;
 #define PSF_SOBOL_DIMS 256
 /* Bits per Sobol coordinate (32: indices up to 2^32 per pixel). */
 #define PSF_SOBOL_BITS 32
+/* After the generator matrices (PSF_SOBOL_BITS x PSF_SOBOL_DIMS uints), the
+ * sobol buffer holds the xors of each nibble's columns: for nibble n (index
+ * bits 4n..4n+3) and its value c, dimension d's entry at
+ * PSF_SOBOL_NIBBLES + (16 n + c) PSF_SOBOL_DIMS + d (host/sampling.cpp). */
+#define PSF_SOBOL_NIBBLES (PSF_SOBOL_BITS * PSF_SOBOL_DIMS)
 
 /* Sample dimensions: 0,1 pixel position; with a thin lens 2,3 the point on the
  * lens; then PSF_DIMS_PER_BOUNCE per bounce from FrameParams.dim_bounce0 (2, or 4

@@ -71,8 +71,9 @@ inline uint sample_bits_keyed(__global const uint* sobol, uint key, uint index, 
 }
 
 /* Dimensions dim..dim+7 of sample `index`, lane k = sample_bits_keyed(sobol, key,
- * index, dim + k) bit for bit: one pass over the index's bits for all eight (a
- * bounce's dimensions, shade.cl), the scrambling in 8-wide arithmetic. */
+ * index, dim + k) bit for bit: one pass over the index's nibbles for all eight
+ * (a bounce's dimensions, shade.cl; the nibbles' xors, PSF_SOBOL_NIBBLES), the
+ * scrambling in 8-wide arithmetic. */
 inline uint8 sample_bits8_keyed(__global const uint* sobol, uint key, uint index, uint dim) {
   const uint8 d = (uint8)(dim) + (uint8)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u);
   const uint8 s = psf_hash_combine8((uint8)(key), d);
@@ -82,9 +83,8 @@ inline uint8 sample_bits8_keyed(__global const uint* sobol, uint key, uint index
     return vload8(0, x);
   }
   uint8 x = (uint8)(0u);
-  __global const uint* m = sobol + dim;
-  for (uint b = 0u; index != 0u; index >>= 1, ++b)
-    if (index & 1u) x ^= vload8(0, m + b * PSF_SOBOL_DIMS);
+  __global const uint* m = sobol + PSF_SOBOL_NIBBLES + dim;
+  for (uint n = 0u; index != 0u; index >>= 4, ++n) x ^= vload8(0, m + (16u * n + (index & 15u)) * PSF_SOBOL_DIMS);
   return nested_uniform_scramble8(x, s);
 }
 

@@ -362,8 +362,9 @@ inline void lanes_add_radiance(Lanes* ln, Vec8 c, int8 mask, bool seen) {
  * choice, point on the light, BSDF direction, Russian roulette, lobe), the
  * same numbers as sample_8d_keyed's, with the work across the lanes: each
  * lane's unscrambled point is the xor of the rows of the generator matrices
- * that its sample index selects (a row holds 8 consecutive dimensions), taken
- * for the bits of the largest index without a branch on any lane's; then the
+ * that its sample index selects (a row holds 8 consecutive dimensions), read
+ * four index bits at a time from the nibbles' xors (PSF_SOBOL_NIBBLES), for
+ * the nibbles of the largest index without a branch on any lane's; then the
  * points, transposed to a vector per dimension, are scrambled 8 lanes at a
  * time. Lanes whose dimensions run past the table (from depth 36 on, 35 with a lens) take
  * sample_8d_keyed's own path. */
@@ -375,14 +376,14 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
   uint any_bits = 0u;
   for (uint l = 0u; l < PSF_LANES; ++l)
     if (LANE_I(active, l) && LANE_I(table, l)) any_bits |= LANE_U(ln->sample, l);
-  const uint bits = 32u - clz(any_bits);
+  const uint nibbles = (35u - clz(any_bits)) / 4u;
   uint8 rows[PSF_LANES];
   for (uint l = 0u; l < PSF_LANES; ++l) {
-    __global const uint* m = sobol + (LANE_I(table, l) ? LANE_U(dim, l) : 0u);
+    __global const uint* m = sobol + PSF_SOBOL_NIBBLES + (LANE_I(table, l) ? LANE_U(dim, l) : 0u);
     const uint sample = LANE_U(ln->sample, l);
     uint8 row = (uint8)(0u);
-    for (uint b = 0u; b < bits; ++b)
-      row ^= vload8(0, m + b * PSF_SOBOL_DIMS) & (uint8)(0u - ((sample >> b) & 1u));
+    for (uint n = 0u; n < nibbles; ++n)
+      row ^= vload8(0, m + (16u * n + ((sample >> (4u * n)) & 15u)) * PSF_SOBOL_DIMS);
     rows[l] = row;
   }
   /* The transpose, a vector per dimension, in three rounds of shuffles. */
