@@ -59,6 +59,7 @@ struct Renderer::Impl {
   const Scene& scene;
   Camera camera;
   std::unique_ptr<RayCaster> caster;
+  BvhSummary bvh_summary;
   cl::Buffer sobol, tri_pos, tri_material, materials, emitters, emitter_cdf, tri_light_pdf;
   uint32_t num_emitters = 0;
   bool lanes = false;  // no camera medium, and lanes_materials_supported
@@ -72,6 +73,12 @@ struct Renderer::Impl {
     std::vector<BvhSphere> spheres;
     for (const SphereShape& sp : scene.spheres) spheres.push_back({sp.center, sp.radius});
     Bvh bvh = build_bvh(scene.positions, scene.triangles, spheres);
+    bvh_summary = {bvh.nodes.size(),
+                   bvh.packs.size(),
+                   bvh.nodes.size() * sizeof(BvhNode) + bvh.packs.size() * sizeof(BvhTriPack),
+                   bvh.triangle_count + bvh.sphere_count,
+                   bvh.references,
+                   bvh.build_ms};
     // Mask materials and media's null boundaries: ray casts that test materials.
     bool masked = mark_masked(bvh, masked_prims(scene)) > 0;
     caster = std::make_unique<RayCaster>(rt, bvh);
@@ -460,6 +467,8 @@ float Renderer::visibility_ray(float option) const {
 // (36) 0.72, Mitsuba's cbox (38) 0.76; that cbox with cubes of 12 triangles
 // added: 50 primitives 0.90, 62 1.02, 74 1.11, 86 1.22, 110 1.36. Not where
 // primitives are alpha-tested (these casts have no alpha test).
+const BvhSummary& Renderer::bvh_summary() const { return impl_->bvh_summary; }
+
 uint32_t Renderer::flat_packs(int option) const {
   const RayCaster& c = *impl_->caster;
   return option != 0 && !c.masked() && c.prim_count() <= kLanesFlatPrims ? c.pack_count() : 0u;

@@ -130,6 +130,15 @@ struct RenderResult {
   double trace_seconds = 0.0, download_seconds = 0.0, add_seconds = 0.0;
 };
 
+// The scene's BVH as built (host/bvh.h Bvh), for the log.
+struct BvhSummary {
+  size_t nodes = 0, packs = 0;  // wide nodes, triangle and sphere packs
+  uint64_t bytes = 0;           // of both
+  uint32_t primitives = 0;      // triangles and spheres in it
+  uint32_t references = 0;      // their leaf references (more with spatial splits)
+  double build_ms = 0.0;
+};
+
 class Renderer {
  public:
   Renderer(Runtime& rt, const Scene& scene);
@@ -166,6 +175,7 @@ class Renderer {
   // them where the scene has at most kLanesFlatPrims primitives and none is
   // alpha-tested, unless `option` is 0; else 0, casts through the BVH.
   uint32_t flat_packs(int option) const;
+  const BvhSummary& bvh_summary() const;
 
  private:
   float footprint(const RenderOptions& o) const;  // sqrt(dOmega / pi) of the footprint's solid angle

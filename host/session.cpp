@@ -330,6 +330,16 @@ SessionResult run_session(const Scene& scene, const SessionOptions& o) {
               << (!time_only && total < batch ? "buffers for the " + std::to_string(total) + " it traces"
                                               : format_bytes(plan.bytes) + " of batch buffers")
               << "\n";
+  if (!o.quiet) {
+    const BvhSummary& b = renderers[0]->bvh_summary();
+    char added[64] = "";
+    if (b.references > b.primitives)
+      std::snprintf(added, sizeof added, " (+%.1f %% by spatial splits)",
+                    100.0 * (b.references - b.primitives) / std::max(1u, b.primitives));
+    std::cerr << "psf: BVH: " << b.references << " references to " << b.primitives << " primitives" << added << ", "
+              << b.nodes << " nodes and " << b.packs << " packs, " << format_bytes(b.bytes) << ", built in "
+              << std::lround(b.build_ms) << " ms\n";
+  }
 
   // Batches are handed to the devices round-robin and added in index order.
   const uint64_t batches = (total + batch - 1) / batch;
