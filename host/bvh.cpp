@@ -64,12 +64,21 @@ struct Ref {
   glm::vec3 centroid() const { return 0.5f * (box.lo + box.hi); }
 };
 
-// Float bounds of double points, rounded outwards.
-void grow_outwards(Box* box, const glm::dvec3& p) {
+// Float bounds of double points, rounded outwards; `exact_axis` (-1: none) of
+// a point computed with rounding (an edge's crossing of a plane, exact on the
+// plane's axis): one float ulp further on the other axes, more than the double
+// computation's own error.
+void grow_outwards(Box* box, const glm::dvec3& p, int exact_axis = 0, bool inexact = false) {
   for (int d = 0; d < 3; ++d) {
     const float f = static_cast<float>(p[d]);
-    box->lo[d] = std::min(box->lo[d], double(f) > p[d] ? std::nextafter(f, -kInf) : f);
-    box->hi[d] = std::max(box->hi[d], double(f) < p[d] ? std::nextafter(f, kInf) : f);
+    float lo = double(f) > p[d] ? std::nextafter(f, -kInf) : f;
+    float hi = double(f) < p[d] ? std::nextafter(f, kInf) : f;
+    if (inexact && d != exact_axis) {
+      lo = std::nextafter(lo, -kInf);
+      hi = std::nextafter(hi, kInf);
+    }
+    box->lo[d] = std::min(box->lo[d], lo);
+    box->hi[d] = std::max(box->hi[d], hi);
   }
 }
 
@@ -116,21 +125,21 @@ struct SplitGeometry {
     const vec v[3] = {vec(shape.v[0]), vec(shape.v[1]), vec(shape.v[2])};
     const real p = plane;
     Box l, r;
-    auto grow = [](Box* b, const vec& x) {
+    auto grow = [axis](Box* b, const vec& x, bool crossing) {
       if constexpr (exact)
-        grow_outwards(b, x);
+        grow_outwards(b, x, axis, crossing);
       else
         b->grow(x);
     };
     for (int k = 0; k < 3; ++k) {
       const vec &a = v[k], &b = v[(k + 1) % 3];
-      if (a[axis] <= p) grow(&l, a);
-      if (a[axis] >= p) grow(&r, a);
+      if (a[axis] <= p) grow(&l, a, false);
+      if (a[axis] >= p) grow(&r, a, false);
       if ((a[axis] < p && b[axis] > p) || (a[axis] > p && b[axis] < p)) {
         vec x = a + (b - a) * ((p - a[axis]) / (b[axis] - a[axis]));
         x[axis] = p;
-        grow(&l, x);
-        grow(&r, x);
+        grow(&l, x, true);
+        grow(&r, x, true);
       }
     }
     *left = intersect(*left, l);
@@ -154,10 +163,14 @@ class BinaryBuilder {
       box.grow(refs[i].box);
     }
     root_area_ = box.half_area();
+    // The budgets: not negative (or NaN), and references within the leaf
+    // encoding's count of packs (each holds at least one).
     Budget budget;
     if (params_.spatial_splits) {
-      budget.refs = static_cast<uint64_t>(params_.split_budget * ids.size());
-      budget.cuts = static_cast<uint64_t>(params_.split_cuts * ids.size());
+      const double n = double(ids.size()), room = double(PSF_LEAF_FIRST_MASK) - n;
+      auto limit = [](double x, double most) { return static_cast<uint64_t>(x > 0.0 ? std::min(x, most) : 0.0); };
+      budget.refs = limit(double(params_.split_budget) * n, room);
+      budget.cuts = limit(double(params_.split_cuts) * n, 1e18);
     }
     nodes_.reserve(2 * ids.size());
     index_.reserve(ids.size());
@@ -269,7 +282,8 @@ class BinaryBuilder {
     // `part` of `total` references.
     Budget share(uint64_t added, uint64_t spent, size_t part, size_t total) const {
       const uint64_t r = refs - std::min(refs, added), c = cuts - std::min(cuts, spent);
-      return {r * part / total, c * part / total};
+      using wide = unsigned __int128;  // c * part can pass 2^64
+      return {static_cast<uint64_t>(wide(r) * part / total), static_cast<uint64_t>(wide(c) * part / total)};
     }
   };
 
@@ -428,6 +442,11 @@ class BinaryBuilder {
         if (left.size() + right.size() - count > budget.refs || left.empty() || right.empty()) {
           left.clear();
           right.clear();
+          // The object split instead: the leaf may now be cheaper.
+          const float object_cost =
+              params_.traversal_cost + (area > 0.0f ? params_.intersection_cost * s.cost / area : 0.0f);
+          if (count <= params_.max_leaf && (s.axis < 0 || leaf_cost <= object_cost))
+            return make_leaf(nodes, index, node, refs);
         }
       }
       if (left.empty() && s.axis >= 0) {
@@ -655,10 +674,11 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
       bvh.skipped += 1;
       continue;
     }
-    boxes[first_sphere + k].grow(s.center - glm::vec3(s.radius));
-    boxes[first_sphere + k].grow(s.center + glm::vec3(s.radius));
+    grow_outwards(&boxes[first_sphere + k], glm::dvec3(s.center) - double(s.radius));
+    grow_outwards(&boxes[first_sphere + k], glm::dvec3(s.center) + double(s.radius));
     ids.push_back(static_cast<uint32_t>(first_sphere + k));
     bvh.sphere_count += 1;
+    bvh.double_spheres += sphere_needs_double(s);
   }
 
   if (ids.empty()) {
@@ -711,15 +731,14 @@ Bvh build_bvh(const std::vector<glm::vec3>& positions, const std::vector<glm::uv
         p.v0_y[lane] = s.center.y;
         p.v0_z[lane] = s.center.z;
         p.e1_x[lane] = s.radius;
-        if (sphere_needs_double(s)) {
-          p.e1_y[0] = 1.0f;
-          bvh.double_spheres += 1;
-        }
+        if (sphere_needs_double(s)) p.e1_y[0] = 1.0f;
         p.prim[lane] = t | PSF_PRIM_SPHERE;
       }
       const uint32_t count = static_cast<uint32_t>(bvh.packs.size()) - first;
       if (count - 1u > PSF_LEAF_COUNT_MASK)  // max_leaf is checked above: never
         throw std::logic_error("build_bvh: a leaf of " + std::to_string(count) + " packs");
+      if (first > PSF_LEAF_FIRST_MASK)  // the reference budget is capped: never
+        throw std::logic_error("build_bvh: pack " + std::to_string(first) + " beyond the leaf encoding");
       return PSF_LEAF_BIT | (count > triangle_packs ? PSF_LEAF_SPHERES : 0u) |
              ((count - 1u) << PSF_LEAF_COUNT_SHIFT) | first;
     };
@@ -762,6 +781,7 @@ void RayCaster::any(const cl::Buffer& rays, const cl::Buffer& hits, uint32_t cou
 }
 
 size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked) {
+  std::vector<bool> seen(masked.size(), false);  // a primitive may lie in several leaves
   size_t marked = 0;
   for (BvhTriPack& p : bvh.packs)
     for (int lane = 0; lane < PSF_BVH_WIDTH; ++lane) {
@@ -770,7 +790,8 @@ size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked) {
       const uint32_t index = prim & ~PSF_PRIM_SPHERE;
       if (index >= masked.size() || !masked[index]) continue;
       p.prim[lane] = prim | PSF_PRIM_MASKED;
-      ++marked;
+      marked += !seen[index];
+      seen[index] = true;
     }
   return marked;
 }

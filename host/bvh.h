@@ -22,12 +22,13 @@ struct BvhParams {
   // Spatial splits (Stich et al. 2009): where an object split's sides overlap
   // by more than split_alpha of the root's surface area, a plane may cut
   // primitives, which are then referenced by both sides, each clipped; at most
-  // split_budget times the primitives' count of references are added, and the
+  // split_budget times the primitives' count of references are added (and never
+  // more than the leaf encoding counts: PSF_LEAF_FIRST_MASK in all), and the
   // searches cut references at bin planes at most split_cuts times per
   // primitive (the living room took 10, Sponza 21; a soup of large triangles
   // overlapping everywhere 274, for 10 references more).
-  // (Stich et al.'s alpha of 1e-5 built the living room in 194 ms instead of
-  // 98 and cast no faster.)
+  // Budgets below 0 (or NaN) allow none. (Stich et al.'s alpha of 1e-5 built
+  // the living room in 194 ms instead of 98 and cast no faster.)
   bool spatial_splits = true;
   float split_alpha = 1e-3f;
   float split_budget = 0.25f;
@@ -74,7 +75,7 @@ inline bool is_leaf(uint32_t child) { return child != PSF_EMPTY_CHILD && (child 
 
 // Sets PSF_PRIM_MASKED on the pack lanes of the primitives with masked[prim] set
 // (prim: triangles, then spheres; alpha-tested mask materials, null boundaries);
-// returns how many lanes it marked.
+// returns how many primitives it marked (each in every leaf that holds it).
 size_t mark_masked(Bvh& bvh, const std::vector<bool>& masked);
 
 // The scene data that alpha testing reads (kernels/raycast.cl, AlphaScene).

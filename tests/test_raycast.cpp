@@ -786,6 +786,17 @@ TEST_CASE("Raycast: spatial splits cut long triangles, every point of a triangle
   no_cuts.split_cuts = 0.0f;
   few.split_budget = 0.01f;
   CHECK(psf::build_bvh(m.positions, m.triangles, {}, no_cuts).references == bvh.triangle_count);
+  psf::BvhParams negative = params, nan = params;
+  negative.split_budget = -1.0f;
+  nan.split_cuts = std::numeric_limits<float>::quiet_NaN();
+  CHECK(psf::build_bvh(m.positions, m.triangles, {}, negative).references == bvh.triangle_count);
+  CHECK(psf::build_bvh(m.positions, m.triangles, {}, nan).references == bvh.triangle_count);
+  // mark_masked counts primitives, not their references: the slivers (the
+  // last 300 triangles, which the splits cut) masked are 300.
+  std::vector<bool> masked(m.triangles.size(), false);
+  for (size_t t = 3000; t < m.triangles.size(); ++t) masked[t] = true;
+  psf::Bvh marked = bvh;
+  CHECK(psf::mark_masked(marked, masked) == 300);
   const psf::Bvh small = psf::build_bvh(m.positions, m.triangles, {}, few);
   CHECK(small.references > bvh.triangle_count);
   CHECK(small.references <= bvh.triangle_count + bvh.triangle_count / 100);
