@@ -550,6 +550,12 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   // render's device time there).
   const bool emission_rays = o.emission_rays > 0 && !p.camera_medium;
   const bool direct = lanes && !filtering && !o.keep_last_batch && !o.aovs && !emission_rays;
+  // Where the filter (or a test) reads the tuples but nothing else of the
+  // states (no emission rays, which add to them), the lanes write the tuple
+  // store's values and the radiance before each vertex themselves
+  // (PSF_LANES_STORE_TUPLES) for accumulate_tuples: 32 bytes a path instead
+  // of the states' 96, no store_tuples pass.
+  const bool tuples = lanes && !direct && !emission_rays;
   // The lanes draw their camera rays themselves (camera_rays' rays, from the
   // same samples): a camera_rays pass wrote 196 bytes per path that the lanes
   // read back, 7 % of the device time of the Cornell boxes.
@@ -572,8 +578,11 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     rt.launch("trace_lanes", (p.batch_size + kLanesRun - 1) / kLanesRun, lanes_local, p, s.sobol, s.tri_pos,
               s.tri_material, s.materials, s.emitters, s.emitter_cdf, s.tri_light_pdf, s.caster->nodes(),
               s.caster->packs(), s.camera, states, vertices, s.tri_attribs, s.textures, s.texels, s.env, s.env_data,
-              cl_uint(s.caster->masked() ? 1 : 0), p.batch_size, kLanesRun, cl_uint(direct ? 1 : 0),
-              b.contrib_unfiltered);
+              cl_uint(s.caster->masked() ? 1 : 0), p.batch_size, kLanesRun,
+              cl_uint(direct   ? 1
+                      : tuples ? 2
+                               : 0),  // trace_lanes.cl PSF_LANES_STORE_*
+              b.contrib_unfiltered, b.values);
   } else if (per_path) {
     rt.launch("trace_paths", p.batch_size, L, p, s.sobol, s.tri_pos, s.tri_material, s.materials, s.emitters,
               s.emitter_cdf, s.tri_light_pdf, s.env, s.env_data, s.caster->nodes(), s.caster->packs(),
@@ -648,7 +657,8 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
   out.index = index;
   out.first = first;
   // The tuple store for the filter (and a test's look at the last batch).
-  if (filtering || o.keep_last_batch) rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
+  if ((filtering || o.keep_last_batch) && !tuples)
+    rt.launch("store_tuples", p.batch_size, L, p.batch_size, states, b.values);
   const float visibility_ray = this->visibility_ray(o.filter.visibility_ray);
   if (filtering && visibility_ray > 0.0f) {
     // Each vertex's visibility from one hemisphere ray instead of its light
@@ -680,7 +690,10 @@ BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering
     out.max_count = b.filter->run(fp, o.filter.iterations, vertices, b.values, b.filtered, b.counts);
     out.params = fp;
   }
-  if (!direct)
+  if (tuples)
+    rt.launch("accumulate_tuples", p.batch_size, L, p.batch_size, cl_uint(filtering ? 1 : 0), vertices, b.values,
+              b.filtered, b.counts, b.contrib_unfiltered, b.contrib);
+  else if (!direct)
     rt.launch("accumulate", p.batch_size, L, p.batch_size, cl_uint(filtering ? 1 : 0), states, vertices,
               b.filtered, b.counts, b.contrib_unfiltered, b.contrib);
   rt.finish();

@@ -34,10 +34,17 @@
  * (camera_rays8: camera.cl's rays from the same samples, eight paths in
  * vectors), so that no camera_rays pass writes rays and states for it to read.
  * Where nothing after the trace reads the paths' states and filtering vertices
- * (`direct`: a batch neither filtered nor kept, without AOVs or emission rays),
+ * (`store` PSF_LANES_STORE_DIRECT: a batch neither filtered nor kept, without
+ * AOVs or emission rays),
  * a path's end writes its contribution instead, as accumulate.cl computes it
  * (the radiance before its filtering vertex plus alpha * c), and no state or
- * vertex: 16 bytes a path where there were 160, and no accumulate pass.
+ * vertex: 16 bytes a path where there were 160, and no accumulate pass. Where
+ * the filter (or a test) reads the vertices and the values c, but nothing
+ * else of the states (`store` PSF_LANES_STORE_TUPLES: no emission rays), a
+ * path's end writes its vertex, its c into the tuple store's values and the
+ * radiance before its vertex into contrib_unfiltered, which
+ * accumulate_tuples then completes: 32 bytes a path where the states took 96,
+ * and no store_tuples pass.
  *
  * The scene class (host/render.cpp lanes_materials_supported): no medium, null
  * boundary or camera medium (an analytic sphere's lanes that shade lane by lane
@@ -317,16 +324,33 @@ inline void lanes_refill(Lanes* ln, int8 take, uint* next, uint end, const Frame
   ln->live |= load;
 }
 
+/* What a lane writes at its path's end (trace_lanes' `store`). */
+#define PSF_LANES_STORE_STATES 0u /* the state and the filtering vertex */
+#define PSF_LANES_STORE_DIRECT 1u /* the contribution (contrib) */
+#define PSF_LANES_STORE_TUPLES 2u /* the vertex, c (values) and the radiance before the vertex (contrib) */
+
 /* Lane l's path has ended: its state as trace_paths leaves it (`pending` the
  * light sample's contribution where its shadow ray was blocked), and the
  * empty filtering vertex of a path that met none (camera_rays' default); or,
- * where `contrib` is not null (direct), its contribution as accumulate.cl's. */
+ * as `store` says, its contribution as accumulate.cl's, or its vertex, its c
+ * as store_tuples' (zero without a vertex) and the radiance before. */
 inline void lanes_store(const Lanes* ln, uint l, float3 pending, __global PathState* states,
-                        __global PathVertex* vertices, __global float4* contrib) {
-  if (contrib) {
+                        __global PathVertex* vertices, uint store, __global float4* contrib,
+                        __global float4* values) {
+  if (store == PSF_LANES_STORE_DIRECT) {
     float3 c = VEC8_GET(ln->radiance, l);
     if (LANE_U(ln->flags, l) & PSF_PATH_VERTEX) c += VEC8_GET(ln->alpha, l) * VEC8_GET(ln->vertex_radiance, l);
     contrib[LANE_U(ln->path, l)] = (float4)(c, 1.0f);
+    return;
+  }
+  const uint j = LANE_U(ln->path, l);
+  if (store == PSF_LANES_STORE_TUPLES) {
+    contrib[j] = (float4)(VEC8_GET(ln->radiance, l), 0.0f);
+    values[j] = (float4)(VEC8_GET(ln->vertex_radiance, l), 0.0f);
+    if (LANE_U(ln->flags, l) & PSF_PATH_VERTEX) return; /* its vertex is written */
+    PathVertex none;
+    none.position = none.normal = none.albedo = none.alpha = (float4)(0.0f);
+    vertices[j] = none;
     return;
   }
   PathState st;
@@ -1779,10 +1803,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
                           Camera camera, __global PathState* restrict states, __global PathVertex* restrict vertices,
                           __global const TriAttrib* restrict tri_attribs, __global const TextureInfo* restrict textures,
                           __global const half* restrict texels, Environment env,
-                          __global const float* restrict env_data, uint masked, uint count, uint per_item, uint direct,
-                          __global float4* restrict contrib_unfiltered) {
+                          __global const float* restrict env_data, uint masked, uint count, uint per_item, uint store,
+                          __global float4* restrict contrib_unfiltered, __global float4* restrict values) {
   const uint first = get_global_id(0) * per_item;
-  __global float4* contrib = direct ? contrib_unfiltered : 0;
   if (first >= count) return;
   const uint end = min(first + per_item, count);
   uint next = first;
@@ -2367,7 +2390,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     }
     lanes_add_radiance(&ln, pending, visible, false);
     ln.alpha = vec8_select(ln.alpha, ln.beta, new_vertex);
-    for (uint l = 0u; l < PSF_LANES && !contrib; ++l) {
+    for (uint l = 0u; l < PSF_LANES && store != PSF_LANES_STORE_DIRECT; ++l) {
       if (!LANE_I(new_vertex, l)) continue;
       PathVertex v;
       v.position = (float4)(VEC8_GET(pos, l), LANE_F(ln.path_length, l));
@@ -2393,7 +2416,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     ln.flags = select(ln.flags, ln.flags & ~PSF_PATH_ALIVE, as_uint8(ends));
     for (uint todo = psf_lanes8(ends); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
-      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, contrib);
+      lanes_store(&ln, l, LANE_I(visible, l) ? (float3)(0.0f) : VEC8_GET(pending, l), states, vertices, store,
+                  contrib_unfiltered, values);
     }
     ln.live &= ~ends;
     lanes_refill(&ln, ends, &next, end, &params, &camera, sobol, &cam);

@@ -2003,12 +2003,17 @@ static void check_within_1e5(const psf::Image& test, const psf::Image& ref) {
   CHECK(worst <= 1e-5);
 }
 
-TEST_CASE("Render: the lanes' own contributions equal accumulate's from their states", "[emitter]") {
+TEST_CASE("Render: the lanes' own contributions equal accumulate's from their tuples", "[emitter]") {
   // Unfiltered, without tuples, AOVs or emission rays, trace_lanes writes each
   // path's contribution itself (radiance before the filtering vertex plus
   // alpha * c) and no state or vertex; keeping the last batch's tuples makes
-  // it store them for accumulate.cl instead. The two images must agree to the
-  // rounding of alpha * c. Scenes: area light (alpha 1 at a diffuse first hit),
+  // it store the vertices, the values c and the radiance before each vertex
+  // for accumulate_tuples instead (as when filtering; the filtered lanes
+  // against trace_paths' states: "trace_lanes gives trace_paths' image"). The
+  // two images must agree to the rounding of alpha * c, and the kept tuples'
+  // values are the paths' c: zero where a path has no vertex, and where it
+  // has one, (contribution - radiance before) / alpha, which the test cannot
+  // separate, so at least finite. Scenes: area light (alpha 1 at a diffuse first hit),
   // rough conductor spheres (filtering vertices behind glossy bounces, alpha < 1),
   // an environment map, and with ../shared the living room.
   auto& rt = psf::test::runtime();
@@ -2033,8 +2038,22 @@ TEST_CASE("Render: the lanes' own contributions equal accumulate's from their st
     rt.reset_stats();
     psf::RenderResult stored = r.render(o);
     rt.finish();
-    CHECK(rt.stats().count("accumulate") == 1);
+    CHECK(rt.stats().count("accumulate_tuples") == 1);
+    CHECK(rt.stats().count("store_tuples") == 0);
     check_within_1e5(direct.image, stored.image);
+    size_t with_vertex = 0;
+    REQUIRE(stored.last_batch.values.size() == stored.last_batch.vertices.size());
+    for (size_t j = 0; j < stored.last_batch.values.size(); ++j) {
+      const cl_float4& c = stored.last_batch.values[j];
+      const cl_float4& a = stored.last_batch.vertices[j].alpha;
+      const bool vertex = a.s[0] != 0.0f || a.s[1] != 0.0f || a.s[2] != 0.0f;
+      with_vertex += vertex;
+      if (!vertex)
+        CHECK((c.s[0] == 0.0f && c.s[1] == 0.0f && c.s[2] == 0.0f));
+      else
+        CHECK((std::isfinite(c.s[0]) && std::isfinite(c.s[1]) && std::isfinite(c.s[2])));
+    }
+    CHECK(with_vertex > 0);
   }
 }
 
