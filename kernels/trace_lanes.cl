@@ -35,10 +35,10 @@
  * vectors), so that no camera_rays pass writes rays and states for it to read.
  * Where nothing after the trace reads the paths' states and filtering vertices
  * (`store` PSF_LANES_STORE_DIRECT: a batch neither filtered nor kept, without
- * AOVs or emission rays),
- * a path's end writes its contribution instead, as accumulate.cl computes it
- * (the radiance before its filtering vertex plus alpha * c), and no state or
- * vertex: 16 bytes a path where there were 160, and no accumulate pass. Where
+ * AOVs or emission rays), a path's end writes its contribution instead, as
+ * accumulate.cl computes it (the radiance before its filtering vertex plus
+ * alpha * c), and no state or vertex: 16 bytes a path where there were 160,
+ * and no accumulate pass. Where
  * the filter (or a test) reads the vertices and the values c, but nothing
  * else of the states (`store` PSF_LANES_STORE_TUPLES: no emission rays), a
  * path's end writes its vertex, its c into the tuple store's values and the
