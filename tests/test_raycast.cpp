@@ -217,11 +217,13 @@ void report(size_t i, const Ray& ray, const Hit& closest, const Verdict& c, cons
   CHECK((c.ok && a.ok));
 }
 
-// Casts closest and any-hit rays and checks every result against the reference.
-// Returns the number of rays whose closest hit was a triangle.
-// Both ways: through the BVH, and as trace_lanes' flat casts test every pack.
-size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact = 0.99) {
-  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+// Casts closest and any-hit rays through `bvh` both ways (through the BVH, and
+// as trace_lanes' flat casts test every pack) and checks every result with
+// judge(ray, hit, any): none fails, at least min_exact of the closest hits are
+// exactly the reference's prim. Returns how many closest hits counts(hit) takes.
+template <class Judge, class Counts>
+size_t check_casts(const psf::Bvh& bvh, const std::vector<Ray>& rays, double min_exact, const Judge& judge,
+                   const Counts& counts) {
   size_t hits = 0;
   for (bool flat : {false, true}) {
     INFO((flat ? "flat casts (lanes_test_casts)" : "through the BVH"));
@@ -230,18 +232,27 @@ size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact
     size_t exact = 0, failures = 0;
     hits = 0;
     for (size_t i = 0; i < rays.size(); ++i) {
-      Verdict c = judge(m, rays[i], closest[i], false);
-      Verdict a = judge(m, rays[i], any[i], true);
+      Verdict c = judge(rays[i], closest[i], false);
+      Verdict a = judge(rays[i], any[i], true);
       exact += c.exact;
-      hits += closest[i].prim != PSF_NO_HIT;
+      hits += counts(closest[i]);
       report(i, rays[i], closest[i], c, any[i], a, failures);
     }
     INFO(failures << " of " << rays.size() << " rays fail");
     CHECK(failures == 0);
-    INFO(exact << " of " << rays.size() << " rays report exactly the reference's triangle");
+    INFO(exact << " of " << rays.size() << " rays report exactly the reference's prim");
     CHECK(double(exact) >= min_exact * double(rays.size()));
   }
   return hits;
+}
+
+// Casts closest and any-hit rays and checks every result against the reference.
+// Returns the number of rays whose closest hit was a triangle.
+size_t check_scene(const Mesh& m, const std::vector<Ray>& rays, double min_exact = 0.99) {
+  psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
+  return check_casts(
+      bvh, rays, min_exact, [&](const Ray& r, const Hit& h, bool any) { return judge(m, r, h, any); },
+      [](const Hit& h) { return h.prim != PSF_NO_HIT; });
 }
 
 vec3 uniform_sphere(std::mt19937& rng) {
@@ -977,26 +988,9 @@ size_t check_mixed(const Mesh& m, const std::vector<psf::BvhSphere>& spheres, co
       sphere_leaves += any_sphere;
     }
   CHECK((sphere_leaves > 0) == !spheres.empty());
-  size_t sphere_hits = 0;
-  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-    INFO((flat ? "flat casts (lanes_test_casts)" : "through the BVH"));
-    std::vector<Hit> closest = cast(bvh, rays, false, flat);
-    std::vector<Hit> any = cast(bvh, rays, true, flat);
-    size_t exact = 0, failures = 0;
-    sphere_hits = 0;
-    for (size_t i = 0; i < rays.size(); ++i) {
-      Verdict c = judge_mixed(m, spheres, rays[i], closest[i], false);
-      Verdict a = judge_mixed(m, spheres, rays[i], any[i], true);
-      exact += c.exact;
-      sphere_hits += closest[i].prim != PSF_NO_HIT && closest[i].prim >= m.triangles.size();
-      report(i, rays[i], closest[i], c, any[i], a, failures);
-    }
-    INFO(failures << " of " << rays.size() << " rays fail");
-    CHECK(failures == 0);
-    INFO(exact << " of " << rays.size() << " rays report exactly the reference's prim");
-    CHECK(double(exact) >= min_exact * double(rays.size()));
-  }
-  return sphere_hits;
+  return check_casts(
+      bvh, rays, min_exact, [&](const Ray& r, const Hit& h, bool any) { return judge_mixed(m, spheres, r, h, any); },
+      [&](const Hit& h) { return h.prim != PSF_NO_HIT && h.prim >= m.triangles.size(); });
 }
 
 }  // namespace
