@@ -70,6 +70,16 @@ inline uint sample_bits_keyed(__global const uint* sobol, uint key, uint index, 
   return psf_hash_combine(psf_hash_combine(s, index), 0x51ed270bu);
 }
 
+/* sobol_unscrambled for dimensions dim..dim+7 (dim + 8 <= PSF_SOBOL_DIMS) at
+ * once: the xor of one row of the nibbles' xors (PSF_SOBOL_NIBBLES) per four
+ * bits of the index. */
+inline uint8 sobol_unscrambled8(__global const uint* sobol, uint index, uint dim) {
+  uint8 x = (uint8)(0u);
+  __global const uint* m = sobol + PSF_SOBOL_NIBBLES + dim;
+  for (uint n = 0u; index != 0u; index >>= 4, ++n) x ^= vload8(0, m + (16u * n + (index & 15u)) * PSF_SOBOL_DIMS);
+  return x;
+}
+
 /* Dimensions dim..dim+7 of sample `index`, lane k = sample_bits_keyed(sobol, key,
  * index, dim + k) bit for bit: one pass over the index's nibbles for all eight
  * (a bounce's dimensions, shade.cl; the nibbles' xors, PSF_SOBOL_NIBBLES), the
@@ -82,10 +92,7 @@ inline uint8 sample_bits8_keyed(__global const uint* sobol, uint key, uint index
     for (uint k = 0u; k < 8u; ++k) x[k] = sample_bits_keyed(sobol, key, index, dim + k);
     return vload8(0, x);
   }
-  uint8 x = (uint8)(0u);
-  __global const uint* m = sobol + PSF_SOBOL_NIBBLES + dim;
-  for (uint n = 0u; index != 0u; index >>= 4, ++n) x ^= vload8(0, m + (16u * n + (index & 15u)) * PSF_SOBOL_DIMS);
-  return nested_uniform_scramble8(x, s);
+  return nested_uniform_scramble8(sobol_unscrambled8(sobol, index, dim), s);
 }
 
 /* 32-bit value of dimension `dim` of sample `index` of `pixel`, scrambled. */

@@ -245,10 +245,11 @@ __attribute__((noinline)) void camera_rays8(const FrameParams* params, const Cam
   /* Dimensions PSF_DIM_PIXEL.. (two, four with a lens). */
   float8 u[4];
   const uint dims = camera->aperture > 0.0f ? 4u : 2u;
+  uint8 row = sobol_unscrambled8(sobol, sample0, PSF_DIM_PIXEL);
+  uint8 row_next = any(next_image) ? sobol_unscrambled8(sobol, sample0 + 1u, PSF_DIM_PIXEL) : row;
   for (uint d = 0u; d < dims; ++d) {
     const uint dim = PSF_DIM_PIXEL + d;
-    const uint8 bits = select((uint8)(sobol_unscrambled(sobol, sample0, dim)),
-                              (uint8)(sobol_unscrambled(sobol, sample0 + 1u, dim)), next_image);
+    const uint8 bits = select((uint8)(LANE_U(row, d)), (uint8)(LANE_U(row_next, d)), next_image);
     u[d] = convert_float8(nested_uniform_scramble8(bits, psf_hash_combine8(key, (uint8)(dim))) >> 8) *
            (1.0f / 16777216.0f);
   }
@@ -384,35 +385,45 @@ inline void lanes_add_radiance(Lanes* ln, Vec8 c, int8 mask, bool seen) {
 
 /* The dimensions of each lane's bounce (shade.cl bounce_samples: light
  * choice, point on the light, BSDF direction, Russian roulette, lobe), the
- * same numbers as sample_8d_keyed's, with the work across the lanes: each
- * lane's unscrambled point is the xor of the rows of the generator matrices
- * that its sample index selects (a row holds 8 consecutive dimensions), read
- * four index bits at a time from the nibbles' xors (PSF_SOBOL_NIBBLES), for
- * the nibbles of the largest index without a branch on any lane's; then the
- * points, transposed to a vector per dimension, are scrambled 8 lanes at a
- * time. Lanes whose dimensions run past the table (from depth 36 on, 35 with a lens) take
- * sample_8d_keyed's own path. */
-inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0, const Lanes* ln, int8 active,
-                          float8* u) {
-  const uint8 key = psf_hash_combine8((uint8)(seed_hash), ln->pixel);
-  const uint8 dim = (uint8)(dim0) + (uint8)(PSF_DIMS_PER_BOUNCE)*ln->depth;
-  const int8 table = dim <= (uint8)(PSF_SOBOL_DIMS - 8u);
+ * same numbers as sample_8d_keyed's, with the work across the lanes, in two
+ * steps so that a bounce scrambles only the dimensions some lane uses
+ * (lanes_sample_dim). lanes_sample_rows: each lane's unscrambled point is the
+ * xor of the rows of the generator matrices that its sample index selects (a
+ * row holds 8 consecutive dimensions), read four index bits at a time from the
+ * nibbles' xors (PSF_SOBOL_NIBBLES), for the nibbles of the largest index
+ * without a branch on any lane's; then the points are transposed to a vector
+ * per dimension. Lanes whose dimensions run past the table (from depth 36 on,
+ * 35 with a lens) take sample_bits_keyed's own path in lanes_sample_dim. */
+typedef struct {
+  uint8 cols[PSF_DIMS_PER_BOUNCE]; /* the unscrambled points, a vector per dimension */
+  uint8 key, dim, sample;          /* each lane's scrambling key, first dimension and sample index */
+  int8 own;                        /* active lanes past the table */
+} LaneSamples;
+
+inline void lanes_sample_rows(__global const uint* sobol, uint seed_hash, uint dim0, const Lanes* ln, int8 active,
+                              LaneSamples* s) {
+  s->key = psf_hash_combine8((uint8)(seed_hash), ln->pixel);
+  s->dim = (uint8)(dim0) + (uint8)(PSF_DIMS_PER_BOUNCE)*ln->depth;
+  s->sample = ln->sample;
+  const int8 table = s->dim <= (uint8)(PSF_SOBOL_DIMS - 8u);
+  s->own = active & ~table;
+  const uint8 samples = select((uint8)(0u), ln->sample, as_uint8(active & table));
   uint any_bits = 0u;
-  for (uint l = 0u; l < PSF_LANES; ++l)
-    if (LANE_I(active, l) && LANE_I(table, l)) any_bits |= LANE_U(ln->sample, l);
+  for (uint l = 0u; l < PSF_LANES; ++l) any_bits |= LANE_U(samples, l);
   const uint nibbles = (35u - clz(any_bits)) / 4u;
+  __global const uint* base[PSF_LANES];
   uint8 rows[PSF_LANES];
   for (uint l = 0u; l < PSF_LANES; ++l) {
-    __global const uint* m = sobol + PSF_SOBOL_NIBBLES + (LANE_I(table, l) ? LANE_U(dim, l) : 0u);
-    const uint sample = LANE_U(ln->sample, l);
-    uint8 row = (uint8)(0u);
-    for (uint n = 0u; n < nibbles; ++n)
-      row ^= vload8(0, m + (16u * n + ((sample >> (4u * n)) & 15u)) * PSF_SOBOL_DIMS);
-    rows[l] = row;
+    base[l] = sobol + PSF_SOBOL_NIBBLES + (LANE_I(table, l) ? LANE_U(s->dim, l) : 0u);
+    rows[l] = (uint8)(0u);
   }
+  /* Nibble by nibble, the lanes' loads of one nibble independent of each other. */
+  for (uint n = 0u; n < nibbles; ++n)
+    for (uint l = 0u; l < PSF_LANES; ++l)
+      rows[l] ^= vload8(0, base[l] + (16u * n + ((LANE_U(samples, l) >> (4u * n)) & 15u)) * PSF_SOBOL_DIMS);
   /* The transpose, a vector per dimension, in three rounds of shuffles. */
 #if PSF_DIMS_PER_BOUNCE != 7
-#error "lanes_samples transposes seven dimensions"
+#error "lanes_sample_rows transposes seven dimensions"
 #endif
   const uint8 lo = (uint8)(0, 8, 1, 9, 2, 10, 3, 11), hi = (uint8)(4, 12, 5, 13, 6, 14, 7, 15);
   const uint8 p01e = shuffle2(rows[0], rows[1], lo), p01h = shuffle2(rows[0], rows[1], hi);
@@ -425,30 +436,24 @@ inline void lanes_samples(__global const uint* sobol, uint seed_hash, uint dim0,
   const uint8 q4 = shuffle2(p45e, p67e, q_a), q5 = shuffle2(p45e, p67e, q_b);
   const uint8 q6 = shuffle2(p45h, p67h, q_a), q7 = shuffle2(p45h, p67h, q_b);
   const uint8 c_a = (uint8)(0, 1, 2, 3, 8, 9, 10, 11), c_b = (uint8)(4, 5, 6, 7, 12, 13, 14, 15);
-  uint8 cols[PSF_DIMS_PER_BOUNCE];
-  cols[0] = shuffle2(q0, q4, c_a);
-  cols[1] = shuffle2(q0, q4, c_b);
-  cols[2] = shuffle2(q1, q5, c_a);
-  cols[3] = shuffle2(q1, q5, c_b);
-  cols[4] = shuffle2(q2, q6, c_a);
-  cols[5] = shuffle2(q2, q6, c_b);
-  cols[6] = shuffle2(q3, q7, c_a);
-  for (uint o = 0u; o < PSF_DIMS_PER_BOUNCE; ++o) {
-    const uint8 v = nested_uniform_scramble8(cols[o], psf_hash_combine8(key, dim + o));
-    u[o] = convert_float8(v >> 8) * (1.0f / 16777216.0f);
+  s->cols[0] = shuffle2(q0, q4, c_a);
+  s->cols[1] = shuffle2(q0, q4, c_b);
+  s->cols[2] = shuffle2(q1, q5, c_a);
+  s->cols[3] = shuffle2(q1, q5, c_b);
+  s->cols[4] = shuffle2(q2, q6, c_a);
+  s->cols[5] = shuffle2(q2, q6, c_b);
+  s->cols[6] = shuffle2(q3, q7, c_a);
+}
+
+/* Dimension o of the bounce (PSF_DIM_*) for every lane, scrambled 8 lanes at a
+ * time: sample_bits_keyed's numbers as floats in [0, 1) (sample_8d_keyed's). */
+inline float8 lanes_sample_dim(__global const uint* sobol, const LaneSamples* s, uint o) {
+  uint8 v = nested_uniform_scramble8(s->cols[o], psf_hash_combine8(s->key, s->dim + o));
+  for (uint todo = psf_lanes8(s->own); todo != 0u; todo &= todo - 1u) {
+    const uint l = bvh_first_lane(todo);
+    LANE_U(v, l) = sample_bits_keyed(sobol, LANE_U(s->key, l), LANE_U(s->sample, l), LANE_U(s->dim, l) + o);
   }
-  if (all(table | ~active)) return;
-  for (uint l = 0u; l < PSF_LANES; ++l) {
-    if (!LANE_I(active, l) || LANE_I(table, l)) continue;
-    const float8 w = sample_8d_keyed(sobol, LANE_U(key, l), LANE_U(ln->sample, l), LANE_U(dim, l));
-    LANE_F(u[0], l) = w.s0;
-    LANE_F(u[1], l) = w.s1;
-    LANE_F(u[2], l) = w.s2;
-    LANE_F(u[3], l) = w.s3;
-    LANE_F(u[4], l) = w.s4;
-    LANE_F(u[5], l) = w.s5;
-    LANE_F(u[6], l) = w.s6;
-  }
+  return convert_float8(v >> 8) * (1.0f / 16777216.0f);
 }
 
 /* The texels env_lookup reads at uv: a prefetch of the two of each row (12
@@ -1835,11 +1840,19 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
      * its light choice: before the casts, for every live lane (those that
      * scatter are among them, and a lane's numbers do not depend on the
      * others'), so that the environment map's light samples can start. */
-    float8 u[PSF_DIMS_PER_BOUNCE];
-    lanes_samples(sobol, seed_hash, params.dim_bounce0, &ln, ln.live, u);
-    const float8 u_light = u[PSF_DIM_LIGHT_SELECT], u_la = u[PSF_DIM_LIGHT_UV], u_lb = u[PSF_DIM_LIGHT_UV + 1];
-    const float8 u_b1 = u[PSF_DIM_BSDF_UV], u_b2 = u[PSF_DIM_BSDF_UV + 1], u_rr = u[PSF_DIM_RR];
-    const float8 u_lobe = u[PSF_DIM_BSDF_LOBE];
+    LaneSamples us;
+    lanes_sample_rows(sobol, seed_hash, params.dim_bounce0, &ln, ln.live, &us);
+    /* With one light, its choice needs no number (sample_cdf_guided of one entry). */
+    const float8 u_light =
+        params.num_emitters > 1u ? lanes_sample_dim(sobol, &us, PSF_DIM_LIGHT_SELECT) : (float8)(0.0f);
+    /* The point on the light: here where an environment map's samples start
+     * before the casts, else with the light samples. */
+    float8 u_la = (float8)(0.0f), u_lb = (float8)(0.0f);
+    const bool light_uv_early = env.width > 0u && params.num_emitters > 0u;
+    if (light_uv_early) {
+      u_la = lanes_sample_dim(sobol, &us, PSF_DIM_LIGHT_UV);
+      u_lb = lanes_sample_dim(sobol, &us, PSF_DIM_LIGHT_UV + 1);
+    }
     /* The light, by sample_cdf_guided for all lanes at once: each lane's guide
      * entry, then the forward steps of the lanes together, so that no lane's
      * number of steps is a branch to mispredict. With a few lights, the number
@@ -2149,6 +2162,10 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     float8 shadow_tmax = (float8)(1.0f - PSF_RAY_EPS);
     int8 contributes = (int8)(0);
     if (params.num_emitters > 0u && any(scatter)) {
+      if (!light_uv_early) {
+        u_la = lanes_sample_dim(sobol, &us, PSF_DIM_LIGHT_UV);
+        u_lb = lanes_sample_dim(sobol, &us, PSF_DIM_LIGHT_UV + 1);
+      }
       Vec8 v0, e1, e2, le;
       float8 area = (float8)(1.0f), choose = (float8)(0.0f);
       int8 light_two_sided = (int8)(0), other_light = (int8)(0), env_light = (int8)(0), sphere_light = (int8)(0);
@@ -2339,7 +2356,11 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     }
 
     /* The next direction (bsdf.cl bsdf_sample: diffuse in vectors, any other
-     * material lane by lane), then Russian roulette. */
+     * material lane by lane), then Russian roulette. The lobe's number only
+     * where a lane's BSDF chooses one (not a diffuse or rough conductor's). */
+    const bool scatters_any = any(scatter);
+    const float8 u_b1 = scatters_any ? lanes_sample_dim(sobol, &us, PSF_DIM_BSDF_UV) : (float8)(0.0f);
+    const float8 u_b2 = scatters_any ? lanes_sample_dim(sobol, &us, PSF_DIM_BSDF_UV + 1) : (float8)(0.0f);
     const Vec8 wl = cosine_hemisphere8(u_b1, u_b2);
     Vec8 wi = vec8_normalize(vec8_add(vec8_add(vec8_scale(fs, wl.x), vec8_scale(ft, wl.y)), vec8_scale(fn, wl.z)));
     float8 pdf = select((float8)(0.0f), wl.z * PSF_INV_PI, fn_wo > 0.0f);
@@ -2347,6 +2368,9 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     int8 delta_lobe = (int8)(0);
     const int8 sample_own = general & scatter;
     const int8 sample_vector = lanes_bsdfs_mask(&bs);
+    const float8 u_lobe = any(sample_own & ~(bs.diffuse | bs.conductor))
+                              ? lanes_sample_dim(sobol, &us, PSF_DIM_BSDF_LOBE)
+                              : (float8)(0.0f);
     for (uint todo = psf_lanes8(sample_own & ~sample_vector); todo != 0u; todo &= todo - 1u) {
       const uint l = bvh_first_lane(todo);
       const Frame fr = vec8_frame(&fs, &ft, &fn, l);
@@ -2367,7 +2391,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
     beta = vec8_mul(beta, weight);
     const int8 rr = scatter & (segments >= params.rr_depth);
     const float8 q = fmin(vec8_max3(beta), 0.95f);
-    scatter &= ~(rr & (u_rr >= q));
+    if (any(rr)) scatter &= ~(rr & (lanes_sample_dim(sobol, &us, PSF_DIM_RR) >= q));
     beta = vec8_select(beta, vec8_div(beta, q), rr);
     const int8 go = scatter & (vec8_max3(weight) > 0.0f);
 
