@@ -174,25 +174,51 @@ Verdict judge(const Mesh& m, const Ray& ray, const Hit& hit, bool any) {
   return v;
 }
 
+// Whether trace_lanes' flat casts skip leaves by the root's boxes in this BVH
+// (kernels/trace_lanes.cl flat_root_leaves): one node, children all leaves or
+// empty, at least 4 packs.
+bool flat_boxes_apply(const psf::Bvh& bvh) {
+  if (bvh.nodes.size() != 1 || bvh.packs.size() < 4) return false;
+  for (uint32_t c : bvh.nodes[0].child)
+    if (c != PSF_EMPTY_CHILD && !psf::is_leaf(c)) return false;
+  return true;
+}
+
 // The hits of trace_lanes' flat casts (every pack against eight rays at once,
-// without the BVH: lanes_test_casts), closest (any false) or any-hit.
-std::vector<Hit> cast_flat(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any) {
+// without the BVH: lanes_test_casts; with `boxes`, skipping the root's leaves
+// whose boxes no ray of the eight meets, where flat_boxes_apply), closest (any
+// false) or any-hit.
+std::vector<Hit> cast_flat(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any, bool boxes) {
   auto& rt = psf::test::runtime();
   const uint32_t n = static_cast<uint32_t>(rays.size());
   std::vector<BvhTriPack> packs = bvh.packs;
   if (packs.empty()) packs.resize(1);  // no zero-sized buffer; pack_count 0 tests none
-  cl::Buffer pb = rt.upload(packs), rb = rt.upload(rays);
+  std::vector<BvhNode> nodes = bvh.nodes;
+  if (nodes.empty()) nodes.resize(1);
+  cl::Buffer pb = rt.upload(packs), nb = rt.upload(nodes), rb = rt.upload(rays);
   cl::Buffer cb = rt.buffer(CL_MEM_WRITE_ONLY, rays.size() * sizeof(Hit));
   cl::Buffer ab = rt.buffer(CL_MEM_WRITE_ONLY, rays.size() * sizeof(Hit));
-  rt.launch("lanes_test_casts", (n + 7) / 8, 8, pb, cl_uint(bvh.packs.size()), cl_uint(bvh.sphere_count > 0), rb, cb,
-            ab, n);
+  rt.launch("lanes_test_casts", (n + 7) / 8, 8, pb, cl_uint(bvh.packs.size()), cl_uint(bvh.sphere_count > 0), nb,
+            cl_uint(boxes && !bvh.nodes.empty() ? 1 : 0), rb, cb, ab, n);
   rt.finish();
   return rt.download<Hit>(any ? ab : cb, rays.size());
 }
 
-// The hits of the BVH's casts (RayCaster), or with `flat` trace_lanes' flat casts.
-std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any, bool flat = false) {
-  if (flat) return cast_flat(bvh, rays, any);
+// How check_casts casts: through the BVH, as trace_lanes' flat casts test every
+// pack, or as they skip the root's leaves by their boxes.
+enum class CastMode { bvh, flat, flat_boxes };
+
+constexpr CastMode kCastModes[] = {CastMode::bvh, CastMode::flat, CastMode::flat_boxes};
+
+const char* cast_mode_name(CastMode mode) {
+  return mode == CastMode::bvh    ? "through the BVH"
+         : mode == CastMode::flat ? "flat casts (lanes_test_casts)"
+                                  : "flat casts skipping leaves by the root's boxes";
+}
+
+// The hits of the BVH's casts (RayCaster), or of trace_lanes' flat casts.
+std::vector<Hit> cast(const psf::Bvh& bvh, const std::vector<Ray>& rays, bool any, CastMode mode = CastMode::bvh) {
+  if (mode != CastMode::bvh) return cast_flat(bvh, rays, any, mode == CastMode::flat_boxes);
   auto& rt = psf::test::runtime();
   psf::RayCaster caster(rt, bvh);
   cl::Buffer rb = rt.upload(rays);
@@ -217,18 +243,20 @@ void report(size_t i, const Ray& ray, const Hit& closest, const Verdict& c, cons
   CHECK((c.ok && a.ok));
 }
 
-// Casts closest and any-hit rays through `bvh` both ways (through the BVH, and
-// as trace_lanes' flat casts test every pack) and checks every result with
+// Casts closest and any-hit rays through `bvh` every way (through the BVH, as
+// trace_lanes' flat casts test every pack, and, where flat_boxes_apply, as they
+// skip leaves by the root's boxes) and checks every result with
 // judge(ray, hit, any): none fails, at least min_exact of the closest hits are
 // exactly the reference's prim. Returns how many closest hits counts(hit) takes.
 template <class Judge, class Counts>
 size_t check_casts(const psf::Bvh& bvh, const std::vector<Ray>& rays, double min_exact, const Judge& judge,
                    const Counts& counts) {
   size_t hits = 0;
-  for (bool flat : {false, true}) {
-    INFO((flat ? "flat casts (lanes_test_casts)" : "through the BVH"));
-    std::vector<Hit> closest = cast(bvh, rays, false, flat);
-    std::vector<Hit> any = cast(bvh, rays, true, flat);
+  for (CastMode mode : kCastModes) {
+    if (mode == CastMode::flat_boxes && !flat_boxes_apply(bvh)) continue;
+    INFO(cast_mode_name(mode));
+    std::vector<Hit> closest = cast(bvh, rays, false, mode);
+    std::vector<Hit> any = cast(bvh, rays, true, mode);
     size_t exact = 0, failures = 0;
     hits = 0;
     for (size_t i = 0; i < rays.size(); ++i) {
@@ -364,6 +392,8 @@ TEST_CASE("Raycast: random triangle soups match the brute-force reference", "[ra
 
 TEST_CASE("Raycast: Cornell box from quads matches the reference", "[raycast]") {
   Mesh m = cornell_box_quads();
+  // A scene of trace_lanes' flat casts that skip leaves by the root's boxes.
+  REQUIRE(flat_boxes_apply(psf::build_bvh(m.positions, m.triangles)));
   std::vector<Ray> rays = rays_in_box(11, 4097, vec3(1, 1, 1), vec3(550, 547, 558), 1e30f);
   size_t hits = check_scene(m, rays);
   CHECK(hits > rays.size() * 7 / 10);  // a closed box except the open front (z = 0)
@@ -387,8 +417,8 @@ TEST_CASE("Raycast: an empty scene is all misses", "[raycast]") {
   REQUIRE(bvh.nodes.size() == 1);
   for (int s = 0; s < PSF_BVH_WIDTH; ++s) CHECK(bvh.nodes[0].child[s] == PSF_EMPTY_CHILD);
   std::vector<Ray> rays = rays_in_box(3, 130, vec3(-1), vec3(1), 100.0f);
-  for (bool flat : {false, true})  // through the BVH, and as trace_lanes' flat casts
-    for (auto hits : {cast(bvh, rays, false, flat), cast(bvh, rays, true, flat)}) {
+  for (CastMode mode : kCastModes)
+    for (auto hits : {cast(bvh, rays, false, mode), cast(bvh, rays, true, mode)}) {
       for (size_t i = 0; i < rays.size(); ++i) {
         CHECK(hits[i].prim == PSF_NO_HIT);
         CHECK(hits[i].t == 100.0f);
@@ -409,9 +439,9 @@ TEST_CASE("Raycast: one triangle", "[raycast]") {
       make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, 0.5f),    // tmax short of it
       make_ray({0.25f, 0.25f, 1}, {0, 0, -1}, 0, -1.0f),   // a dead ray
   };
-  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-    INFO((flat ? "flat casts" : "through the BVH"));
-    std::vector<Hit> hits = cast(bvh, rays, false, flat);
+  for (CastMode mode : kCastModes) {
+    INFO(cast_mode_name(mode));
+    std::vector<Hit> hits = cast(bvh, rays, false, mode);
     CHECK(hits[0].prim == 0u);
     CHECK(hits[0].t == Approx(1.0f));
     CHECK(hits[0].u == Approx(0.25f));
@@ -423,7 +453,7 @@ TEST_CASE("Raycast: one triangle", "[raycast]") {
       CHECK(hits[i].prim == PSF_NO_HIT);
       CHECK(hits[i].t == rays[i].dir.s[3]);
     }
-    std::vector<Hit> any = cast(bvh, rays, true, flat);
+    std::vector<Hit> any = cast(bvh, rays, true, mode);
     for (size_t i = 0; i < rays.size(); ++i) CHECK((any[i].prim == PSF_NO_HIT) == (hits[i].prim == PSF_NO_HIT));
   }
   check_scene(m, rays_in_box(5, 515, vec3(-0.5f), vec3(1.5f), 5.0f));
@@ -462,10 +492,10 @@ TEST_CASE("Raycast: degenerate triangles are never hit and do not disturb others
   Mesh proper;                                                    // the reference sees only these
   proper.positions = m.positions;
   for (size_t t = 7; t < m.triangles.size(); ++t) proper.triangles.push_back(m.triangles[t]);
-  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-    INFO((flat ? "flat casts" : "through the BVH"));
-    std::vector<Hit> hits = cast(bvh, rays, false, flat);
-    std::vector<Hit> any = cast(bvh, rays, true, flat);
+  for (CastMode mode : kCastModes) {
+    INFO(cast_mode_name(mode));
+    std::vector<Hit> hits = cast(bvh, rays, false, mode);
+    std::vector<Hit> any = cast(bvh, rays, true, mode);
     for (size_t i = 0; i < rays.size(); ++i) {
       INFO("ray " << i);
       CHECK((hits[i].prim == PSF_NO_HIT || hits[i].prim >= 7));
@@ -525,10 +555,10 @@ TEST_CASE("Raycast: rays through edges shared by two triangles hit one of them",
       d = glm::normalize(d);
       rays.push_back(make_ray(target - dist * d, d, 0.0f, 1e3f));
     }
-    for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-      INFO((flat ? "flat casts" : "through the BVH"));
-      std::vector<Hit> hits = cast(bvh, rays, false, flat);
-      std::vector<Hit> any = cast(bvh, rays, true, flat);
+    for (CastMode mode : kCastModes) {
+      INFO(cast_mode_name(mode));
+      std::vector<Hit> hits = cast(bvh, rays, false, mode);
+      std::vector<Hit> any = cast(bvh, rays, true, mode);
       size_t missed = 0, missed_any = 0;
       for (size_t i = 0; i < rays.size(); ++i) {
         missed += hits[i].prim == PSF_NO_HIT;
@@ -569,10 +599,10 @@ TEST_CASE("Raycast: rays leaving a surface with tmin > 0 skip it", "[raycast]") 
     start.push_back(t);
   }
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
-  for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-    std::vector<Hit> hits = cast(bvh, rays, false, flat);
+  for (CastMode mode : kCastModes) {
+    std::vector<Hit> hits = cast(bvh, rays, false, mode);
     for (size_t i = 0; i < rays.size(); ++i) {
-      INFO("ray " << i << " from triangle " << start[i] << (flat ? ", flat casts" : ""));
+      INFO("ray " << i << " from triangle " << start[i] << ", " << cast_mode_name(mode));
       CHECK(hits[i].prim != start[i]);
       CHECK((hits[i].prim == PSF_NO_HIT || hits[i].t > 1e-2f));
     }
@@ -589,11 +619,13 @@ TEST_CASE("Raycast: axis-aligned and special rays give no NaN", "[raycast]") {
                    vec3(-0.0f, 0.0f, 1), vec3(1, 1, 0), vec3(0, -1, -1), vec3(1e-30f, 1, 0)})
       for (float tmax : {1e30f, inf, 50.0f}) rays.push_back(make_ray(o, d, 0.0f, tmax));
   psf::Bvh bvh = psf::build_bvh(m.positions, m.triangles);
-  for (int mode = 0; mode < 4; ++mode) {  // closest and any, through the BVH and as flat casts
-    const bool any = mode & 1, flat = mode & 2;
-    std::vector<Hit> hits = cast(bvh, rays, any, flat);
+  REQUIRE(flat_boxes_apply(bvh));
+  for (int k = 0; k < 6; ++k) {  // closest and any, each way of casting
+    const bool any = k & 1;
+    const CastMode mode = kCastModes[k / 2];
+    std::vector<Hit> hits = cast(bvh, rays, any, mode);
     for (size_t i = 0; i < rays.size(); ++i) {
-      INFO("ray " << i << (any ? " any" : " closest") << (flat ? ", flat casts" : ""));
+      INFO("ray " << i << (any ? " any, " : " closest, ") << cast_mode_name(mode));
       CHECK(!std::isnan(hits[i].t));
       CHECK(!std::isnan(hits[i].u));
       CHECK(!std::isnan(hits[i].v));
@@ -1051,10 +1083,10 @@ TEST_CASE("Raycast: rays leaving a sphere's surface miss it outwards and cross i
       rays.push_back(make_ray(o, w * 2.0f, 0.0f, std::numeric_limits<float>::infinity()));
       chords.push_back(ref_sphere(s, rays.back()).t1);  // the far root, from the offset origin
     }
-    for (bool flat : {false, true}) {  // through the BVH, and as trace_lanes' flat casts
-      INFO((flat ? "flat casts" : "through the BVH"));
-      std::vector<Hit> hits = cast(bvh, rays, false, flat);
-      std::vector<Hit> any = cast(bvh, rays, true, flat);
+    for (CastMode mode : kCastModes) {
+      INFO(cast_mode_name(mode));
+      std::vector<Hit> hits = cast(bvh, rays, false, mode);
+      std::vector<Hit> any = cast(bvh, rays, true, mode);
       int bad = 0;
       for (size_t i = 0; i < rays.size(); ++i) {
         bool inward = i % 2 == 1;
