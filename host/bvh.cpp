@@ -759,6 +759,9 @@ RayCaster::RayCaster(Runtime& rt, const Bvh& bvh)
       depth_(bvh.depth),
       pack_count_(static_cast<uint32_t>(bvh.packs.size())),
       prim_count_(bvh.triangle_count + bvh.sphere_count),
+      root_of_leaves_(bvh.nodes.size() == 1 &&
+                      std::all_of(std::begin(bvh.nodes[0].child), std::end(bvh.nodes[0].child),
+                                  [](uint32_t c) { return c == PSF_EMPTY_CHILD || is_leaf(c); })),
       spheres_(bvh.sphere_count > 0),
       sphere_mode_(bvh.sphere_count == 0    ? PSF_FRAME_SPHERES_NONE
                    : bvh.double_spheres > 0 ? PSF_FRAME_SPHERES_DOUBLE

@@ -112,6 +112,9 @@ class RayCaster {
   uint32_t pack_count() const { return pack_count_; }  // BvhTriPacks in packs()
   uint32_t prim_count() const { return prim_count_; }  // triangles and spheres in them
   bool masked() const { return masked_; }  // enable_alpha was called
+  // The BVH is one node whose children are leaves (or empty): trace_lanes' flat
+  // casts can skip a leaf by its box (kernels/trace_lanes.cl flat_root_leaves).
+  bool root_of_leaves() const { return root_of_leaves_; }
   bool spheres() const { return spheres_; }  // the BVH holds sphere packs
   // FrameParams.spheres for trace_lanes' casts: PSF_FRAME_SPHERES_NONE, _DOUBLE
   // (some sphere needs the test in double) or _FLOAT.
@@ -127,6 +130,7 @@ class RayCaster {
   int depth_ = 0;
   uint32_t pack_count_ = 0;
   uint32_t prim_count_ = 0;
+  bool root_of_leaves_ = false;
   bool spheres_ = false;  // the BVH holds sphere packs (the kernels' `spheres`)
   uint32_t sphere_mode_ = PSF_FRAME_SPHERES_NONE;
   bool masked_ = false;   // enable_alpha was called

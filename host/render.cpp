@@ -465,13 +465,20 @@ float Renderer::visibility_ray(float option) const {
 // PoCL on 2 cores (AMD EPYC, AVX-512), tracing times at 8-64 spp, flat / BVH:
 // sphere-light (5 primitives) 0.58, sphere-ground (3) 0.63, our Cornell box
 // (36) 0.72, Mitsuba's cbox (38) 0.76; that cbox with cubes of 12 triangles
-// added: 50 primitives 0.90, 62 1.02, 74 1.11, 86 1.22, 110 1.36. Not where
-// primitives are alpha-tested (these casts have no alpha test).
+// added: 50 primitives 0.90, 62 1.02, 74 1.11, 86 1.22, 110 1.36 (each pack
+// tested). Since the flat casts of a BVH that is one node of leaves skip the
+// leaves whose boxes no ray of the eight meets: our Cornell box 0.97-0.99 and
+// the cbox 0.96-0.97 of the time without, and our Cornell box with two cubes
+// (60 primitives, one node, 10 packs) 0.78 of the BVH's; with four (84, two
+// nodes, no boxes to skip by) 1.22. Hence flat casts at most kLanesFlatPrims
+// primitives or a BVH of one node. Not where primitives are alpha-tested (these
+// casts have no alpha test).
 const BvhSummary& Renderer::bvh_summary() const { return impl_->bvh_summary; }
 
 uint32_t Renderer::flat_packs(int option) const {
   const RayCaster& c = *impl_->caster;
-  return option != 0 && !c.masked() && c.prim_count() <= kLanesFlatPrims ? c.pack_count() : 0u;
+  const bool few = c.prim_count() <= kLanesFlatPrims || c.root_of_leaves();
+  return option != 0 && !c.masked() && few ? c.pack_count() : 0u;
 }
 
 BatchImages Renderer::trace_batch(uint64_t index, uint64_t total, bool filtering) {

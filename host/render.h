@@ -13,9 +13,9 @@
 
 namespace psf {
 
-// Scenes of at most this many primitives (triangles and spheres) have
-// trace_lanes cast without the BVH (RenderOptions.flat_casts; render.cpp has
-// the measurements behind it).
+// Scenes of at most this many primitives (triangles and spheres), or whose BVH
+// is one node of leaves, have trace_lanes cast without the BVH
+// (RenderOptions.flat_casts; render.cpp has the measurements behind it).
 constexpr uint32_t kLanesFlatPrims = 48;
 
 struct RenderOptions {
@@ -37,7 +37,7 @@ struct RenderOptions {
   FilterOptions filter;      // path space filtering (filter.enabled false: plain path tracing)
   int emission_rays = 0;     // more camera rays per path for the emission seen directly (kernels/emission.cl;
                              // none where the camera sits in a medium)
-  int flat_casts = -1;       // trace_lanes' casts in a scene of at most kLanesFlatPrims primitives: -1 or 1 each
+  int flat_casts = -1;       // trace_lanes' casts in a scene of few primitives (flat_packs): -1 or 1 each
                              // primitive against eight rays at once, without the BVH; 0 through the BVH (tests).
                              // The image is the same up to float rounding.
   bool emission_recast = false;  // tests: cast each path's own camera ray again instead of taking the
@@ -172,8 +172,9 @@ class Renderer {
   float visibility_ray(float option) const;
   // The packs that trace_lanes tests each ray against without the BVH
   // (FrameParams.flat_packs) under RenderOptions::flat_casts = `option`: all of
-  // them where the scene has at most kLanesFlatPrims primitives and none is
-  // alpha-tested, unless `option` is 0; else 0, casts through the BVH.
+  // them where the scene has at most kLanesFlatPrims primitives or a BVH of one
+  // node, and none is alpha-tested, unless `option` is 0; else 0, casts through
+  // the BVH.
   uint32_t flat_packs(int option) const;
   const BvhSummary& bvh_summary() const;
 

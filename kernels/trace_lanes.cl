@@ -615,8 +615,9 @@ inline void lane_cast_any(bool masked, uint spheres, __global const BvhNode* nod
 
 /* Casts in scenes of a few primitives (FrameParams.flat_packs > 0:
  * Renderer::flat_packs sets it where the BVH holds at most kLanesFlatPrims
- * primitives and none is alpha-tested): every primitive of the packs against
- * the eight lanes' rays at once, without the BVH. A cast through the BVH costs
+ * primitives or is one node, and none is alpha-tested): every primitive of the
+ * packs against the eight lanes' rays at once, without the BVH (but for the
+ * root's boxes, flat_root_leaves). A cast through the BVH costs
  * a call, a slab test and the branches of its traversal whatever the scene's
  * size, and a lane's ray goes into a Ray and its hit out of a Hit; here the
  * rays stay in the lanes' vectors. Each primitive's test is raycast.cl's

@@ -1650,10 +1650,11 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
   // an emission texture, three cameras (thin lens and Gaussian filter, tent
   // filter and crop window, orthographic), whose rays the lanes draw
   // themselves; and a scene outside the class (media), which must fall back to
-  // trace_paths bit for bit. Scenes of at most kLanesFlatPrims primitives,
-  // none alpha-tested, render twice: with the lanes' default casts, which
-  // test every primitive against eight rays without the BVH, and through the
-  // BVH (RenderOptions.flat_casts 0).
+  // trace_paths bit for bit. Scenes of at most kLanesFlatPrims primitives
+  // or a BVH of one node (the Cornell box with 13 lights), none alpha-tested,
+  // render twice: with the lanes' default casts, which test every primitive
+  // against eight rays without the BVH (but for the root's boxes), and through
+  // the BVH (RenderOptions.flat_casts 0).
   auto& rt = psf::test::runtime();
   struct Case {
     std::string name;
@@ -1802,7 +1803,10 @@ TEST_CASE("Render: trace_lanes gives trace_paths' image up to float rounding", "
     xml.insert(xml.rfind("</scene>"), lights);
     const std::string path = psf::test::temp_dir("lanes-lights") + "/box.xml";
     std::ofstream(path) << xml;
-    cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true, false});  // 60 triangles
+    cases.push_back({"cornell-box, 13 lights", psf::load_scene(path), true});
+    // 60 triangles, more than kLanesFlatPrims, in a BVH of one node: flat casts
+    // that skip leaves by their boxes.
+    REQUIRE(cases.back().scene.triangles.size() > psf::kLanesFlatPrims);
   }
   // Analytic spheres: a sphere light over a rough conductor sphere, a glass
   // sphere on a sphere ground under a constant sky, principled spheres,
