@@ -119,6 +119,61 @@ inline int filter_record_offset(uint record) {
 #define PSF_FILTER_SKIP_TEST
 #endif
 
+/* A query's cell and the cells around it that the ball can reach (filter_queries):
+ * its cell c, and along y and z the rows lo..hi of c - 1 .. c + 1, along x from
+ * `left` cells below c to `right` above, packed into `reach` (lo_y | hi_y << 2 |
+ * lo_z << 4 | hi_z << 6 | left << 8 | right << 20). With a margin for rounding:
+ * visiting a cell too many never changes the result. The distances to the faces
+ * are exact (c times a power of two, subtracted from a nearby x). */
+#define PSF_FILTER_REACH_LEFT(v) (((v) >> 8) & 0xFFFu)
+#define PSF_FILTER_REACH_RIGHT(v) ((v) >> 20)
+inline uint filter_reach_of(int lo_y, int hi_y, int lo_z, int hi_z, int left, int right) {
+  return (uint)lo_y | (uint)hi_y << 2 | (uint)lo_z << 4 | (uint)hi_z << 6 | (uint)clamp(left, 0, 0xFFF) << 8 |
+         (uint)clamp(right, 0, 0xFFF) << 20;
+}
+inline int3 filter_cell(float3 x, float r, int level, uint cells27, uint* reach_out) {
+  const float split = cell_x_split(cells27), size = cell_size(level, cells27), inv_x = 1.0f / size * split;
+  const int3 c = cell_of(x, size, split);
+  const float3 edge = (float3)(size / split, size, size);
+  const float3 below = x - convert_float3(c) * edge;             /* distance to the lower face */
+  const float3 above = convert_float3(c + (int3)(1)) * edge - x; /* to the upper face */
+  const float reach = r * 1.0001f;
+  *reach_out = filter_reach_of(below.y < reach ? 0 : 1, above.y < reach ? 2 : 1, below.z < reach ? 0 : 1,
+                               above.z < reach ? 2 : 1,
+                               below.x < reach ? convert_int(floor((reach - below.x) * inv_x)) + 1 : 0,
+                               above.x < reach ? convert_int(floor((reach - above.x) * inv_x)) + 1 : 0);
+  return c;
+}
+/* filter_cell of the eight queries i .. i + 7 at once (the arrays are padded
+ * past the batch's end), the same arithmetic in 8-wide vectors: PoCL runs the
+ * filter's work-items one by one, and the scalar floors and selects of each
+ * query's own were a quarter of the kernel's time. */
+inline void filter_cells8(__global const float* xs, __global const float* ys, __global const float* zs,
+                          __global const float* rs, __global const int* tags, uint i, uint cells27, int* cx, int* cy,
+                          int* cz, uint* reach_out) {
+  const float8 x = vload8(0, xs + i), y = vload8(0, ys + i), z = vload8(0, zs + i);
+  const int8 level = (vload8(0, tags + i) | 1) >> 2;
+  const float split = cell_x_split(cells27);
+  const float8 size = cell_size8(level, cells27), inv = 1.0f / size, inv_x = inv * split;
+  const int8 c_x = cell_coord8(x, inv_x), c_y = cell_coord8(y, inv), c_z = cell_coord8(z, inv);
+  const float8 edge_x = size / split;
+  const float8 below_x = x - convert_float8(c_x) * edge_x, above_x = convert_float8(c_x + 1) * edge_x - x;
+  const float8 below_y = y - convert_float8(c_y) * size, above_y = convert_float8(c_y + 1) * size - y;
+  const float8 below_z = z - convert_float8(c_z) * size, above_z = convert_float8(c_z + 1) * size - z;
+  const float8 reach = vload8(0, rs + i) * 1.0001f;
+  const int8 left = select((int8)(0), convert_int8(floor((reach - below_x) * inv_x)) + 1, below_x < reach);
+  const int8 right = select((int8)(0), convert_int8(floor((reach - above_x) * inv_x)) + 1, above_x < reach);
+  const uint8 packed = as_uint8(select((int8)(1), (int8)(0), below_y < reach)) |
+                       as_uint8(select((int8)(1), (int8)(2), above_y < reach)) << 2 |
+                       as_uint8(select((int8)(1), (int8)(0), below_z < reach)) << 4 |
+                       as_uint8(select((int8)(1), (int8)(2), above_z < reach)) << 6 |
+                       as_uint8(clamp(left, 0, 0xFFF)) << 8 | as_uint8(clamp(right, 0, 0xFFF)) << 20;
+  vstore8(c_x, 0, cx);
+  vstore8(c_y, 0, cy);
+  vstore8(c_z, 0, cz);
+  vstore8(packed, 0, reach_out);
+}
+
 /* sorted: the PSF_SORTED_* fields of the tuples in cell order, `stride` floats
  * apart; values and filtered: r, g, b arrays `stride` apart; starts: where each
  * key's tuples start in cell order (2^key_bits + 1 entries). queries: the
@@ -157,6 +212,14 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
   int cy = 0, cz = 0, cclass = 0;
   bool cached = false;
   uint my[3], mz[3], by[3], bz[3];
+  /* The work-item's queries' cells, eight at a time, where they fit the arrays. */
+  int q_cx[PSF_FILTER_QUERIES], q_cy[PSF_FILTER_QUERIES], q_cz[PSF_FILTER_QUERIES];
+  uint q_reach[PSF_FILTER_QUERIES];
+  const bool vector_cells = PSF_FILTER_LANES >= 8 && queries <= PSF_FILTER_QUERIES && queries % 8u == 0u;
+  if (vector_cells)
+    for (uint k = 0u; k < i1 - i0; k += 8u)
+      filter_cells8(xs, ys, zs, sorted + PSF_SORTED_R * stride, tags, i0 + k, p.cells27, q_cx + k, q_cy + k, q_cz + k,
+                    q_reach + k);
   for (uint i = i0; i < i1; ++i) {
     __global uint* list = mode == PSF_FILTER_SEARCH ? lists : lists + (size_t)i * PSF_FILTER_LIST_WORDS;
     if (mode == PSF_FILTER_READ_LISTS && list[0] <= PSF_FILTER_LIST) {
@@ -194,23 +257,22 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
      * that overflows). */
     int tag = tags[i] | 1;
     int level = tag >> 2;
-    float size = cell_size(level, p.cells27), inv = 1.0f / size, inv_x = inv * split;
-    int3 c = cell_of(x, size, split);
-    /* The cells that can hold points within r. Along y and z: c, and the
-     * neighbour across a face nearer to x than r (cells of size >= r (27) or >= 2r
-     * (8) make that at most 3 or 2), as offsets lo_*, hi_* from c - 1. Along x, where
-     * cells are `split` times narrower (with cells of 2r): from `left` cells below c to
-     * `right` above, as many as the ball reaches. With a margin for rounding:
-     * visiting a cell too many never changes the result. The distances to the
-     * faces are exact (c times a power of two, subtracted from a nearby x). */
-    float3 edge = (float3)(size / split, size, size);
-    float3 below = x - convert_float3(c) * edge;             /* distance to the lower face */
-    float3 above = convert_float3(c + (int3)(1)) * edge - x; /* to the upper face */
-    float reach = r * 1.0001f;
-    int lo_y = below.y < reach ? 0 : 1, hi_y = above.y < reach ? 2 : 1;
-    int lo_z = below.z < reach ? 0 : 1, hi_z = above.z < reach ? 2 : 1;
-    int left = below.x < reach ? convert_int(floor((reach - below.x) * inv_x)) + 1 : 0;
-    int right = above.x < reach ? convert_int(floor((reach - above.x) * inv_x)) + 1 : 0;
+    float inv = 1.0f / cell_size(level, p.cells27), inv_x = inv * split;
+    /* The cells that can hold points within r (filter_cell). Along y and z: c,
+     * and the neighbour across a face nearer to x than r (cells of size >= r (27)
+     * or >= 2r (8) make that at most 3 or 2), as offsets lo_*, hi_* from c - 1.
+     * Along x, where cells are `split` times narrower (with cells of 2r): from
+     * `left` cells below c to `right` above, as many as the ball reaches. */
+    int3 c;
+    uint reach;
+    if (vector_cells) {
+      c = (int3)(q_cx[i - i0], q_cy[i - i0], q_cz[i - i0]);
+      reach = q_reach[i - i0];
+    } else {
+      c = filter_cell(x, r, level, p.cells27, &reach);
+    }
+    const int lo_y = reach & 3u, hi_y = (reach >> 2) & 3u, lo_z = (reach >> 4) & 3u, hi_z = (reach >> 6) & 3u;
+    const int left = PSF_FILTER_REACH_LEFT(reach), right = PSF_FILTER_REACH_RIGHT(reach);
     int key_class = tag_key_class(tag);
     if (!cached || c.y != cy || c.z != cz || key_class != cclass) {
       cached = true;
