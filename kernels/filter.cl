@@ -300,29 +300,36 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
     const bool one_block = cell_layout_per_axis(layout) >= 2u &&
                            bx_lo == cell_block_part(c.x + right, 0u, layout) && by[lo_y] == by[hi_y] &&
                            bz[lo_z] == bz[hi_z];
-    for (int kz = lo_z; kz <= hi_z; ++kz)
-      for (int ky = lo_y; ky <= hi_y; ++ky) {
-        if (one_block) {
-          /* The row's keys, key .. end - 1, wrap around the table's end at most once. */
+    if (one_block) {
+      /* The rows' runs first, then their scans: the loads of the table's
+       * entries need not wait behind a scan. A row's keys, key .. end - 1, wrap
+       * around the table's end at most once: two runs. */
+      uint2 runs[18];
+      uint nruns = 0u;
+      for (int kz = lo_z; kz <= hi_z; ++kz)
+        for (int ky = lo_y; ky <= hi_y; ++ky) {
           uint key = cell_key_of_parts(mx_lo | my[ky] | mz[kz], bx_lo ^ by[ky] ^ bz[kz], p.key_bits);
           uint end = key + (uint)(left + right) + 1u;
           uint wrap = end > cells ? end - cells : 0u;
-          uint2 range = (uint2)(starts[key], starts[end - wrap]);
-          for (int part = 0; part < (wrap > 0u ? 2 : 1); ++part) {
-            PSF_FILTER_SCAN(range, (intL)(-1))
-            range = (uint2)(starts[0], starts[wrap]);
-          }
-        } else {
-          for (int kx = -left; kx <= right; ++kx) {
-            uint key = cell_key_of_parts(cell_morton_part(c.x + kx, 0u, layout) | my[ky] | mz[kz],
-                                         cell_block_part(c.x + kx, 0u, layout) ^ by[ky] ^ bz[kz], p.key_bits);
-            uint2 range = (uint2)(starts[key], starts[key + 1u]);
-            PSF_FILTER_SCAN(range, (convert_intL(floor(vloadL(0, xs + j) * inv_x)) == (intL)(c.x + kx)) &
-                                       (convert_intL(floor(vloadL(0, ys + j) * inv)) == (intL)(c.y - 1 + ky)) &
-                                       (convert_intL(floor(vloadL(0, zs + j) * inv)) == (intL)(c.z - 1 + kz)))
-          }
+          runs[nruns++] = (uint2)(starts[key], starts[end - wrap]);
+          if (wrap > 0u) runs[nruns++] = (uint2)(starts[0], starts[wrap]);
         }
+      for (uint k = 0u; k < nruns; ++k) {
+        const uint2 range = runs[k];
+        PSF_FILTER_SCAN(range, (intL)(-1))
       }
+    }
+    /* Else cell by cell, taking from each only the tuples inside it. */
+    for (int kz = lo_z; kz <= hi_z && !one_block; ++kz)
+      for (int ky = lo_y; ky <= hi_y; ++ky)
+        for (int kx = -left; kx <= right; ++kx) {
+          uint key = cell_key_of_parts(cell_morton_part(c.x + kx, 0u, layout) | my[ky] | mz[kz],
+                                       cell_block_part(c.x + kx, 0u, layout) ^ by[ky] ^ bz[kz], p.key_bits);
+          uint2 range = (uint2)(starts[key], starts[key + 1u]);
+          PSF_FILTER_SCAN(range, (convert_intL(floor(vloadL(0, xs + j) * inv_x)) == (intL)(c.x + kx)) &
+                                     (convert_intL(floor(vloadL(0, ys + j) * inv)) == (intL)(c.y - 1 + ky)) &
+                                     (convert_intL(floor(vloadL(0, zs + j) * inv)) == (intL)(c.z - 1 + kz)))
+        }
     uint n = (uint)filter_lane_isum(taken);
     float3 sum = (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb));
     if (n == 0u) { /* the centre lies in a cell it was not keyed to: cannot happen, but never divide by 0 */
