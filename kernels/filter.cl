@@ -88,9 +88,9 @@ inline int filter_isum16(int16 v) { return filter_isum8(v.lo) + filter_isum8(v.h
                    (dar * dar + dag * dag + dab * dab <= (floatL)(tol2));                                          \
     floatL cr = vloadL(0, vr + j), cg = vloadL(0, vg + j), cb = vloadL(0, vb + j);                                 \
     intL take = (idx < (intL)((int)(range).y)) & ((idx == (intL)((int)i)) | (in & similar)) & (MEMBER);            \
-    sr += select((floatL)(0.0f), cr, take);                                                                        \
-    sg += select((floatL)(0.0f), cg, take);                                                                        \
-    sb += select((floatL)(0.0f), cb, take);                                                                        \
+    sr = select(sr, sr + cr, take); /* an add under the mask: the values' loads need not wait for it */            \
+    sg = select(sg, sg + cg, take);                                                                                \
+    sb = select(sb, sb + cb, take);                                                                                \
     taken -= take; /* take is -1 where true */                                                                     \
     if (mode == PSF_FILTER_WRITE_LISTS) { /* record (j - i, lanes taken) where any is; past the end: the sink */  \
       uint m = (uint)filter_lane_isum(take & ((intL)(1) << PSF_FILTER_LANE_INDEX));                                \
@@ -233,9 +233,9 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
         const uint e = list[k];
         const uint j = (uint)((int)i + filter_record_offset(e));
         const intL take = -(((intL)(as_int(e)) >> PSF_FILTER_LANE_INDEX) & (intL)(1));
-        sr += select((floatL)(0.0f), vloadL(0, vr + j), take);
-        sg += select((floatL)(0.0f), vloadL(0, vg + j), take);
-        sb += select((floatL)(0.0f), vloadL(0, vb + j), take);
+        sr = select(sr, sr + vloadL(0, vr + j), take);
+        sg = select(sg, sg + vloadL(0, vg + j), take);
+        sb = select(sb, sb + vloadL(0, vb + j), take);
       }
       const float3 mean =
           (float3)(filter_lane_sum(sr), filter_lane_sum(sg), filter_lane_sum(sb)) / (float)counts[i];
