@@ -167,7 +167,8 @@ inline void filter_cells8(__global const float* xs, __global const float* ys, __
                        as_uint8(select((int8)(1), (int8)(2), above_y < reach)) << 2 |
                        as_uint8(select((int8)(1), (int8)(0), below_z < reach)) << 4 |
                        as_uint8(select((int8)(1), (int8)(2), above_z < reach)) << 6 |
-                       as_uint8(clamp(left, (int8)(0), (int8)(0xFFF))) << 8 | as_uint8(clamp(right, (int8)(0), (int8)(0xFFF))) << 20;
+                       as_uint8(clamp(left, (int8)(0), (int8)(0xFFF))) << 8 |
+                       as_uint8(clamp(right, (int8)(0), (int8)(0xFFF))) << 20;
   vstore8(c_x, 0, cx);
   vstore8(c_y, 0, cy);
   vstore8(c_z, 0, cz);
