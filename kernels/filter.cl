@@ -216,7 +216,9 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
   /* The work-item's queries' cells, eight at a time, where they fit the arrays. */
   int q_cx[PSF_FILTER_QUERIES], q_cy[PSF_FILTER_QUERIES], q_cz[PSF_FILTER_QUERIES];
   uint q_reach[PSF_FILTER_QUERIES];
-  const bool vector_cells = PSF_FILTER_LANES >= 8 && queries <= PSF_FILTER_QUERIES && queries % 8u == 0u;
+  /* Not in the later passes, where most queries replay their lists. */
+  const bool vector_cells = PSF_FILTER_LANES >= 8 && mode != PSF_FILTER_READ_LISTS && queries <= PSF_FILTER_QUERIES &&
+                            queries % 8u == 0u;
   if (vector_cells)
     for (uint k = 0u; k < i1 - i0; k += 8u)
       filter_cells8(xs, ys, zs, sorted + PSF_SORTED_R * stride, tags, i0 + k, p.cells27, q_cx + k, q_cy + k, q_cz + k,

@@ -761,7 +761,8 @@ inline bool flat_pack_double(__global const float* p) { return p[PACK_E1 + PSF_B
 
 /* Whether the flat casts of `count` packs skip the leaves whose boxes no lane's
  * ray meets: with at least PSF_FLAT_BOX_PACKS packs and a root (not null) whose
- * children are all leaves or empty. With fewer packs the box tests cost more
+ * children are all leaves or empty. Decided once per work-item: the flat casts
+ * take the root where it holds, else null. With fewer packs the box tests cost more
  * than they save (PoCL, AMD EPYC, tracing time with the boxes / without:
  * the thin principled sheets, 3 packs, 1.05; Mitsuba's cbox and our Cornell
  * box, 5 packs, 0.96 and 0.97). */
@@ -775,11 +776,13 @@ inline bool flat_root_leaves(__global const BvhNode* root, uint count) {
 
 /* The closest hits of the lanes of `live` among the first `count` packs: t
  * (tmax where none), prim (PSF_NO_HIT where none) and the barycentrics, as the
- * lane casts give them; lanes not live get t 0 and no hit. */
+ * lane casts give them; lanes not live get t 0 and no hit. root: the BVH's root
+ * where flat_root_leaves holds (its leaves are skipped by their boxes), else
+ * null. */
 inline void flat_closest8(__global const BvhTriPack* packs, uint count, __global const BvhNode* root, bool spheres,
                           Vec8 org, Vec8 dir, float8 tmin, float8 tmax, int8 live, float8* t_out, uint8* prim_out,
                           float8* u_out, float8* v_out) {
-  const bool boxes = flat_root_leaves(root, count);
+  const bool boxes = root != 0;
   const FlatRays r = flat_rays(org, dir, spheres, boxes);
   float8 best = select((float8)(-1.0f), tmax, live); /* no hit within a dead lane's (tmin, -1) */
   uint8 prim = (uint8)(PSF_NO_HIT);
@@ -818,10 +821,10 @@ inline void flat_closest8(__global const BvhTriPack* packs, uint count, __global
 }
 
 /* The lanes of `cast` whose segment (tmin, tmax) meets a primitive of the
- * first `count` packs (intersect_any_hit_leaves' verdict). */
+ * first `count` packs (intersect_any_hit_leaves' verdict); root as flat_closest8's. */
 inline int8 flat_any8(__global const BvhTriPack* packs, uint count, __global const BvhNode* root, bool spheres,
                       Vec8 org, Vec8 dir, float8 tmin, float8 tmax, int8 cast) {
-  const bool boxes = flat_root_leaves(root, count);
+  const bool boxes = root != 0;
   const FlatRays r = flat_rays(org, dir, spheres, boxes);
   int8 blocked = ~cast;
   for (uint c = 0u; c < (boxes ? (uint)PSF_BVH_WIDTH : 1u) && !all(blocked); ++c) {
@@ -1886,6 +1889,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
   const AlphaScene alpha = {tri_material, materials, tri_attribs, textures, texels, 0};
   const int8 hide_area = (int8)((params.hide & PSF_HIDE_AREA) ? -1 : 0);
   const int8 mis_on = (int8)(params.num_emitters > 0u ? -1 : 0);
+  __global const BvhNode* flat_root = flat_root_leaves(nodes, params.flat_packs) ? nodes : 0;
   /* With a few lights, the environment map's entry among them (none: num_emitters). */
   uint env_emitter = params.num_emitters;
   if (env.width > 0u && params.num_emitters <= PSF_LANES_FEW_LIGHTS)
@@ -1959,8 +1963,8 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
         env_lanes_block(env, env_data, &env_lanes);
         env_lanes_cell(env, env_data, env.scale.w, &env_lanes);
       }
-      flat_closest8(packs, params.flat_packs, nodes, params.spheres != PSF_FRAME_SPHERES_NONE, ln.org, ln.dir, ln.tmin,
-                    ln.tmax, ln.live, &t, &prim, &bu, &bv);
+      flat_closest8(packs, params.flat_packs, flat_root, params.spheres != PSF_FRAME_SPHERES_NONE, ln.org, ln.dir,
+                    ln.tmin, ln.tmax, ln.live, &t, &prim, &bu, &bv);
     }
     for (uint l = 0u; l < PSF_LANES && params.flat_packs == 0u; ++l) {
       if (env_samples && l == 2u) env_lanes_guide(env, env_data, &env_lanes);
@@ -2457,7 +2461,7 @@ __kernel void trace_lanes(FrameParams params, __global const uint* restrict sobo
      * what they decide (shade.cl shadow_slot). */
     int8 visible = (int8)(0);
     if (params.flat_packs > 0u)
-      visible = contributes & ~flat_any8(packs, params.flat_packs, nodes, params.spheres != PSF_FRAME_SPHERES_NONE,
+      visible = contributes & ~flat_any8(packs, params.flat_packs, flat_root, params.spheres != PSF_FRAME_SPHERES_NONE,
                                          shadow_org, shadow_dir, (float8)(0.0f), shadow_tmax, contributes);
     for (uint todo = params.flat_packs > 0u ? 0u : psf_lanes8(contributes); todo != 0u;
          todo &= todo - 1u) { /* else its set lanes through the BVH: no branch per lane */
@@ -2564,8 +2568,9 @@ __kernel void lanes_test_casts(__global const BvhTriPack* packs, uint pack_count
   }
   float8 t, u, v;
   uint8 prim;
-  flat_closest8(packs, pack_count, boxes ? nodes : 0, spheres != 0u, org, dir, tmin, tmax, valid, &t, &prim, &u, &v);
-  const int8 blocked = flat_any8(packs, pack_count, boxes ? nodes : 0, spheres != 0u, org, dir, tmin, tmax, valid);
+  __global const BvhNode* root = boxes && flat_root_leaves(nodes, pack_count) ? nodes : 0;
+  flat_closest8(packs, pack_count, root, spheres != 0u, org, dir, tmin, tmax, valid, &t, &prim, &u, &v);
+  const int8 blocked = flat_any8(packs, pack_count, root, spheres != 0u, org, dir, tmin, tmax, valid);
   for (uint l = 0u; l < PSF_LANES && k0 + l < count; ++l) {
     Hit h;
     h.t = LANE_F(t, l);
