@@ -28,6 +28,9 @@
 #ifndef PSF_FILTER_LANES
 #define PSF_FILTER_LANES 8
 #endif
+#if PSF_SORTED_PAD < PSF_FILTER_LANES - 1
+#error "PSF_SORTED_PAD: a cell's last vector of candidates reads up to PSF_FILTER_LANES - 1 past its end"
+#endif
 /* 1: skip the similarity tests of a vector with no candidate in the ball. A
  * mispredicted branch on CPUs (slower there); on GPUs it saves the loads. */
 #ifndef PSF_FILTER_SKIP
@@ -213,16 +216,17 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
   int cy = 0, cz = 0, cclass = 0;
   bool cached = false;
   uint my[3], mz[3], by[3], bz[3];
-  /* The work-item's queries' cells, eight at a time, where they fit the arrays. */
+#if PSF_FILTER_LANES >= 8
+  /* The work-item's queries' cells, eight at a time, where they fit the arrays
+   * (the CPU variant); not in the later passes, where most queries replay their lists. */
   int q_cx[PSF_FILTER_QUERIES], q_cy[PSF_FILTER_QUERIES], q_cz[PSF_FILTER_QUERIES];
   uint q_reach[PSF_FILTER_QUERIES];
-  /* Not in the later passes, where most queries replay their lists. */
-  const bool vector_cells = PSF_FILTER_LANES >= 8 && mode != PSF_FILTER_READ_LISTS && queries <= PSF_FILTER_QUERIES &&
-                            queries % 8u == 0u;
+  const bool vector_cells = mode != PSF_FILTER_READ_LISTS && queries <= PSF_FILTER_QUERIES && queries % 8u == 0u;
   if (vector_cells)
     for (uint k = 0u; k < i1 - i0; k += 8u)
       filter_cells8(xs, ys, zs, sorted + PSF_SORTED_R * stride, tags, i0 + k, p.cells27, q_cx + k, q_cy + k, q_cz + k,
                     q_reach + k);
+#endif
   for (uint i = i0; i < i1; ++i) {
     __global uint* list = mode == PSF_FILTER_SEARCH ? lists : lists + (size_t)i * PSF_FILTER_LIST_WORDS;
     if (mode == PSF_FILTER_READ_LISTS && list[0] <= PSF_FILTER_LIST) {
@@ -268,12 +272,13 @@ PSF_FORCE_INLINE void filter_queries(FilterParams p, uint stride, uint queries,
      * `left` cells below c to `right` above, as many as the ball reaches. */
     int3 c;
     uint reach;
+#if PSF_FILTER_LANES >= 8
     if (vector_cells) {
       c = (int3)(q_cx[i - i0], q_cy[i - i0], q_cz[i - i0]);
       reach = q_reach[i - i0];
-    } else {
+    } else
+#endif
       c = filter_cell(x, r, level, p.cells27, &reach);
-    }
     const int lo_y = reach & 3u, hi_y = (reach >> 2) & 3u, lo_z = (reach >> 4) & 3u, hi_z = (reach >> 6) & 3u;
     const int left = PSF_FILTER_REACH_LEFT(reach), right = PSF_FILTER_REACH_RIGHT(reach);
     int key_class = tag_key_class(tag);

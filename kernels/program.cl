@@ -76,4 +76,5 @@ inline uint psf_lanes8(int8 c) {
 #include "sort.cl"
 #include "cell_ranges.cl"
 #include "filter.cl"
+#include "filter_test.cl"
 #include "accumulate.cl"

@@ -532,6 +532,10 @@ typedef struct {
 
 /* Queries per work-item of filter (filter.cl) on CPUs. */
 #define PSF_FILTER_QUERIES 16u
+#if PSF_SORTED_PAD < PSF_FILTER_QUERIES - 1 || PSF_SORTED_PAD < PSF_GATHER_LANES - 1
+/* filter_cells8 loads up to PSF_FILTER_QUERIES - 1 and gather_tuples writes up to PSF_GATHER_LANES - 1 past the batch. */
+#error "PSF_SORTED_PAD is less than the filter's queries or the gather's lanes reach past the batch"
+#endif
 
 /* Records a query's list holds (filter.cl filter_record): with --iterations > 1
  * the first pass records, for each query, the vectors of candidates it took

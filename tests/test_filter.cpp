@@ -3,11 +3,11 @@
 // a brute-force all-pairs evaluation of Keller et al. 2016, Eq. 1-2.
 // Under PSF_TEST_SMALL (psf::test::small_sizes(), set by scripts/oclgrind) the
 // same checks run on fewer tuples, pixels and samples.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
 #include <array>
+#include <catch2/catch.hpp>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <numeric>
 #include <random>
@@ -665,6 +665,69 @@ TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force
       CHECK(wrong == 0);
       CHECK(dev.max_count == *std::max_element(ref.counts.begin(), ref.counts.end()));
     }
+  }
+}
+
+// filter_cells8 (eight queries' cells and reach in vectors, CPUs) against
+// filter_cell (one query, GPUs and the later passes) bit for bit, and both
+// against the geometry: the cell is floor(x / edge) per axis, and the cells
+// visited cover [x - r, x + r] with at most one cell to spare (the reach's
+// 1e-4 margin for rounding).
+TEST_CASE("Filter: the vector cell search equals the scalar one and covers each query's ball", "[filter]") {
+  auto& rt = psf::test::runtime();
+  const uint32_t n = 4096;  // a multiple of 8
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<float> xs(n), ys(n), zs(n), rs(n);
+  std::vector<int32_t> tags(n);
+  std::vector<int> levels(n);
+  for (uint32_t i = 0; i < n; ++i) {
+    int level = int(u(rng) * 12) - 8;  // cells of 2^-8 .. 2^3 (and twice that with 8 cells)
+    float cell = std::ldexp(1.0f, level);
+    float r = cell * (0.5f + 0.5f * u(rng));  // r in (2^(level-1), 2^level]
+    if (i % 7 == 0) r = cell;                 // the largest radius of the level
+    auto coord = [&](int k) {
+      float x = (u(rng) - 0.5f) * 40.0f;
+      if ((i + k) % 5 == 0) x = std::floor(x / cell) * cell;  // on a face (of the coarser grid too)
+      if ((i + k) % 11 == 0) x = std::floor(x / cell) * cell + r * (k ? 0.999999f : 1.0f);  // r from a face
+      return x;
+    };
+    xs[i] = coord(0), ys[i] = coord(1), zs[i] = coord(2), rs[i] = r;
+    levels[i] = level;
+    tags[i] = level * 4 + int(i % 4);  // the visibility and finiteness bits below the level
+  }
+  // filter_cells8 loads eight values from each query's index on.
+  for (auto* a : {&xs, &ys, &zs, &rs}) a->resize(n + 8, 0.0f);
+  tags.resize(n + 8, 0);
+  cl::Buffer bx = rt.upload(xs), by = rt.upload(ys), bz = rt.upload(zs), br = rt.upload(rs), bt = rt.upload(tags);
+  cl::Buffer vec = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int4)),
+             sca = rt.buffer(CL_MEM_READ_WRITE, n * sizeof(cl_int4));
+  for (uint32_t cells27 : {0u, 1u}) {
+    INFO("cells27 " << cells27);
+    rt.launch("filter_test_cells", n / 8, 1, bx, by, bz, br, bt, cells27, vec, sca);
+    auto v = rt.download<cl_int4>(vec, n), s = rt.download<cl_int4>(sca, n);
+    size_t differ = 0, wrong_cell = 0, uncovered = 0, too_wide = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+      if (std::memcmp(&v[i], &s[i], sizeof(cl_int4)) != 0) ++differ;
+      // Edges: 2^level (27 cells) or 2^(level+1) (8 cells) along y and z, a quarter of that along x with 8 cells.
+      const double size = std::ldexp(1.0, levels[i] + (cells27 ? 0 : 1)),
+                   edge[3] = {cells27 ? size : size / 4, size, size};
+      const double x[3] = {xs[i], ys[i], zs[i]}, r = rs[i];
+      const uint32_t reach = uint32_t(s[i].s[3]);
+      const int lo[3] = {-int((reach >> 8) & 0xFFF), int(reach & 3) - 1, int((reach >> 4) & 3) - 1};
+      const int hi[3] = {int(reach >> 20), int((reach >> 2) & 3) - 1, int((reach >> 6) & 3) - 1};
+      for (int a = 0; a < 3; ++a) {
+        const int c = s[i].s[a];
+        if (double(c) != std::floor(x[a] / edge[a])) ++wrong_cell;
+        const double first = (c + lo[a]) * edge[a], end = (c + hi[a] + 1) * edge[a];
+        if (first > x[a] - r || end < x[a] + r) ++uncovered;
+        if (first + edge[a] <= x[a] - r * 1.001 || end - edge[a] >= x[a] + r * 1.001) ++too_wide;
+      }
+    }
+    CHECK(differ == 0);
+    CHECK(wrong_cell == 0);
+    CHECK(uncovered == 0);
+    CHECK(too_wide == 0);
   }
 }
 
