@@ -218,8 +218,8 @@ TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
   auto& rt = psf::test::runtime();
   std::mt19937 rng(5);
   // Small keeps 65537 (257 work-items of 256 pairs: several work-groups and a
-  // tail; 33 tiles of 2048, the last of one pair) and drops only 300001 (the
-  // 1024 work-item cap). Every variant runs on any device: chunks with 4-bit
+  // tail; 33 tiles of 2048, the last of one pair), for 13 and 32 bits, and drops
+  // only 300001 (the 1024 work-item cap). Every variant runs on any device: chunks with 4-bit
   // and 8-bit digits, chunk 0 this device's choice (radix_chunk) and 16 what
   // GPUs used before tiles; tiles (GPUs) with 4-bit digits. Keys have random
   // bits above the `bits` sorted by, which the sort must ignore (the reference
@@ -237,6 +237,9 @@ TEST_CASE("Sort: radix sort equals std::stable_sort", "[filter]") {
       {0, 1, 2, 63, 1000, 2048, 65537, 300001}, {0, 1, 2, 63, 1000, 2048, 4097, 65537});
   for (uint32_t n : sizes) {
     for (uint32_t bits : {1u, 4u, 13u, 22u, 32u}) {
+      // Small: 65537 with a partial last digit and with every digit only (10 of
+      // the tag's 19 minutes under Oclgrind went to its 25 sorts of 65537).
+      if (psf::test::small_sizes() && n > 4097 && bits != 13u && bits != 32u) continue;
       for (const Variant& v : variants) {
         std::vector<uint32_t> keys(n), idx(n);
         uint64_t mask = bits == 32 ? 0xFFFFFFFFull : ((1ull << bits) - 1);
@@ -616,8 +619,14 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     // vectors of candidates hold, so those search again) beside spread tuples
     // (a few neighbours: recorded); four passes over both.
     auto v = random_tuples(2000, 47, 1.0f);
-    auto dense = random_tuples(10000, 48, 0.01f);
-    for (auto& t : dense) t.position.s[0] += 2.0f;
+    // Under Oclgrind (small sizes) fewer, which each pass tests in pairs, all of
+    // one normal, albedo and visibility, so that as many lists overflow.
+    const bool small = psf::test::small_sizes();
+    auto dense = random_tuples(small ? 3000 : 10000, 48, 0.01f);
+    for (auto& t : dense) {
+      t.position.s[0] += 2.0f;
+      if (small) t.normal = {{0, 1, 0, 1}}, t.albedo.s[0] = t.albedo.s[1] = 0.5f;
+    }
     v.insert(v.end(), dense.begin(), dense.end());
     auto c = random_values(v.size(), 49);
     auto ref = brute_force(v, c, p, 4);
@@ -627,7 +636,7 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
       recorded += n > 1 && n <= PSF_FILTER_LIST ? 1 : 0;               // at most one vector each
     }
     CHECK(overflowed > 150);
-    CHECK(recorded > 1000);
+    CHECK(recorded > 500);
     check_same(ref, run_filter(v, c, p, 4));
   }
 }
