@@ -3,9 +3,10 @@
 // a brute-force all-pairs evaluation of Keller et al. 2016, Eq. 1-2.
 // Under PSF_TEST_SMALL (psf::test::small_sizes(), set by scripts/oclgrind) the
 // same checks run on fewer tuples, pixels and samples.
+#include <catch2/catch.hpp>
+
 #include <algorithm>
 #include <array>
-#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -680,8 +681,8 @@ TEST_CASE("Filter: the other device kind's kernel variant equals the brute-force
 // filter_cells8 (eight queries' cells and reach in vectors, CPUs) against
 // filter_cell (one query, GPUs and the later passes) bit for bit, and both
 // against the geometry: the cell is floor(x / edge) per axis, and the cells
-// visited cover [x - r, x + r] with at most one cell to spare (the reach's
-// 1e-4 margin for rounding).
+// visited cover [x - r, x + r], none of them wholly outside it by more than
+// 0.1 % of r (the reach has a margin of 1e-4 r for rounding).
 TEST_CASE("Filter: the vector cell search equals the scalar one and covers each query's ball", "[filter]") {
   auto& rt = psf::test::runtime();
   const uint32_t n = 4096;  // a multiple of 8
