@@ -626,7 +626,10 @@ TEST_CASE("Filter: edge cases: one cell, empty cells, global r0, NaN values, ite
     auto dense = random_tuples(small ? 3000 : 10000, 48, 0.01f);
     for (auto& t : dense) {
       t.position.s[0] += 2.0f;
-      if (small) t.normal = {{0, 1, 0, 1}}, t.albedo.s[0] = t.albedo.s[1] = 0.5f;
+      if (small) {
+        t.normal = {{0, 1, 0, 1}};
+        t.albedo.s[0] = t.albedo.s[1] = 0.5f;
+      }
     }
     v.insert(v.end(), dense.begin(), dense.end());
     auto c = random_values(v.size(), 49);
